@@ -1,0 +1,384 @@
+"""The ``bridgeplan`` command. Each subcommand maps its flags onto a module's function; user
+mistakes (BridgeplanError) print one ``error:`` line and exit 2."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+
+
+def _add_data_commands(sub) -> None:
+    p = sub.add_parser("data", help="generate, inspect offline datasets")
+    data = p.add_subparsers(dest="data_command", required=True)
+    g = data.add_parser("generate", help="a noisy expert stream in the Minari format (D4RL recipe)")
+    g.add_argument("--maze", required=True, help="open, umaze, medium or large")
+    g.add_argument("--steps", type=int, default=1_000_000, help="transitions (default 1 M)")
+    g.add_argument("--seed", type=int, default=123)
+    g.add_argument("--out", default=None, help="dataset directory (default datasets/<maze>-<steps>)")
+    g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
+    g.add_argument("--no-progress", action="store_true")
+    g.set_defaults(func=_cmd_data_generate)
+    i = data.add_parser("info", help="summarize a dataset (Minari directory or id, or D4RL hdf5)")
+    i.add_argument("path")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=_cmd_data_info)
+
+    p = sub.add_parser("reference", help="reference returns of the normalized score")
+    ref = p.add_subparsers(dest="reference_command", required=True)
+    s = ref.add_parser("show", help="the shipped reference returns")
+    s.set_defaults(func=_cmd_reference_show)
+    m = ref.add_parser("measure", help="measure them again in this environment")
+    m.add_argument("--maze", default=None, help="one maze (default: all)")
+    m.add_argument("--episodes", type=int, default=100)
+    m.add_argument("--seed", type=int, default=123)
+    m.set_defaults(func=_cmd_reference_measure)
+
+
+def _cmd_data_generate(args) -> int:
+    from bridgeplan.data import generate_dataset, load_stream
+    from bridgeplan.data.info import format_summary, summarize
+
+    if args.steps <= 0:
+        raise BridgeplanError(f"--steps must be positive, got {args.steps}")
+    out = Path(args.out) if args.out else Path("datasets") / f"{args.maze}-{args.steps}"
+    generate_dataset(args.maze, args.steps, args.seed, out, force=args.force, progress=not args.no_progress)
+    print(format_summary(summarize(load_stream(str(out)))))
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_data_info(args) -> int:
+    from bridgeplan.data import load_stream
+    from bridgeplan.data.info import format_summary, summarize
+
+    info = summarize(load_stream(args.path))
+    print(json.dumps(info, indent=2) if args.json else format_summary(info))
+    return 0
+
+
+def _reference_table(ref: dict) -> str:
+    lines = [f"{'maze':<8} {'episodes':>8} {'random':>8} {'expert':>8} {'stale expert (d4rl)':>20}"]
+    for name, r in ref.items():
+        lines.append(f"{name:<8} {r['episodes']:>8} {r['random']:>8.2f} {r['expert']:>8.2f} {r['expert_stale']:>20.2f}")
+    return "\n".join(lines) + ("\nminari convention: random..expert; d4rl convention: random..stale expert "
+                                "(seed %d)" % next(iter(ref.values()))["seed"])
+
+
+def _cmd_reference_show(args) -> int:
+    from bridgeplan.maze.reference import load_reference_returns
+
+    print(_reference_table(load_reference_returns()))
+    return 0
+
+
+def _cmd_reference_measure(args) -> int:
+    from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
+    from bridgeplan.maze.reference import measure_reference_returns
+
+    if args.episodes <= 0:
+        raise BridgeplanError(f"--episodes must be positive, got {args.episodes}")
+    names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
+    print(_reference_table({n: measure_reference_returns(n, args.episodes, args.seed) for n in names}))
+    return 0
+
+
+def _add_train_commands(sub) -> None:
+    p = sub.add_parser("train", help="train a planner (DDPM or bridge)",
+                       description="Train a planner. Defaults come from --preset per maze; flags override them.")
+    _common_train_flags(p)
+    p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
+    p.add_argument("--process", default=None, help="ddpm or bridge (default ddpm)")
+    p.add_argument("--prior", default=None, help="bridge prior: gaussian, line or learned (default gaussian)")
+    p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
+    p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
+    p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
+    p.add_argument("--ot-ode", action="store_true", help="bridge: noise-free marginal and sampler")
+    p.add_argument("--dim", type=int, default=None, help="U-Net base width")
+    p.add_argument("--dim-mults", default=None, help="U-Net channel multipliers, e.g. 1,4,8")
+    p.add_argument("--grad-accum", type=int, default=None)
+    p.add_argument("--ema-decay", type=float, default=None)
+    p.add_argument("--ema-every", type=int, default=None)
+    p.add_argument("--ema-start", type=int, default=None)
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
+    _common_train_flags(p)
+    p.set_defaults(func=_cmd_train_prior)
+
+
+def _common_train_flags(p) -> None:
+    p.add_argument("--maze", required=True)
+    p.add_argument("--dataset", required=True, help="dataset directory or legacy D4RL hdf5 file")
+    p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
+    p.add_argument("--runs-root", default="runs")
+    p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
+    p.add_argument("--horizon", type=int, default=None)
+    p.add_argument("--steps", type=int, default=None, help="optimizer steps")
+    p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
+    p.add_argument("--batch-size", type=int, default=None)
+    p.add_argument("--lr", type=float, default=None)
+    p.add_argument("--checkpoint-every", type=int, default=None)
+    p.add_argument("--log-every", type=int, default=None)
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--device", default=None, help="auto (CUDA if present), cpu, cuda, ...")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def _overrides(args, names) -> dict:
+    return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+
+
+_COMMON = ("horizon", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
+           "device", "threads")
+
+
+def _cmd_train(args) -> int:
+    from bridgeplan import config as cfg
+    from bridgeplan.train import train
+
+    base = cfg.preset_config(args.maze, args.preset)
+    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start"))
+    process = _overrides(args, ("beta_max",))
+    if args.process is not None:
+        process["name"] = args.process
+    if args.diffusion_steps is not None:
+        process["steps"] = args.diffusion_steps
+    if args.ot_ode:
+        process["ot_ode"] = True
+    model = {"dim": args.dim} if args.dim is not None else {}
+    if args.dim_mults is not None:
+        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
+    config = cfg.replace(base, dataset=args.dataset, process=process, model=model, **over)
+    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
+    train(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    print(f"run: {run_dir}")
+    return 0
+
+
+def _cmd_train_prior(args) -> int:
+    from bridgeplan import config as cfg
+    from bridgeplan.train import train_prior
+
+    config = cfg.replace(cfg.PriorTrainConfig(maze=args.maze, dataset=args.dataset),
+                         **_overrides(args, _COMMON))
+    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
+    train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    print(f"run: {run_dir}")
+    return 0
+
+
+def _int_tuple(text: str, flag: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
+    if not values or min(values) <= 0:
+        raise BridgeplanError(f"{flag} takes positive integers, got {text!r}")
+    return values
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise BridgeplanError(f"--seeds takes comma-separated integers, got {text!r}") from None
+    if min(seeds) < 0:
+        raise BridgeplanError(f"--seeds must be >= 0, got {text!r}")
+    return seeds
+
+
+def _add_eval_commands(sub) -> None:
+    p = sub.add_parser("eval", help="evaluate a trained run over many episodes")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file)")
+    p.add_argument("--episodes", type=int, default=200)
+    p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
+    p.add_argument("--batch-size", type=int, default=0, help="plans per batch (0: all episodes at once)")
+    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
+    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
+    p.add_argument("run")
+    p.add_argument("--episodes", type=int, default=8)
+    p.add_argument("--nfe", type=int, default=None)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true")
+    p.add_argument("--out", default=None, help="PNG path (default RUN/render/...)")
+    p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
+    p.add_argument("--video", action="store_true", help="also write an MP4/GIF of the first episode (MuJoCo)")
+    p.add_argument("--device", default="auto")
+    p.set_defaults(func=_cmd_render)
+
+
+def _cmd_eval(args) -> int:
+    from bridgeplan.evaluate import evaluate, format_table, write_result
+
+    result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
+                      multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
+                      device=args.device)
+    run_dir = Path(args.run) if Path(args.run).is_dir() else Path(args.run).parent
+    name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
+        "-multi" if args.multi_task else "")
+    out = Path(args.out) if args.out else run_dir / "eval" / f"{name}.json"
+    write_result(result, out)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_table(result))
+        print(f"wrote {out}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from bridgeplan.render import render_run
+
+    for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
+                           multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
+                           device=args.device):
+        print(f"wrote {path}")
+    return 0
+
+
+def _add_experiment_commands(sub) -> None:
+    from bridgeplan.experiments.grids import EXPERIMENTS
+
+    p = sub.add_parser("experiment", help="run one of the thesis's experiments (a declared grid of runs)",
+                       description="Experiments: " + "; ".join(f"{k}: {e.title}" for k, e in EXPERIMENTS.items()))
+    p.add_argument("name", help=", ".join(EXPERIMENTS))
+    p.add_argument("--maze", default="umaze")
+    p.add_argument("--dataset", default="", help="dataset directory (default: generated under RESULTS/data)")
+    p.add_argument("--dataset-steps", type=int, default=200_000, help="size of the generated dataset")
+    p.add_argument("--preset", default="cpu-small")
+    p.add_argument("--results", default="results", help="results directory (store, runs, report)")
+    p.add_argument("--train-steps", type=int, default=3000, help="optimizer steps per run")
+    p.add_argument("--prior-steps", type=int, default=2000, help="optimizer steps of the learned prior")
+    p.add_argument("--checkpoint-every", type=int, default=500, help="snapshot (evaluation) interval")
+    p.add_argument("--diffusion-steps", type=int, default=16)
+    p.add_argument("--fixed-nfe", type=int, default=4, help="NFE of the `priors` experiment")
+    p.add_argument("--episodes", type=int, default=200)
+    p.add_argument("--seeds", default="0", help="comma-separated training/evaluation seeds")
+    p.add_argument("--backend", default="local", help="local or ray")
+    p.add_argument("--workers", type=int, default=1, help="local backend: parallel jobs (cores divided)")
+    p.add_argument("--ray-address", default=None, help="existing Ray cluster (default: start a local one)")
+    p.add_argument("--horizon", type=int, default=None)
+    p.add_argument("--dim", type=int, default=None)
+    p.add_argument("--dim-mults", default=None)
+    p.add_argument("--batch-size", type=int, default=None)
+    p.add_argument("--device", default=None)
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_experiment)
+
+    p = sub.add_parser("report", help="figures and a Markdown page from the results store")
+    p.add_argument("--results", default="results")
+    p.add_argument("--out", default=None, help="output directory (default RESULTS/report)")
+    p.add_argument("--csv", default=None, help="also export every result row to this CSV file")
+    p.set_defaults(func=_cmd_report)
+
+
+def _cmd_experiment(args) -> int:
+    from bridgeplan.experiments.grids import get_experiment
+    from bridgeplan.experiments.runner import SweepSettings, run_sweep
+
+    for name in ("train_steps", "prior_steps", "checkpoint_every", "episodes", "dataset_steps"):
+        if getattr(args, name) <= 0:
+            raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe)
+    overrides = _overrides(args, ("horizon", "batch_size", "device"))
+    model = {"dim": args.dim} if args.dim is not None else {}
+    if args.dim_mults is not None:
+        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
+    if model:
+        overrides["model"] = model
+    settings = SweepSettings(maze=args.maze, dataset=args.dataset, dataset_steps=args.dataset_steps,
+                             preset=args.preset, train_steps=args.train_steps, prior_steps=args.prior_steps,
+                             checkpoint_every=args.checkpoint_every, episodes=args.episodes,
+                             seeds=_seeds(args.seeds),
+                             results_dir=args.results, overrides=overrides)
+    added = run_sweep([experiment], settings, backend=args.backend, workers=args.workers,
+                      ray_address=args.ray_address, progress=not args.no_progress)
+    print(f"{args.name}: {added} new results in {Path(args.results) / 'results.sqlite'}")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.report import write_report
+
+    results = Path(args.results)
+    if not (results / "results.sqlite").exists():
+        raise BridgeplanError(f"no results store at {results / 'results.sqlite'}; run `bridgeplan experiment` first")
+    path = write_report(results, Path(args.out) if args.out else None)
+    print(f"wrote {path}")
+    if args.csv:
+        n = ResultsStore(results / "results.sqlite").export_csv(Path(args.csv))
+        print(f"wrote {args.csv} ({n} rows)")
+    return 0
+
+
+def _add_demo_command(sub) -> None:
+    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report")
+    p.add_argument("--maze", default="umaze")
+    p.add_argument("--out", default="demo", help="output directory")
+    p.add_argument("--dataset-steps", type=int, default=200_000)
+    p.add_argument("--train-steps", type=int, default=1500, help="optimizer steps per run")
+    p.add_argument("--episodes", type=int, default=100)
+    p.set_defaults(func=_cmd_demo)
+
+
+def _cmd_demo(args) -> int:
+    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> report with plots."""
+    from bridgeplan.experiments.grids import Experiment, RunSpec, Series
+    from bridgeplan.experiments.runner import SweepSettings, run_sweep
+    from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.report import write_report
+
+    print(_reference_table({args.maze: load_reference_returns()[args.maze]}))
+    ddpm, bridge = RunSpec("ddpm", "gaussian", 16), RunSpec("bridge", "line", 16)
+    demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
+                      (Series("DDPM", ddpm, 16), Series("DDPM", ddpm, 1),
+                       Series("bridge (line)", bridge, 15), Series("bridge (line)", bridge, 1)))
+    settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
+                             train_steps=args.train_steps, checkpoint_every=max(1, args.train_steps // 3),
+                             episodes=args.episodes, results_dir=args.out)
+    added = run_sweep([demo], settings)
+    report = write_report(Path(args.out))
+    print(f"demo: {added} new results; report: {report}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="bridgeplan", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_data_commands(sub)
+    _add_train_commands(sub)
+    _add_eval_commands(sub)
+    _add_experiment_commands(sub)
+    _add_demo_command(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    warnings.filterwarnings("ignore", module="gymnasium_robotics")
+    try:
+        return args.func(args)
+    except BridgeplanError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted (finished work and checkpoints are kept)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,158 @@
+"""Running a sweep: train what is missing, evaluate what is not in the store yet.
+
+Work is split into jobs, one per trained run (train or resume it, then evaluate its snapshots for
+every series that uses it). The learned prior is trained first, since the runs from it need it.
+Backends: ``local`` runs jobs in this process, or in ``workers`` processes with the cores divided
+among them; ``ray`` submits each job as a Ray task with its CPU/GPU needs.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bridgeplan import config as cfg
+from bridgeplan.checkpoint import load_checkpoint
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.experiments.grids import Experiment, RunSpec
+from bridgeplan.experiments.store import ResultsStore, row_from_result
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """How a sweep trains and evaluates; the grid itself comes from the experiments."""
+
+    maze: str = "umaze"
+    dataset: str = ""
+    """Dataset directory; generated under ``results_dir/data`` when empty."""
+    dataset_steps: int = 200_000
+    """Transitions to generate when no dataset is given."""
+    preset: str = "cpu-small"
+    train_steps: int = 3000
+    """Optimizer steps per planner run."""
+    prior_steps: int = 2000
+    """Optimizer steps for the learned prior."""
+    checkpoint_every: int = 500
+    """Snapshot interval: the x-axis of the figures."""
+    episodes: int = 200
+    seeds: tuple[int, ...] = (0,)
+    results_dir: str = "results"
+    overrides: dict = field(default_factory=dict)
+    """Extra TrainConfig fields (e.g. a tiny model for tests)."""
+
+
+def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
+    return cfg.preset_config(
+        s.maze, s.preset, **s.overrides, dataset=s.dataset, steps=s.train_steps, seed=seed,
+        checkpoint_every=s.checkpoint_every,
+        process={"name": spec.process, "steps": spec.diffusion_steps},
+        prior=spec.prior if spec.process == "bridge" else "gaussian",
+        prior_run=prior_run if spec.prior == "learned" and spec.process == "bridge" else "")
+
+
+def _prior_config(s: SweepSettings, seed: int, horizon: int) -> cfg.PriorTrainConfig:
+    extra = {k: v for k, v in s.overrides.items() if k in ("device", "threads")}
+    return cfg.PriorTrainConfig(maze=s.maze, dataset=s.dataset, horizon=horizon, steps=s.prior_steps,
+                                checkpoint_every=s.prior_steps, seed=seed, **extra)
+
+
+def _trained_step(run_dir: Path) -> int:
+    """Optimizer steps a run has done (-1: not started)."""
+    ckpt = run_dir / "checkpoint.pt"
+    return load_checkpoint(ckpt)["step"] if ckpt.exists() else -1
+
+
+def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
+            prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
+    """Train (or finish) one run and evaluate every (snapshot, NFE) its series need; returns new rows."""
+    import torch
+
+    from bridgeplan.evaluate import evaluate
+    from bridgeplan.train import train
+
+    if threads:
+        torch.set_num_threads(threads)
+    config = _train_config(settings, spec, seed, prior_run)
+    run_dir = Path(settings.results_dir) / "runs" / config.run_name()
+    done = _trained_step(run_dir)
+    if done < config.steps:
+        train(config, run_dir, resume=done >= 0, progress=progress)
+    store = ResultsStore(Path(settings.results_dir) / "results.sqlite")
+    snapshots = sorted(int(p.stem.split("_")[1]) for p in (run_dir / "snapshots").glob("step_*.pt"))
+    snapshots = [s for s in snapshots if s <= config.steps]
+    rows = []
+    for exp in experiments:
+        for series in exp.series:
+            if series.run != spec:
+                continue
+            for step in snapshots:
+                key = dict(experiment=exp.name, run_name=config.run_name(), step=step, nfe=series.nfe,
+                           episodes=settings.episodes, eval_seed=seed)
+                if store.has(**key):
+                    continue
+                result = evaluate(run_dir, episodes=settings.episodes, nfe=series.nfe, seed=seed,
+                                  snapshot=step, device=config.device, progress=False)
+                row = row_from_result(exp.name, config.run_name(), result)
+                store.add(row)
+                rows.append(row)
+    return rows
+
+
+def ensure_dataset(settings: SweepSettings) -> SweepSettings:
+    """Generate the sweep's dataset once if none was given."""
+    import dataclasses
+
+    if settings.dataset:
+        return settings
+    from bridgeplan.data import generate_dataset
+
+    path = Path(settings.results_dir) / "data" / f"{settings.maze}-{settings.dataset_steps}"
+    if not path.exists():
+        generate_dataset(settings.maze, settings.dataset_steps, seed=123, out=path)
+    return dataclasses.replace(settings, dataset=str(path))
+
+
+def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: str = "local",
+              workers: int = 1, ray_address: str | None = None, progress: bool = True) -> int:
+    """Run every job the experiments need; returns the number of new result rows."""
+    for exp in experiments:
+        exp.validate()
+    ResultsStore(Path(settings.results_dir) / "results.sqlite")  # refuse a newer schema before any work
+    if backend not in ("local", "ray"):
+        raise BridgeplanError(f"unknown backend {backend!r}: choose from local, ray")
+    if workers < 1:
+        raise BridgeplanError(f"workers must be >= 1, got {workers}")
+    settings = ensure_dataset(settings)
+    specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
+    horizon = cfg.preset_config(settings.maze, settings.preset, **settings.overrides).horizon
+    prior_runs = {}
+    for seed in settings.seeds:
+        if any(r.prior == "learned" and r.process == "bridge" for r in specs):
+            prior_runs[seed] = _ensure_prior(settings, seed, horizon, progress)
+    jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
+    if backend == "ray":
+        from bridgeplan.experiments.ray_backend import run_ray
+
+        return run_ray(jobs, experiments, settings, prior_runs, ray_address)
+    if workers == 1:
+        return sum(len(run_job(settings, experiments, spec, seed, prior_runs.get(seed, ""), 0, progress))
+                   for spec, seed in jobs)
+    import multiprocessing as mp
+
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    with mp.get_context("spawn").Pool(workers) as pool:
+        results = pool.starmap(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads,
+                                          False) for spec, seed in jobs])
+    return sum(len(r) for r in results)
+
+
+def _ensure_prior(settings: SweepSettings, seed: int, horizon: int, progress: bool) -> str:
+    from bridgeplan.train import train_prior
+
+    config = _prior_config(settings, seed, horizon)
+    run_dir = Path(settings.results_dir) / "runs" / config.run_name()
+    done = _trained_step(run_dir)
+    if done < config.steps:
+        train_prior(config, run_dir, resume=done >= 0, progress=progress)
+    return str(run_dir)

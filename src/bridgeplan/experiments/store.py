@@ -1,0 +1,126 @@
+"""The results store: one SQLite row per evaluation, safe for concurrent sweeps.
+
+WAL journaling and a busy timeout let two sweeps write at once; every insert is one transaction,
+so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the schema
+version: a database from a newer bridgeplan is refused, untouched.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sqlite3
+import time
+from pathlib import Path
+
+from bridgeplan.checkpoint import atomic_write_text
+from bridgeplan.errors import BridgeplanError
+
+SCHEMA_VERSION = 1
+
+COLUMNS = {
+    "experiment": "TEXT NOT NULL",
+    "run_name": "TEXT NOT NULL",
+    "maze": "TEXT NOT NULL",
+    "process": "TEXT NOT NULL",
+    "prior": "TEXT NOT NULL",
+    "diffusion_steps": "INTEGER NOT NULL",
+    "seed": "INTEGER NOT NULL",
+    "step": "INTEGER NOT NULL",
+    "train_seconds": "REAL",
+    "nfe": "INTEGER NOT NULL",
+    "episodes": "INTEGER NOT NULL",
+    "eval_seed": "INTEGER NOT NULL",
+    "score_minari": "REAL",
+    "score_minari_se": "REAL",
+    "score_d4rl": "REAL",
+    "score_d4rl_se": "REAL",
+    "success_rate": "REAL",
+    "plan_ms": "REAL",
+    "prior_ms": "REAL",
+    "floor_minari": "REAL",
+    "config": "TEXT",
+    "code_version": "TEXT",
+    "created": "REAL",
+}
+KEY = ("experiment", "run_name", "step", "nfe", "episodes", "eval_seed")
+
+
+class ResultsStore:
+    """``results.sqlite`` under a results directory."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        if self.path.exists():
+            self._check_version()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self._connect() as db:
+            db.execute("PRAGMA journal_mode=WAL")
+            cols = ", ".join(f"{k} {v}" for k, v in COLUMNS.items())
+            db.execute(f"CREATE TABLE IF NOT EXISTS results (id INTEGER PRIMARY KEY, {cols}, "
+                       f"UNIQUE ({', '.join(KEY)}))")
+            db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+
+    def _connect(self) -> sqlite3.Connection:
+        return sqlite3.connect(self.path, timeout=60.0)
+
+    def _check_version(self) -> None:
+        try:
+            with sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=60.0) as db:
+                version = db.execute("PRAGMA user_version").fetchone()[0]
+        except sqlite3.DatabaseError as e:
+            raise BridgeplanError(f"{self.path} is not a results database: {e}") from None
+        if version > SCHEMA_VERSION:
+            raise BridgeplanError(f"{self.path} has schema version {version}, newer than this bridgeplan "
+                                  f"understands ({SCHEMA_VERSION}); upgrade bridgeplan")
+
+    def has(self, **key) -> bool:
+        where = " AND ".join(f"{k} = ?" for k in KEY)
+        with self._connect() as db:
+            return db.execute(f"SELECT 1 FROM results WHERE {where}", [key[k] for k in KEY]).fetchone() is not None
+
+    def add(self, row: dict) -> None:
+        row = dict(row, created=row.get("created", time.time()))
+        if isinstance(row.get("config"), dict):
+            row["config"] = json.dumps(row["config"], sort_keys=True)
+        names = [k for k in COLUMNS if k in row]
+        with self._connect() as db:
+            db.execute(f"INSERT OR REPLACE INTO results ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})",
+                       [row[k] for k in names])
+
+    def rows(self, experiment: str | None = None) -> list[dict]:
+        with self._connect() as db:
+            db.row_factory = sqlite3.Row
+            query = "SELECT * FROM results" + (" WHERE experiment = ?" if experiment else "")
+            query += " ORDER BY experiment, run_name, nfe, step"
+            return [dict(r) for r in db.execute(query, [experiment] if experiment else [])]
+
+    def experiments(self) -> list[str]:
+        with self._connect() as db:
+            return [r[0] for r in db.execute("SELECT DISTINCT experiment FROM results ORDER BY experiment")]
+
+    def export_csv(self, path: Path) -> int:
+        rows = self.rows()
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=["id", *COLUMNS])
+        writer.writeheader()
+        writer.writerows(rows)
+        atomic_write_text(Path(path), buf.getvalue())
+        return len(rows)
+
+
+def row_from_result(experiment: str, run_name: str, result: dict) -> dict:
+    """A store row from an evaluation result (``bridgeplan.evaluate.evaluate``'s dict)."""
+    cfg = result["config"]
+    return {
+        "experiment": experiment, "run_name": run_name, "maze": result["maze"], "process": result["process"],
+        "prior": result["prior"], "diffusion_steps": result["diffusion_steps"], "seed": cfg["seed"],
+        "step": result["step"], "train_seconds": result["train_seconds"], "nfe": result["nfe"],
+        "episodes": result["episodes"], "eval_seed": result["seed"],
+        "score_minari": result["score"]["minari"]["mean"], "score_minari_se": result["score"]["minari"]["se"],
+        "score_d4rl": result["score"]["d4rl"]["mean"], "score_d4rl_se": result["score"]["d4rl"]["se"],
+        "success_rate": result["success_rate"]["mean"], "plan_ms": result["plan_ms_per_plan"],
+        "prior_ms": result["prior_ms_per_plan"], "floor_minari": result["floor_line"]["score"]["minari"]["mean"],
+        "config": cfg, "code_version": result["environment"]["code_version"],
+    }

@@ -1,0 +1,97 @@
+"""Diffuser's temporal U-Net over trajectories ``[batch, horizon, transition_dim]``.
+
+Conv1d(kernel 5) -> GroupNorm(8) -> Mish blocks; residual temporal blocks that add the
+diffusion-time embedding after their first block; Conv1d(3, stride 2) down, ConvTranspose1d(4,
+stride 2) up; no attention. ``dim=32, dim_mults=(1, 4, 8)`` is Diffuser's Maze2D network.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from bridgeplan.errors import BridgeplanError
+
+
+class SinusoidalEmbedding(nn.Module):
+    def __init__(self, dim: int):
+        super().__init__()
+        self.dim = dim
+
+    def forward(self, t: torch.Tensor) -> torch.Tensor:
+        half = self.dim // 2
+        freqs = torch.exp(-math.log(10000) * torch.arange(half, device=t.device, dtype=torch.float32) / (half - 1))
+        args = t.float()[:, None] * freqs[None]
+        return torch.cat([args.sin(), args.cos()], dim=-1)
+
+
+class ConvBlock(nn.Sequential):
+    """Conv1d -> GroupNorm -> Mish."""
+
+    def __init__(self, c_in: int, c_out: int, kernel: int = 5, groups: int = 8):
+        super().__init__(nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, c_out), nn.Mish())
+
+
+class ResidualTemporalBlock(nn.Module):
+    def __init__(self, c_in: int, c_out: int, embed_dim: int, kernel: int = 5):
+        super().__init__()
+        self.blocks = nn.ModuleList([ConvBlock(c_in, c_out, kernel), ConvBlock(c_out, c_out, kernel)])
+        self.time_mlp = nn.Sequential(nn.Mish(), nn.Linear(embed_dim, c_out))
+        self.skip = nn.Conv1d(c_in, c_out, 1) if c_in != c_out else nn.Identity()
+
+    def forward(self, x: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
+        h = self.blocks[0](x) + self.time_mlp(emb)[:, :, None]
+        return self.blocks[1](h) + self.skip(x)
+
+
+class TemporalUNet(nn.Module):
+    """Maps a noisy trajectory and a diffusion time ``t`` (float, ``[batch]``) to a trajectory."""
+
+    def __init__(self, transition_dim: int, dim: int = 32, dim_mults: tuple[int, ...] = (1, 4, 8),
+                 horizon: int | None = None):
+        super().__init__()
+        if dim <= 0 or dim % 8 or not dim_mults or min(dim_mults) <= 0:
+            raise BridgeplanError(f"U-Net needs dim a positive multiple of 8 (GroupNorm(8)) and positive "
+                                  f"multipliers, got dim={dim}, dim_mults={dim_mults}")
+        self.downsample_factor = 2 ** (len(dim_mults) - 1)
+        if horizon is not None and horizon % self.downsample_factor:
+            raise BridgeplanError(f"horizon {horizon} must be divisible by the U-Net's downsampling factor "
+                                  f"{self.downsample_factor} (dim_mults={tuple(dim_mults)})")
+        dims = [transition_dim, *(dim * m for m in dim_mults)]
+        pairs = list(zip(dims[:-1], dims[1:]))
+        self.time_mlp = nn.Sequential(SinusoidalEmbedding(dim), nn.Linear(dim, dim * 4), nn.Mish(),
+                                      nn.Linear(dim * 4, dim))
+        self.downs = nn.ModuleList()
+        for k, (c_in, c_out) in enumerate(pairs):
+            last = k == len(pairs) - 1
+            self.downs.append(nn.ModuleList([
+                ResidualTemporalBlock(c_in, c_out, dim), ResidualTemporalBlock(c_out, c_out, dim),
+                nn.Conv1d(c_out, c_out, 3, stride=2, padding=1) if not last else nn.Identity()]))
+        mid = dims[-1]
+        self.mid = nn.ModuleList([ResidualTemporalBlock(mid, mid, dim), ResidualTemporalBlock(mid, mid, dim)])
+        self.ups = nn.ModuleList()
+        # as in Diffuser: every up level upsamples, and the first level's skip goes unused
+        for c_in, c_out in reversed(pairs[1:]):
+            self.ups.append(nn.ModuleList([
+                ResidualTemporalBlock(c_out * 2, c_in, dim), ResidualTemporalBlock(c_in, c_in, dim),
+                nn.ConvTranspose1d(c_in, c_in, 4, stride=2, padding=1)]))
+        self.final = nn.Sequential(ConvBlock(dim, dim), nn.Conv1d(dim, transition_dim, 1))
+
+    def forward(self, x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        if x.shape[1] % self.downsample_factor:
+            raise BridgeplanError(f"horizon {x.shape[1]} must be divisible by {self.downsample_factor}")
+        h = x.transpose(1, 2)
+        emb = self.time_mlp(t)
+        skips = []
+        for block1, block2, down in self.downs:
+            h = block2(block1(h, emb), emb)
+            skips.append(h)
+            h = down(h)
+        for block in self.mid:
+            h = block(h, emb)
+        for block1, block2, up in self.ups:
+            h = torch.cat([h, skips.pop()], dim=1)
+            h = up(block2(block1(h, emb), emb))
+        return self.final(h).transpose(1, 2)

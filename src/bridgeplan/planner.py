@@ -1,0 +1,74 @@
+"""The planner: normalizer + prior + process + network -> plans for a batch of (start, goal)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from bridgeplan.data.normalizer import Normalizer
+from bridgeplan.trajectory import ACT_DIM, Conditions
+
+
+@dataclass
+class Plan:
+    """Plans in physical units and what they cost."""
+
+    states: np.ndarray
+    """``[N, H, 4]`` planned (x, y, vx, vy)."""
+    actions: np.ndarray
+    """``[N, H, 2]`` planned actions (the tracking controller ignores them, as Diffuser's did)."""
+    prior_seconds: float
+    """Wall time to sample the prior for the whole batch."""
+    sample_seconds: float
+    """Wall time of the sampler (the network calls) for the whole batch."""
+
+
+@dataclass
+class Planner:
+    model: torch.nn.Module
+    process: object
+    prior: object
+    normalizer: Normalizer
+    horizon: int
+    device: torch.device
+
+    def conditions(self, starts: np.ndarray, goals: np.ndarray) -> Conditions:
+        """Normalized conditions: the start state at t=0, the goal with zero velocity at t=H-1."""
+        goal_states = np.concatenate([goals, np.zeros_like(goals)], axis=1)
+        state_dims = slice(ACT_DIM, None)
+
+        def norm(s: np.ndarray) -> torch.Tensor:
+            return torch.as_tensor(self.normalizer.normalize(s, state_dims), dtype=torch.float32,
+                                   device=self.device)
+
+        return {0: norm(starts), self.horizon - 1: norm(goal_states)}
+
+    def unnormalize(self, x: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        traj = self.normalizer.unnormalize(x.double().cpu().numpy())
+        return traj[..., ACT_DIM:], traj[..., :ACT_DIM]
+
+    @torch.inference_mode()
+    def plan(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator,
+             prior_only: bool = False) -> Plan:
+        """Plan from ``starts`` ``[N, 4]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
+
+        ``prior_only`` returns the prior sample itself (the floor every model must beat).
+        """
+        conditions = self.conditions(starts, goals)
+        t0 = _now(self.device)
+        x = self.prior.sample(conditions, self.horizon, len(starts), generator=generator)
+        t1 = _now(self.device)
+        if not prior_only:
+            x = self.process.sample(self.model, x, conditions, nfe, generator=generator)
+        t2 = _now(self.device)
+        states, actions = self.unnormalize(x)
+        return Plan(states, actions, t1 - t0, t2 - t1)
+
+
+def _now(device: torch.device) -> float:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter()

@@ -1,0 +1,83 @@
+"""DDPM as Diffuser trains it: cosine schedule, x0 prediction, L2 loss, inpainted conditions."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from functools import cached_property
+
+import torch
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes.samplers import ddim, ddpm_ancestral
+from bridgeplan.processes.schedules import cosine_betas
+from bridgeplan.trajectory import Conditions, apply_conditions
+
+SAMPLERS = ("ancestral", "ddim")
+
+
+@dataclass(frozen=True)
+class DDPM:
+    """Diffusion over ``steps`` noise levels; sampled by ``sampler`` in any NFE from 1 to ``steps``.
+
+    ``ancestral`` with NFE = steps is Diffuser's chain; fewer NFE take evenly spaced steps (strided
+    ancestral, or DDIM with ``eta``).
+    """
+
+    steps: int = 64
+    sampler: str = "ancestral"
+    eta: float = 0.0
+    name = "ddpm"
+
+    def __post_init__(self):
+        if self.steps < 1:
+            raise BridgeplanError(f"diffusion steps must be >= 1, got {self.steps}")
+        if self.sampler not in SAMPLERS:
+            raise BridgeplanError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
+
+    @cached_property
+    def alpha_bar(self) -> torch.Tensor:
+        return torch.cumprod(1 - cosine_betas(self.steps), 0)
+
+    @property
+    def max_nfe(self) -> int:
+        return self.steps
+
+    def validate_nfe(self, nfe: int) -> None:
+        if not 1 <= nfe <= self.max_nfe:
+            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for ddpm with {self.steps} steps, got {nfe}")
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, **asdict(self)}
+
+    def predict_x0(self, model, x_t: torch.Tensor, t: int) -> torch.Tensor:
+        tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)
+        return model(x_t, tt).clamp(-1, 1)
+
+    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> torch.Tensor:
+        """L2 between x0 and the network's x0 prediction at a uniform random step (``x1`` unused)."""
+        b = x0.shape[0]
+        t = torch.randint(0, self.steps, (b,), generator=generator, device=x0.device)
+        ab = self.alpha_bar.to(x0.device, x0.dtype)[t][:, None, None]
+        noise = torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
+        x_t = apply_conditions(ab.sqrt() * x0 + (1 - ab).sqrt() * noise, conditions)
+        return torch.mean((model(x_t, t.float()) - x0) ** 2)
+
+    def sample_steps(self, nfe: int) -> list[int]:
+        """``nfe`` evenly spaced steps from ``steps - 1`` down to 0."""
+        self.validate_nfe(nfe)
+        if nfe == 1:
+            return [self.steps - 1]
+        return sorted({round(i * (self.steps - 1) / (nfe - 1)) for i in range(nfe)}, reverse=True)
+
+    def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,
+               generator: torch.Generator | None = None) -> torch.Tensor:
+        """From noise ``x_start`` to a trajectory in ``nfe`` network calls."""
+        steps = self.sample_steps(nfe)
+
+        def predict(x, t):
+            return self.predict_x0(model, x, t)
+
+        if self.sampler == "ddim":
+            return ddim(predict, x_start, conditions, steps, self.alpha_bar, self.eta, generator)
+        return ddpm_ancestral(predict, x_start, conditions, steps, self.alpha_bar, generator)

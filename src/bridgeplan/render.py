@@ -1,0 +1,149 @@
+"""Pictures: planned and executed trajectories over the maze, prior/target pairs, rollout videos."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.checkpoint import atomic_write_bytes
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_maze(ax, maze) -> None:
+    """Walls as grey squares in gymnasium-robotics coordinates (maze centred on the origin)."""
+    from matplotlib.patches import Rectangle
+
+    rows, cols = len(maze.grid), len(maze.grid[0])
+    for i in range(rows):
+        for j in range(cols):
+            if maze.grid[i][j] == 1:
+                x, y = j - cols / 2, rows / 2 - i - 1
+                ax.add_patch(Rectangle((x, y), 1, 1, color="0.35", lw=0))
+    ax.set_xlim(-cols / 2, cols / 2)
+    ax.set_ylim(-rows / 2, rows / 2)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def draw_path(ax, xy: np.ndarray, cmap: str, label: str | None = None, size: float = 6) -> None:
+    """A trajectory as points coloured by time (the thesis's gradients), start and end marked."""
+    t = np.linspace(0, 1, len(xy))
+    ax.plot(xy[:, 0], xy[:, 1], color="0.6", lw=0.5, zorder=2)
+    ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap=cmap, s=size, zorder=3, label=label)
+    ax.scatter(*xy[0], marker="o", s=40, facecolor="none", edgecolor="k", zorder=4)
+    ax.scatter(*xy[-1], marker="*", s=60, color="k", zorder=4)
+
+
+def save_figure(fig, path: Path) -> None:
+    plt = _pyplot()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(path, lambda f: f.write(buf.getvalue()))
+
+
+def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: Path, title: str = "",
+                         goals: np.ndarray | None = None, columns: int = 4) -> None:
+    """One panel per episode; each layer ``(trajectories [N, T, >=2], colormap, label)`` drawn over the maze.
+
+    Used for plans vs executed states (``bridgeplan render``) and prior/target pairs (the thesis's figures).
+    """
+    plt = _pyplot()
+    n = len(layers[0][0])
+    rows = (n + columns - 1) // columns
+    aspect = len(maze.grid) / len(maze.grid[0])
+    fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 3.2 * rows * aspect), squeeze=False)
+    for k, ax in enumerate(axes.flat):
+        if k >= n:
+            ax.axis("off")
+            continue
+        draw_maze(ax, maze)
+        for size, (trajs, cmap, label) in zip((6, 3, 3), layers):
+            draw_path(ax, trajs[k][:, :2], cmap, label, size=size)
+        if goals is not None:
+            ax.scatter(*goals[k], marker="x", s=80, color="m", zorder=5)
+    axes.flat[0].legend(loc="lower left", fontsize=6)
+    fig.suptitle(title, fontsize=9)
+    save_figure(fig, path)
+
+
+def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int = 0, multi_task: bool = False,
+               out: str | None = None, pairs: bool = False, video: bool = False, device: str = "auto") -> list[Path]:
+    """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written."""
+    import torch
+
+    from bridgeplan.errors import BridgeplanError
+    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.maze.rollout import execute_plans
+    from bridgeplan.maze.tasks import sample_tasks
+    from bridgeplan.runs import load_planner, load_windows
+
+    if episodes <= 0:
+        raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    run = Path(run)
+    planner, info = load_planner(run, device=device)
+    config = info["config"]
+    nfe = planner.process.max_nfe if nfe is None else nfe
+    planner.process.validate_nfe(nfe)
+    maze = get_maze(config.maze)
+    starts_xy, goals_xy = sample_tasks(maze, episodes, seed=seed, multi_task=multi_task)
+    starts = np.concatenate([starts_xy, np.zeros_like(starts_xy)], axis=1)
+    gen = torch.Generator(device=planner.device).manual_seed(seed)
+    plan = planner.plan(starts, goals_xy, nfe, gen)
+    result = execute_plans(maze, starts_xy, goals_xy, plan.states)
+    base = Path(out) if out else run / "render" / f"step{info['step']}-nfe{nfe}-seed{seed}.png"
+    title = f"{maze.name} {config.process.name} prior={config.prior} NFE={nfe} step={info['step']}"
+    plot_trajectory_grid(maze, [(plan.states, "winter", "plan"), (result.states, "autumn", "executed")],
+                         base, title, goals=goals_xy)
+    written = [base]
+    if pairs:
+        windows, _ = load_windows(config.dataset, config.maze, config.horizon)
+        idx = torch.randint(len(windows), (episodes,), generator=torch.Generator().manual_seed(seed))
+        x0 = windows.batch(idx).to(planner.device)
+        conditions = {0: x0[:, 0, 2:], config.horizon - 1: x0[:, -1, 2:]}
+        with torch.inference_mode():
+            x1 = planner.prior.sample(conditions, config.horizon, episodes, generator=gen)
+        prior_states, _ = planner.unnormalize(x1)
+        target_states, _ = planner.unnormalize(x0)
+        path = base.with_name(base.stem + "-pairs.png")
+        plot_trajectory_grid(maze, [(prior_states, "cool", f"prior ({planner.prior.name})"),
+                                    (target_states, "viridis", "target")], path, f"{maze.name}: prior/target pairs")
+        written.append(path)
+    if video:
+        path = base.with_suffix(".gif")
+        write_rollout_gif(maze, result.states[0], goals_xy[0], path)
+        written.append(path)
+    return written
+
+
+def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, every: int = 4) -> None:
+    """Replay executed states in MuJoCo's renderer (headless: MUJOCO_GL=egl) and save an animated GIF."""
+    import gymnasium as gym
+    import gymnasium_robotics
+    from PIL import Image
+
+    gym.register_envs(gymnasium_robotics)
+    env = gym.make(maze.gym_id, render_mode="rgb_array", width=320, height=320)
+    env.reset(seed=0)
+    point = env.unwrapped.point_env
+    env.unwrapped.goal = np.asarray(goal, dtype=np.float64)
+    env.unwrapped.update_target_site_pos()
+    frames = []
+    for s in states[::every]:
+        point.set_state(np.asarray(s[:2], dtype=np.float64), np.asarray(s[2:4], dtype=np.float64))
+        frames.append(Image.fromarray(env.render()))
+    env.close()
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=40, loop=0)
+    atomic_write_bytes(path, lambda f: f.write(buf.getvalue()))

@@ -1,0 +1,91 @@
+"""Figures and a Markdown page from the results store (never from memory)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.checkpoint import atomic_write_text
+from bridgeplan.experiments.grids import EXPERIMENTS
+from bridgeplan.experiments.store import ResultsStore
+from bridgeplan.render import _pyplot, save_figure
+
+
+def _series(rows: list[dict]) -> dict[str, list[dict]]:
+    """Rows grouped into the lines of a figure: one per (process, prior, diffusion steps, NFE)."""
+    groups: dict[str, list[dict]] = {}
+    for r in sorted(rows, key=lambda r: (r["process"], r["prior"], r["diffusion_steps"], r["nfe"], r["step"])):
+        name = "DDPM" if r["process"] == "ddpm" else f"bridge ({r['prior']})"
+        groups.setdefault(f"{name} N={r['diffusion_steps']} NFE={r['nfe']}", []).append(r)
+    return groups
+
+
+def _aggregate(rows: list[dict]) -> list[tuple[int, float, float, int]]:
+    """(step, mean, standard error, seeds) per training step; several seeds are averaged."""
+    by_step: dict[int, list[dict]] = {}
+    for r in rows:
+        by_step.setdefault(r["step"], []).append(r)
+    out = []
+    for step, rs in sorted(by_step.items()):
+        means = np.array([r["score_minari"] for r in rs])
+        if len(rs) == 1:
+            se = rs[0]["score_minari_se"]
+        else:  # spread across seeds and within each, combined
+            se = float(np.sqrt(means.var(ddof=1) / len(rs) + np.mean([r["score_minari_se"] ** 2 for r in rs]) / len(rs)))
+        out.append((step, float(means.mean()), se, len(rs)))
+    return out
+
+
+def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
+    """Score vs training steps with standard-error bands, one line per series; False if no data."""
+    rows = store.rows(name)
+    if not rows:
+        return False
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, srows in _series(rows).items():
+        steps, mean, se = (np.array(v) for v in list(zip(*_aggregate(srows)))[:3])
+        ax.plot(steps, mean, marker="o", ms=3, label=label)
+        ax.fill_between(steps, mean - se, mean + se, alpha=0.2)
+    floors = [r["floor_minari"] for r in rows if r["floor_minari"] is not None]
+    if floors:
+        ax.axhline(float(np.mean(floors)), color="0.5", ls="--", lw=1, label="floor (line, tracked)")
+    ax.set_xlabel("training steps")
+    ax.set_ylabel("normalized score (minari convention)")
+    ax.set_title(f"{rows[0]['maze']}: {EXPERIMENTS[name].title if name in EXPERIMENTS else name}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    save_figure(fig, path)
+    return True
+
+
+def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
+    """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path."""
+    results_dir = Path(results_dir)
+    out_dir = Path(out_dir) if out_dir else results_dir / "report"
+    store = ResultsStore(results_dir / "results.sqlite")
+    lines = ["# bridgeplan results", "",
+             "Normalized scores (Minari convention unless marked d4rl): mean ± standard error over the "
+             "stated episodes, made by `bridgeplan report` from the results store.", ""]
+    for name in store.experiments():
+        png = out_dir / f"{name}.png"
+        if not plot_experiment(store, name, png):
+            continue
+        rows = store.rows(name)
+        title = EXPERIMENTS[name].title if name in EXPERIMENTS else name
+        lines += [f"## {name}: {title}", "", f"![{name}]({png.name})", "",
+                  "| series | step | train s | NFE | episodes | seeds | score (minari) | score (d4rl) | success | plan ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for label, srows in _series(rows).items():
+            for step, mean, se, seeds in _aggregate(srows):
+                at = [r for r in srows if r["step"] == step]
+                d4rl = np.mean([r["score_d4rl"] for r in at])
+                lines.append(
+                    f"| {label} | {step} | {np.mean([r['train_seconds'] or 0 for r in at]):.0f} | "
+                    f"{at[0]['nfe']} | {at[0]['episodes']} | {seeds} | {mean:.1f} ± {se:.1f} | {d4rl:.1f} | "
+                    f"{np.mean([r['success_rate'] for r in at]):.2f} | {np.mean([r['plan_ms'] for r in at]):.1f} |")
+        lines.append("")
+    path = out_dir / "report.md"
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    return path

@@ -1,0 +1,88 @@
+"""Building the pieces of a run from its config, and loading a trained run back as a planner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from bridgeplan import config as cfg
+from bridgeplan.checkpoint import load_checkpoint
+from bridgeplan.data.normalizer import Normalizer
+from bridgeplan.device import resolve_device
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.nets.prior_mlp import PriorMLP
+from bridgeplan.nets.unet import TemporalUNet
+from bridgeplan.planner import Planner
+from bridgeplan.priors import make_prior
+from bridgeplan.processes import make_process
+from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
+
+
+def load_windows(dataset: str, maze: str, horizon: int):
+    """Training windows of ``dataset`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
+    from bridgeplan.data import load_stream, WindowDataset
+
+    if not dataset:
+        raise BridgeplanError("no dataset given: pass --dataset (see `bridgeplan data generate`)")
+    stream = load_stream(dataset)
+    if stream.maze != maze:
+        raise BridgeplanError(f"dataset {dataset} is from maze {stream.maze!r}, not {maze!r}")
+    normalizer = Normalizer.fit(stream.transitions())
+    return WindowDataset(stream, horizon, normalizer), normalizer
+
+
+def build_model(config: cfg.TrainConfig) -> TemporalUNet:
+    return TemporalUNet(TRANSITION_DIM, dim=config.model.dim, dim_mults=tuple(config.model.dim_mults),
+                        horizon=config.horizon)
+
+
+def build_prior_net(horizon: int) -> PriorMLP:
+    return PriorMLP(OBS_DIM, horizon, TRANSITION_DIM)
+
+
+def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.device):
+    """The prior the process starts from: DDPM always starts from noise; the bridge from ``config.prior``."""
+    if config.process.name != "bridge":
+        return make_prior("gaussian", normalizer)
+    if config.prior != "learned":
+        return make_prior(config.prior, normalizer)
+    if not config.prior_run:
+        raise BridgeplanError("the learned prior needs --prior-run (a run of `bridgeplan train-prior`)")
+    state = load_checkpoint(Path(config.prior_run))
+    if state["kind"] != "prior":
+        raise BridgeplanError(f"{config.prior_run} is not a learned-prior run")
+    saved = state["config"]
+    for name in ("maze", "horizon"):
+        if saved[name] != getattr(config, name):
+            raise BridgeplanError(f"learned prior {config.prior_run} was trained for {name} {saved[name]!r}, "
+                                  f"not {getattr(config, name)!r}")
+    if state["normalizer"] != normalizer.to_dict():
+        raise BridgeplanError(f"learned prior {config.prior_run} was trained on a different dataset")
+    net = build_prior_net(config.horizon)
+    net.load_state_dict(state["model"])
+    return make_prior("learned", normalizer, net=net.to(device).eval())
+
+
+def load_planner(run: Path, snapshot: int | None = None, device: str = "auto") -> tuple[Planner, dict]:
+    """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``)."""
+    run = Path(run)
+    path = run if run.is_file() else (
+        run / "snapshots" / f"step_{snapshot:08d}.pt" if snapshot is not None else run / "checkpoint.pt")
+    if snapshot is not None and not path.exists():
+        have = sorted(int(p.stem.split("_")[1]) for p in (run / "snapshots").glob("step_*.pt"))
+        raise BridgeplanError(f"no snapshot at step {snapshot} in {run} (have: {have or 'none'})")
+    state = load_checkpoint(path)
+    if state["kind"] != "planner":
+        raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a planner")
+    config = cfg.from_dict(cfg.TrainConfig, state["config"])
+    dev = resolve_device(device)
+    normalizer = Normalizer.from_dict(state["normalizer"])
+    model = build_model(config)
+    model.load_state_dict(state["ema"])
+    model.to(dev).eval()
+    process = make_process(config.process.name, **config.process.params())
+    prior = build_prior(config, normalizer, dev)
+    planner = Planner(model, process, prior, normalizer, config.horizon, dev)
+    return planner, {"config": config, "config_dict": state["config"], "step": state["step"],
+                     "elapsed_seconds": state["elapsed_seconds"]}

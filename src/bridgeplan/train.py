@@ -1,0 +1,205 @@
+"""Training: the planner (DDPM or bridge) and the learned prior, with EMA and exact resume.
+
+One loop (:func:`_fit`) serves both: it owns the optimizer, gradient accumulation, EMA, the RNG,
+the time budget, NaN detection, TensorBoard scalars and checkpoints. Everything needed to resume
+lives in one file, ``RUN/checkpoint.pt``; EMA snapshots ``RUN/snapshots/step_*.pt`` are what the
+experiments evaluate across training steps.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import torch
+from tqdm import tqdm
+
+from bridgeplan import config as cfg
+from bridgeplan.checkpoint import CHECKPOINT_NAME, code_version, load_checkpoint, save_checkpoint, write_config
+from bridgeplan.device import resolve_device
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
+from bridgeplan.processes import make_process
+from bridgeplan.priors import train_prior_loss
+from bridgeplan.trajectory import ACT_DIM
+
+# Fields that may change when a run is resumed: they do not change what is being trained.
+_RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every"}
+
+
+@dataclass
+class _Job:
+    """What distinguishes the planner's training from the prior's, for the shared loop."""
+
+    kind: str
+    config: object
+    model: torch.nn.Module
+    loss: Callable[[torch.Tensor, torch.Generator], torch.Tensor]
+    normalizer_dict: dict
+    grad_accum: int = 1
+    ema: tuple[float, int, int] | None = None  # (decay, every, start)
+
+
+def conditions_of(x0: torch.Tensor) -> dict[int, torch.Tensor]:
+    """Start and goal conditions of a training window: its first and last states (Diffuser)."""
+    return {0: x0[:, 0, ACT_DIM:], x0.shape[1] - 1: x0[:, -1, ACT_DIM:]}
+
+
+def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
+    """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
+    device = _setup(config)
+    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
+    model = build_model(config).to(device)
+    process = make_process(config.process.name, **config.process.params())
+    prior = build_prior(config, normalizer, device)
+
+    def loss(x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        conditions = conditions_of(x0)
+        x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
+        return process.training_loss(model, x0, x1, conditions, generator=gen)
+
+    job = _Job("planner", config, model, loss, normalizer.to_dict(), config.grad_accum,
+               (config.ema_decay, config.ema_every, config.ema_start))
+    return _fit(job, windows, run_dir, resume, device, progress)
+
+
+def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = False,
+                progress: bool = True) -> Path:
+    """Train the learned prior (the thesis's MLP on start and goal) on the same windows and loss."""
+    device = _setup(config)
+    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
+    net = build_prior_net(config.horizon).to(device)
+    job = _Job("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
+    return _fit(job, windows, run_dir, resume, device, progress)
+
+
+def _setup(config) -> torch.device:
+    for name in ("steps", "batch_size"):
+        if getattr(config, name) <= 0:
+            raise BridgeplanError(f"{name} must be positive, got {getattr(config, name)}")
+    if config.minutes < 0:
+        raise BridgeplanError(f"minutes must be >= 0, got {config.minutes}")
+    if config.threads > 0:
+        torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)  # the network's initial weights
+    return resolve_device(config.device)
+
+
+def _check_resumable(saved: dict, current: dict, path: Path) -> None:
+    diff = sorted(k for k in set(saved) | set(current)
+                  if k not in _RESUMABLE_FIELDS and saved.get(k) != current.get(k))
+    if diff:
+        detail = ", ".join(f"{k}: {saved.get(k)!r} -> {current.get(k)!r}" for k in diff)
+        raise BridgeplanError(f"checkpoint {path} was trained with a different config ({detail})")
+
+
+def _fit(job: _Job, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
+    config = job.config
+    run_dir = Path(run_dir)
+    ckpt_path = run_dir / CHECKPOINT_NAME
+    config_dict = cfg.to_dict(config)
+    model = job.model
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    ema = copy.deepcopy(model).requires_grad_(False) if job.ema else None
+    gen = torch.Generator(device=device).manual_seed(config.seed)
+    step, elapsed = 0, 0.0
+
+    if resume:
+        if not ckpt_path.exists():
+            raise BridgeplanError(f"--resume given but {ckpt_path} does not exist")
+        state = load_checkpoint(ckpt_path)
+        if state["kind"] != job.kind:
+            raise BridgeplanError(f"{ckpt_path} is a {state['kind']} checkpoint, not a {job.kind} one")
+        _check_resumable(state["config"], config_dict, ckpt_path)
+        if state["normalizer"] != job.normalizer_dict:
+            raise BridgeplanError(f"{ckpt_path} was trained on a different dataset (normalizer differs)")
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        if ema is not None:
+            ema.load_state_dict(state["ema"])
+        gen.set_state(state["generator"].to(gen.get_state().device))
+        torch.set_rng_state(state["torch_rng"])
+        step, elapsed = state["step"], state["elapsed_seconds"]
+    elif run_dir.exists() and any(run_dir.iterdir()):
+        raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_config(run_dir, {"kind": job.kind, "config": config_dict, "code_version": code_version()})
+
+    def snapshot_state() -> dict:
+        return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict,
+                "step": step, "elapsed_seconds": elapsed, "code_version": code_version()}
+
+    def save() -> None:
+        state = snapshot_state() | {
+            "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "ema": ema.state_dict() if ema is not None else None,
+            "generator": gen.get_state(), "torch_rng": torch.get_rng_state()}
+        save_checkpoint(ckpt_path, state)
+        weights = (ema if ema is not None else model).state_dict()
+        save_checkpoint(run_dir / "snapshots" / f"step_{step:08d}.pt", snapshot_state() | {"ema": weights})
+
+    writer = _tensorboard(run_dir)
+    budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {job.kind}",
+               unit="step", dynamic_ncols=True)
+    model.train()
+    last_saved = step
+    t_start, t_log, step_log = time.perf_counter(), time.perf_counter(), step
+    elapsed0 = elapsed
+    try:
+        while step < config.steps and elapsed < budget:
+            total = 0.0
+            for _ in range(job.grad_accum):
+                idx = torch.randint(len(windows), (config.batch_size,), generator=gen, device=device)
+                x0 = windows.batch(idx.cpu()).to(device)
+                loss = job.loss(x0, gen) / job.grad_accum
+                loss.backward()
+                total += loss.item()
+            if not math.isfinite(total):
+                raise BridgeplanError(
+                    f"loss became {total} at step {step + 1}; stopped. The last good checkpoint "
+                    f"(step {last_saved}) is kept in {ckpt_path}" if last_saved else
+                    f"loss became {total} at step {step + 1}; stopped before any checkpoint was written")
+            optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
+            step += 1
+            if ema is not None:
+                decay, every, start = job.ema
+                if step < start:
+                    ema.load_state_dict(model.state_dict())
+                elif step % every == 0:
+                    with torch.no_grad():
+                        for pe, pm in zip(ema.parameters(), model.parameters()):
+                            pe.lerp_(pm, 1.0 - decay)
+            elapsed = elapsed0 + time.perf_counter() - t_start
+            bar.update(1)
+            if step % config.log_every == 0:
+                now = time.perf_counter()
+                rate = (step - step_log) / max(now - t_log, 1e-9)
+                t_log, step_log = now, step
+                bar.set_postfix(loss=f"{total:.4f}", steps_per_s=f"{rate:.1f}")
+                if writer is not None:
+                    writer.add_scalar("loss", total, step)
+                    writer.add_scalar("steps_per_s", rate, step)
+            if step % config.checkpoint_every == 0:
+                save()
+                last_saved = step
+        if step != last_saved:
+            save()
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close()
+    return run_dir
+
+
+def _tensorboard(run_dir: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # tensorboard is an optional extra
+        return None
+    return SummaryWriter(log_dir=str(run_dir / "tensorboard"))

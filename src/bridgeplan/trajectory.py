@@ -1,0 +1,28 @@
+"""The trajectory layout shared by data, networks, processes and planner.
+
+A trajectory is a tensor ``[batch, horizon, transition_dim]`` whose columns are
+``(actions, state)`` = ``(ax, ay, x, y, vx, vy)`` (Diffuser's layout). Goal reaching is
+inpainting: ``conditions`` maps a time index to the state (normalized) that the trajectory must
+have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``.
+"""
+
+from __future__ import annotations
+
+import torch
+
+ACT_DIM = 2
+OBS_DIM = 4
+TRANSITION_DIM = ACT_DIM + OBS_DIM
+
+Conditions = dict[int, torch.Tensor]
+
+
+def apply_conditions(x: torch.Tensor, conditions: Conditions, act_dim: int = ACT_DIM) -> torch.Tensor:
+    """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor).
+
+    Used by training and by every sampler step alike, so conditions hold exactly in every sample.
+    """
+    x = x.clone()
+    for t, state in conditions.items():
+        x[:, t, act_dim:] = state.to(x.dtype)
+    return x

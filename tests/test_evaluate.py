@@ -1,0 +1,81 @@
+"""Evaluation and rendering through the real CLI on a tiny trained run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bridgeplan.cli import main
+from tests.test_train import train_args
+
+
+@pytest.fixture(scope="module")
+def tiny_runs(tiny_dataset, tmp_path_factory):
+    root = tmp_path_factory.mktemp("runs")
+    prior = root / "prior"
+    assert main(["train-prior", "--maze", "umaze", "--dataset", tiny_dataset, "--run-dir", str(prior),
+                 "--horizon", "32", "--steps", "3", "--no-progress", "--device", "cpu"]) == 0
+    runs = {"ddpm": root / "ddpm", "bridge": root / "bridge"}
+    assert main(train_args(tiny_dataset, runs["ddpm"], 3)) == 0
+    assert main(train_args(tiny_dataset, runs["bridge"], 3, "--process", "bridge", "--prior", "learned",
+                           "--prior-run", str(prior))) == 0
+    return runs
+
+
+@pytest.mark.parametrize("process, nfe", [("ddpm", None), ("ddpm", 2), ("bridge", 1), ("bridge", None)])
+def test_eval_json_fields(tiny_runs, tmp_path, capsys, process, nfe):
+    out = tmp_path / "result.json"
+    args = ["eval", str(tiny_runs[process]), "--episodes", "6", "--seed", "3", "--device", "cpu",
+            "--out", str(out), "--json"]
+    if nfe is not None:
+        args += ["--nfe", str(nfe)]
+    assert main(args) == 0
+    printed = json.loads(capsys.readouterr().out)
+    saved = json.loads(out.read_text())
+    assert printed == saved
+    assert saved["episodes"] == 6 and saved["seed"] == 3 and saved["maze"] == "umaze"
+    assert saved["process"] == process
+    assert saved["nfe"] == (nfe if nfe is not None else (6 if process == "ddpm" else 5))
+    for convention in ("minari", "d4rl"):
+        assert np.isfinite(saved["score"][convention]["mean"]) and saved["score"][convention]["se"] >= 0
+    assert 0.0 <= saved["success_rate"]["mean"] <= 1.0
+    assert saved["plan_ms_per_plan"] > 0
+    assert sum(c["episodes"] for c in saved["per_start_cell"]) == 6
+    assert saved["floor_line"]["prior"] == "line"
+    if process == "bridge":
+        assert saved["prior"] == "learned" and "prior_only_learned" in saved
+
+
+def test_eval_is_reproducible(tiny_runs, tmp_path):
+    outs = [tmp_path / f"{k}.json" for k in range(2)]
+    for out in outs:
+        assert main(["eval", str(tiny_runs["bridge"]), "--episodes", "4", "--device", "cpu",
+                     "--out", str(out)]) == 0
+    a, b = (json.loads(o.read_text()) for o in outs)
+    assert a["return"] == b["return"] and a["score"] == b["score"]
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--nfe", "0"], "nfe"),
+    (["--nfe", "6"], "nfe"),
+    (["--episodes", "0"], "episodes must be positive"),
+])
+def test_eval_bad_input(tiny_runs, capsys, bad, message):
+    assert main(["eval", str(tiny_runs["bridge"]), "--device", "cpu", *bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0].lower()
+
+
+def test_eval_missing_run(tmp_path, capsys):
+    assert main(["eval", str(tmp_path / "nope")]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+
+
+def test_render_writes_pngs(tiny_runs, tmp_path):
+    out = tmp_path / "plan.png"
+    assert main(["render", str(tiny_runs["bridge"]), "--episodes", "2", "--device", "cpu", "--out", str(out),
+                 "--pairs"]) == 0
+    for path in (out, tmp_path / "plan-pairs.png"):
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,97 @@
+"""Training through the real CLI with tiny settings: smoke runs, exact resume, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from bridgeplan.cli import main
+
+TINY = ["--preset", "cpu-small", "--horizon", "32", "--dim", "8", "--dim-mults", "1,2",
+        "--diffusion-steps", "6", "--batch-size", "4", "--ema-start", "2", "--ema-every", "1",
+        "--log-every", "1", "--no-progress", "--device", "cpu"]
+
+
+def train_args(dataset, run_dir, steps, *extra):
+    return ["train", "--maze", "umaze", "--dataset", dataset, "--run-dir", str(run_dir),
+            "--steps", str(steps), *TINY, *extra]
+
+
+def weights(run_dir):
+    state = torch.load(run_dir / "checkpoint.pt", weights_only=False)
+    return state["model"], state["ema"], state["step"]
+
+
+@pytest.mark.parametrize("process", ["ddpm", "bridge"])
+def test_resume_is_exact(tiny_dataset, tmp_path, process):
+    straight, interrupted = tmp_path / "straight", tmp_path / "interrupted"
+    assert main(train_args(tiny_dataset, straight, 6, "--process", process, "--prior", "line")) == 0
+    assert main(train_args(tiny_dataset, interrupted, 3, "--process", process, "--prior", "line")) == 0
+    assert weights(interrupted)[2] == 3
+    assert main(train_args(tiny_dataset, interrupted, 6, "--process", process, "--prior", "line",
+                           "--resume")) == 0
+    (m1, e1, s1), (m2, e2, s2) = weights(straight), weights(interrupted)
+    assert s1 == s2 == 6
+    for key in m1:
+        assert torch.equal(m1[key], m2[key]), key
+        assert torch.equal(e1[key], e2[key]), key
+    # the EMA really moved away from the raw weights after ema_start
+    assert any(not torch.equal(m1[k], e1[k]) for k in m1 if m1[k].is_floating_point())
+
+
+def test_run_directory_holds_config_and_snapshots(tiny_dataset, tmp_path):
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 4, "--checkpoint-every", "2")) == 0
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["kind"] == "planner"
+    assert saved["config"]["maze"] == "umaze" and saved["config"]["horizon"] == 32
+    assert saved["config"]["model"]["dim_mults"] == [1, 2]
+    assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["step_00000002.pt", "step_00000004.pt"]
+
+
+def test_existing_run_without_resume_is_refused(tiny_dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2)) == 0
+    before = (run / "checkpoint.pt").read_bytes()
+    assert main(train_args(tiny_dataset, run, 2)) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert (run / "checkpoint.pt").read_bytes() == before
+
+
+def test_resume_with_other_config_is_refused(tiny_dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2)) == 0
+    assert main(train_args(tiny_dataset, run, 4, "--lr", "0.1", "--resume")) == 2
+    err = capsys.readouterr().err
+    assert "different config" in err and "lr" in err
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--process", "flow"], "unknown process"),
+    (["--preset", "huge"], "unknown preset"),
+    (["--horizon", "31"], "divisible"),
+    (["--steps", "0"], "steps must be positive"),
+    (["--process", "bridge", "--prior", "magic"], "unknown prior"),
+    (["--process", "bridge", "--prior", "learned"], "--prior-run"),
+])
+def test_bad_input(tiny_dataset, tmp_path, capsys, bad, message):
+    run = tmp_path / "run"
+    args = train_args(tiny_dataset, run, 2)
+    # later flags win in argparse
+    assert main(args + bad) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and message in err[0], err
+    assert not (run / "checkpoint.pt").exists()
+
+
+def test_nan_loss_stops_and_keeps_last_checkpoint(tiny_dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    # a huge learning rate makes the loss blow up to inf/NaN after the first update
+    assert main(train_args(tiny_dataset, run, 50, "--lr", "1e30", "--checkpoint-every", "1")) == 2
+    err = capsys.readouterr().err
+    assert "loss became" in err and "last good checkpoint" in err
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert 1 <= state["step"] < 50
+    assert all(torch.isfinite(v).all() for v in state["model"].values() if v.is_floating_point())
