@@ -34,7 +34,7 @@ def write_minari(episodes: Episodes, maze: Maze, out: Path, dataset_id: str, see
     import minari
     from minari.data_collector import EpisodeBuffer
 
-    out = Path(out)
+    out = Path(out).resolve()  # minari resolves paths relative to its own root
     if out.exists() and not force:
         raise BridgeplanError(f"{out} already exists; pass --force to overwrite it")
     gym.register_envs(gymnasium_robotics)
