@@ -202,6 +202,8 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
     p.add_argument("--batch-size", type=int, default=0, help="plans per batch (0: all episodes at once)")
     p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
+    p.add_argument("--sampler", default=None, help="ddpm runs: ancestral (default; strided below N) or ddim")
+    p.add_argument("--eta", type=float, default=0.0, help="DDIM's eta (0: deterministic)")
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
@@ -225,10 +227,10 @@ def _cmd_eval(args) -> int:
 
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
-                      device=args.device)
+                      device=args.device, sampler=args.sampler, eta=args.eta)
     run_dir = Path(args.run) if Path(args.run).is_dir() else Path(args.run).parent
     name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
-        "-multi" if args.multi_task else "")
+        "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "")
     out = Path(args.out) if args.out else run_dir / "eval" / f"{name}.json"
     write_result(result, out)
     if args.json:

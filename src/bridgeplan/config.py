@@ -132,8 +132,9 @@ def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> Trai
             maze=maze, preset=preset, horizon=horizon,
             model=ModelConfig(dim=16, dim_mults=(1, 2, 4)),
             process=ProcessConfig(steps=20),
-            steps=200_000, batch_size=32, grad_accum=1, lr=5e-4,
-            ema_start=500, checkpoint_every=1000, log_every=50,
+            steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
+            # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
+            ema_every=1, ema_start=200, checkpoint_every=1000, log_every=50,
         )
     else:
         raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")

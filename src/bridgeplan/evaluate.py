@@ -42,13 +42,13 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
 
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
              multi_task: bool = False, batch_size: int = 0, snapshot: int | None = None,
-             device: str = "auto", progress: bool = True) -> dict:
+             device: str = "auto", sampler: str | None = None, eta: float = 0.0) -> dict:
     """Evaluate a trained run; returns the result dict (see the README for its fields)."""
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     if batch_size < 0:
         raise BridgeplanError(f"batch size must be positive (or 0 for all episodes at once), got {batch_size}")
-    planner, info = load_planner(run, snapshot=snapshot, device=device)
+    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta)
     config = info["config"]
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
@@ -70,7 +70,8 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     out = {
         "run": str(run), "step": info["step"], "train_seconds": info["elapsed_seconds"], "maze": maze.name, "process": config.process.name,
         "prior": config.prior if config.process.name == "bridge" else "gaussian",
-        "diffusion_steps": config.process.steps, "nfe": nfe, "episodes": episodes, "seed": seed,
+        "diffusion_steps": config.process.steps, "nfe": nfe,
+        "sampler": getattr(planner.process, "sampler", "i2sb"), "eta": getattr(planner.process, "eta", None), "episodes": episodes, "seed": seed,
         "multi_task": multi_task, "horizon": config.horizon, "episode_steps": maze.episode_steps,
         **score_returns(maze.name, result.returns, result.success),
         "plan_ms_per_plan": 1000.0 * (prior_s + sample_s) / episodes,

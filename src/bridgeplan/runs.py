@@ -64,8 +64,12 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
     return make_prior("learned", normalizer, net=net.to(device).eval())
 
 
-def load_planner(run: Path, snapshot: int | None = None, device: str = "auto") -> tuple[Planner, dict]:
-    """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``)."""
+def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
+                 eta: float = 0.0) -> tuple[Planner, dict]:
+    """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``).
+
+    ``sampler``/``eta`` choose DDPM's sampler (``ancestral`` or ``ddim``); the bridge has one.
+    """
     run = Path(run)
     path = run if run.is_file() else (
         run / "snapshots" / f"step_{snapshot:08d}.pt" if snapshot is not None else run / "checkpoint.pt")
@@ -81,7 +85,12 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto") -
     model = build_model(config)
     model.load_state_dict(state["ema"])
     model.to(dev).eval()
-    process = make_process(config.process.name, **config.process.params())
+    params = config.process.params()
+    if sampler is not None:
+        if config.process.name != "ddpm":
+            raise BridgeplanError(f"--sampler applies to ddpm runs; {path} is a {config.process.name} run")
+        params |= {"sampler": sampler, "eta": eta}
+    process = make_process(config.process.name, **params)
     prior = build_prior(config, normalizer, dev)
     planner = Planner(model, process, prior, normalizer, config.horizon, dev)
     return planner, {"config": config, "config_dict": state["config"], "step": state["step"],

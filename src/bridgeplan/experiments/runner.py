@@ -92,7 +92,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                 if store.has(**key):
                     continue
                 result = evaluate(run_dir, episodes=settings.episodes, nfe=series.nfe, seed=seed,
-                                  snapshot=step, device=config.device, progress=False)
+                                  snapshot=step, device=config.device)
                 row = row_from_result(exp.name, config.run_name(), result)
                 store.add(row)
                 rows.append(row)

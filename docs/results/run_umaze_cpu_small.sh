@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# The measurements committed in docs/results/umaze-cpu-small/ (2-core CPU, one job at a time).
+# Run from the repository root after `bash scripts/setup.sh`.
+set -euo pipefail
+export MUJOCO_GL=egl
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}  # leaves a core free; recorded as cpu_threads in every JSON
+B=.venv/bin/bridgeplan
+R=results/umaze-cpu-small
+DATA=datasets/umaze-1000000
+[ -d $DATA ] || $B data generate --maze umaze --no-progress
+COMMON="--maze umaze --dataset $DATA --results $R --train-steps 4000 --prior-steps 1500 --checkpoint-every 1000 --episodes 200 --no-progress"
+# the four runs (DDPM; bridge from gaussian, line, learned; N=16) are trained once and shared
+for exp in nfe1 priors bridge-vs-ddpm bridge-nfe; do
+  $B experiment $exp $COMMON
+done
+$B report --results $R --csv $R/results.csv
+# every run at NFE 1, 2, 4 and the full count, final snapshot, 200 episodes (issue: bridge vs DDPM table)
+for run in $R/runs/umaze-*-N16-*; do
+  for nfe in 1 2 4 full; do
+    if [ $nfe = full ]; then $B eval $run --episodes 200 --json > $run/eval-full.json
+    else $B eval $run --episodes 200 --nfe $nfe --json > $run/eval-nfe$nfe.json; fi
+  done
+done
+# beta_max 1.0 for the bridge from the line prior (the default above is 0.3)
+$B train --maze umaze --dataset $DATA --preset cpu-small --process bridge --prior line --diffusion-steps 16 \
+  --beta-max 1.0 --steps 4000 --run-dir $R/runs/umaze-bridge-line-N16-beta1 --no-progress
+for nfe in 1 2 4 15; do
+  $B eval $R/runs/umaze-bridge-line-N16-beta1 --episodes 200 --nfe $nfe --json > $R/runs/umaze-bridge-line-N16-beta1/eval-nfe$nfe.json
+done
