@@ -327,6 +327,29 @@ def _cmd_report(args) -> int:
     return 0
 
 
+def _add_bench_command(sub) -> None:
+    p = sub.add_parser("bench", help="planning latency, overheads and evaluation throughput (JSON + Markdown)")
+    p.add_argument("--out", default="bench", help="output directory")
+    p.add_argument("--presets", default="cpu-small,diffuser", help="comma-separated presets")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--eval-run", default=None, help="a trained run: also time 200 episodes at NFE 1")
+    p.add_argument("--device", default="auto")
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args) -> int:
+    from bridgeplan.bench import run_bench
+    from bridgeplan.config import PRESETS
+
+    presets = tuple(args.presets.split(","))
+    for preset in presets:
+        if preset not in PRESETS:
+            raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+    path = run_bench(Path(args.out), presets, device=args.device, repeats=args.repeats, eval_run=args.eval_run)
+    print(path.read_text())
+    return 0
+
+
 def _add_demo_command(sub) -> None:
     p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report")
     p.add_argument("--maze", default="umaze")
@@ -365,6 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_commands(sub)
     _add_eval_commands(sub)
     _add_experiment_commands(sub)
+    _add_bench_command(sub)
     _add_demo_command(sub)
     return parser
 
