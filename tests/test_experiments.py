@@ -61,8 +61,23 @@ def test_newer_schema_is_refused_untouched(tmp_path, capsys):
     assert db.read_bytes() == before
 
 
+@pytest.mark.parametrize("backend", [["--workers", "2"], ["--backend", "ray"]])
+def test_parallel_backends_fill_the_same_store(tiny_dataset, tmp_path, backend):
+    if "ray" in backend:
+        pytest.importorskip("ray")
+    results = tmp_path / "results"
+    args = ["experiment", "bridge-vs-ddpm", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    assert main(args + backend) == 0
+    rows = ResultsStore(results / "results.sqlite").rows()
+    assert len(rows) == 4 and {r["process"] for r in rows} == {"ddpm", "bridge"}
+    assert all(r["nfe"] == 5 for r in rows)  # N - 1 with the tiny 6 diffusion steps
+
+
 def test_ray_address_that_does_not_answer(tiny_dataset, tmp_path, capsys):
     pytest.importorskip("ray")
-    assert main(["experiment", "nfe1", "--dataset", tiny_dataset, "--results", str(tmp_path / "r"),
+    results = tmp_path / "r"
+    assert main(["experiment", "nfe1", "--dataset", tiny_dataset, "--results", str(results),
                  *TINY_SWEEP, "--backend", "ray", "--ray-address", "127.0.0.1:1"]) == 2
-    assert "ray" in capsys.readouterr().err.lower()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ray" in err[0].lower()
+    assert not (results / "runs").exists()

@@ -123,18 +123,38 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
         raise BridgeplanError(f"unknown backend {backend!r}: choose from local, ray")
     if workers < 1:
         raise BridgeplanError(f"workers must be >= 1, got {workers}")
-    settings = ensure_dataset(settings)
-    specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
-    horizon = cfg.preset_config(settings.maze, settings.preset, **settings.overrides).horizon
-    prior_runs = {}
-    for seed in settings.seeds:
-        if any(r.prior == "learned" and r.process == "bridge" for r in specs):
-            prior_runs[seed] = _ensure_prior(settings, seed, horizon, progress)
-    jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
-    if backend == "ray":
-        from bridgeplan.experiments.ray_backend import run_ray
+    ray = None
+    if backend == "ray":  # connect first: a cluster that does not answer fails before any work
+        from bridgeplan.experiments.ray_backend import connect
 
-        return run_ray(jobs, experiments, settings, prior_runs, ray_address)
+        ray = connect(ray_address)
+    try:
+        settings = ensure_dataset(settings)
+        specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
+        horizon = cfg.preset_config(settings.maze, settings.preset, **settings.overrides).horizon
+        prior_runs = {}
+        for seed in settings.seeds:
+            if any(r.prior == "learned" and r.process == "bridge" for r in specs):
+                prior_runs[seed] = _ensure_prior(settings, seed, horizon, progress)
+        jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
+        if ray is not None:
+            from bridgeplan.experiments.ray_backend import run_ray
+
+            gpus = 1.0 if settings.overrides.get("device", "auto") != "cpu" and _has_cuda() else 0.0
+            return run_ray(ray, jobs, experiments, settings, prior_runs, gpus_per_job=gpus)
+        return _run_local(jobs, experiments, settings, prior_runs, workers, progress)
+    finally:
+        if ray is not None:
+            ray.shutdown()
+
+
+def _has_cuda() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
+def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: bool) -> int:
     if workers == 1:
         return sum(len(run_job(settings, experiments, spec, seed, prior_runs.get(seed, ""), 0, progress))
                    for spec, seed in jobs)
