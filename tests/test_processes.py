@@ -8,12 +8,22 @@ import pytest
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.processes import DDPM, Bridge, make_process
+from bridgeplan.processes import DDPM, Bridge, make_process, process_from_dict
 from bridgeplan.processes.samplers import bridge_posterior_step
-from bridgeplan.processes.schedules import bridge_stds, cosine_betas, gaussian_product, i2sb_betas, spaced_steps
+from bridgeplan.processes.schedules import (bridge_stds, cosine_betas, gaussian_product, i2sb_betas,
+                                            spaced_steps)
 from bridgeplan.trajectory import ACT_DIM
 
 B, H, D = 5, 8, 6
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """These tensors are tiny: one thread is much faster than two on a shared, busy machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
 
 
 def oracle(x0: torch.Tensor, process):
@@ -31,7 +41,8 @@ def conditions_for(x0: torch.Tensor) -> dict[int, torch.Tensor]:
 
 
 def data(seed=0) -> torch.Tensor:
-    return torch.rand((B, H, D), generator=torch.Generator().manual_seed(seed), dtype=torch.float64) * 1.8 - 0.9
+    gen = torch.Generator().manual_seed(seed)
+    return torch.rand((B, H, D), generator=gen, dtype=torch.float64) * 1.8 - 0.9
 
 
 def test_cosine_schedule_matches_closed_form():
@@ -106,6 +117,28 @@ def test_ddim_eta0_keeps_the_noise_direction():
     assert len(seen) == 5 and all(seen)
 
 
+def test_strided_ancestral_keeps_the_forward_marginal():
+    """With a perfect predictor, a strided ancestral jump T -> s from x_T ~ q(x_T | x0) gives q(x_s | x0)."""
+    process = DDPM(steps=20)
+    ab = process.alpha_bar
+    n_samples, x0_value = 40000, 0.6
+    x0 = torch.full((n_samples, 1, 1), x0_value, dtype=torch.float64)
+    gen = torch.Generator().manual_seed(7)
+    eps = torch.randn(x0.shape, generator=gen, dtype=torch.float64)
+    x_start = ab[19].sqrt() * x0 + (1 - ab[19]).sqrt() * eps
+    seen = {}
+
+    def model(x_t, t):
+        seen[int(t[0])] = x_t
+        return x0
+
+    process.sample(model, x_start, {}, 3, generator=gen)
+    assert sorted(seen) == [0, 10, 19]
+    s = 10
+    assert abs(float(seen[s].mean()) - float(ab[s].sqrt()) * x0_value) < 0.01
+    assert abs(float(seen[s].var()) - float(1 - ab[s])) < 0.03 * float(1 - ab[s])
+
+
 def test_ddpm_full_loop_no_noise():
     """Diffuser's chain with the noise switched off and a perfect predictor lands on the data."""
     process = DDPM(steps=8)
@@ -173,7 +206,8 @@ def test_conditions_hold_in_every_sample(process):
         return torch.tanh(3 * x + t[:, None, None])
 
     for nfe in (1, process.max_nfe):
-        out = process.sample(model, torch.randn((B, H, D), generator=gen, dtype=torch.float64), cond, nfe, gen)
+        x_start = torch.randn((B, H, D), generator=gen, dtype=torch.float64)
+        out = process.sample(model, x_start, cond, nfe, gen)
         assert torch.equal(out[:, 0, ACT_DIM:], cond[0]) and torch.equal(out[:, -1, ACT_DIM:], cond[H - 1])
 
 
@@ -186,6 +220,21 @@ def test_nfe_and_process_errors():
         make_process("flow")
     with pytest.raises(BridgeplanError, match="unknown sampler"):
         DDPM(sampler="euler")
+    with pytest.raises(BridgeplanError, match="bad parameters"):
+        make_process("ddpm", beta_max=0.3)
+    assert DDPM(steps=16).max_nfe == 16 and Bridge(steps=16).max_nfe == 15
+    DDPM(steps=16).validate_nfe(16)
+    Bridge(steps=16).validate_nfe(1)
+
+
+@pytest.mark.parametrize("process", [DDPM(steps=10, sampler="ddim", eta=0.5), Bridge(steps=12, beta_max=1.0,
+                                                                                     ot_ode=True)])
+def test_processes_round_trip_through_dicts(process):
+    import json
+
+    d = json.loads(json.dumps(process.to_dict()))
+    assert process_from_dict(d) == process and type(process).from_dict(d) == process
+    assert make_process(d["name"], **{k: v for k, v in d.items() if k != "name"}) == process
 
 
 @pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10)])

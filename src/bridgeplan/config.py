@@ -12,16 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridgeplan.errors import BridgeplanError
-
-
-@dataclass(frozen=True)
-class ModelConfig:
-    """Temporal U-Net size."""
-
-    dim: int = 32
-    """Base channel width; channels are ``dim * m`` for each multiplier."""
-    dim_mults: tuple[int, ...] = (1, 4, 8)
-    """Channel multipliers, one per U-Net level (each level after the first halves the horizon)."""
+from bridgeplan.nets.unet import UNetConfig
 
 
 @dataclass(frozen=True)
@@ -56,7 +47,7 @@ class TrainConfig:
     """Planning horizon H (trajectory length); divisible by the U-Net's downsampling factor."""
     preset: str = "diffuser"
     """Name of the preset the defaults came from (``diffuser`` or ``cpu-small``)."""
-    model: ModelConfig = field(default_factory=ModelConfig)
+    model: UNetConfig = field(default_factory=UNetConfig)
     process: ProcessConfig = field(default_factory=ProcessConfig)
     prior: str = "gaussian"
     """Prior the bridge starts from: ``gaussian``, ``line`` or ``learned`` (DDPM always uses noise)."""
@@ -130,7 +121,7 @@ def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> Trai
     elif preset == "cpu-small":
         base = TrainConfig(
             maze=maze, preset=preset, horizon=horizon,
-            model=ModelConfig(dim=16, dim_mults=(1, 2, 4)),
+            model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),
             process=ProcessConfig(steps=20),
             steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
             # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
@@ -162,7 +153,7 @@ def from_dict(cls, d: dict[str, Any]):
         if f.name not in d:
             continue
         value = d[f.name]
-        sub = {"model": ModelConfig, "process": ProcessConfig}.get(f.name) if cls is TrainConfig else None
+        sub = {"model": UNetConfig, "process": ProcessConfig}.get(f.name) if cls is TrainConfig else None
         if sub is not None:
             value = from_dict(sub, value)
         elif isinstance(value, list):

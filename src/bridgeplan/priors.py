@@ -1,10 +1,14 @@
 """Priors: each maps the conditions (start, goal) to a whole trajectory x1 ``[B, H, D]`` (normalized).
 
-A new prior is one small class with a ``name`` and ``sample(conditions, horizon, batch, generator)``,
-registered in ``PRIORS``. Every prior returns its sample with the start and goal inpainted.
+A prior is a small class with a ``name`` and ``sample(conditions, horizon, batch, generator=None)``;
+``conditions`` are the planner's normalized ``{0: start, horizon - 1: goal}`` states ``[B, obs_dim]``.
+Every prior returns its sample with the start and goal inpainted (``apply_conditions``).
+A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, net)``).
 """
 
 from __future__ import annotations
+
+from typing import Callable, Protocol
 
 import torch
 
@@ -14,10 +18,26 @@ from bridgeplan.trajectory import ACT_DIM, TRANSITION_DIM, Conditions, apply_con
 
 SIM_DT = 0.01
 """Seconds per environment step (MuJoCo timestep, one step per action): converts positions to velocities."""
+MAX_SPEED = 5.0
+"""The simulator clips each velocity component to this (``maze.sim.MAX_SPEED``; a test keeps them equal)."""
 
 
-def _endpoints(conditions: Conditions, horizon: int) -> tuple[torch.Tensor, torch.Tensor]:
-    return conditions[0], conditions[horizon - 1]
+class Prior(Protocol):
+    name: str
+
+    def sample(self, conditions: Conditions, horizon: int, batch: int,
+               generator: torch.Generator | None = None) -> torch.Tensor: ...
+
+
+def _endpoints(conditions: Conditions, horizon: int, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The start and goal states, checked against ``horizon`` and ``batch``."""
+    if 0 not in conditions or horizon - 1 not in conditions:
+        raise BridgeplanError(f"a prior needs conditions at t=0 and t={horizon - 1} (the horizon), "
+                              f"got t={sorted(conditions)}")
+    start, goal = conditions[0], conditions[horizon - 1]
+    if start.shape[0] != batch or goal.shape[0] != batch:
+        raise BridgeplanError(f"conditions have batch {start.shape[0]}, the prior was asked for {batch}")
+    return start, goal
 
 
 class GaussianPrior:
@@ -27,16 +47,22 @@ class GaussianPrior:
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
-        start = conditions[0]
-        x = torch.randn((batch, horizon, TRANSITION_DIM), generator=generator, device=start.device)
+        start, _ = _endpoints(conditions, horizon, batch)
+        x = torch.randn((batch, horizon, TRANSITION_DIM), generator=generator, device=start.device,
+                        dtype=start.dtype)
         return apply_conditions(x, conditions)
 
 
 class LinePrior:
-    """Straight line from start to goal in position, walls ignored.
+    """The thesis's analytical prior: a straight line from start to goal in position, walls ignored.
 
-    Positions are evenly spaced over the H steps; the velocity is the constant one that covers the
-    line in ``(H - 1) * SIM_DT`` seconds; the action is the unit vector toward the goal.
+    In physical units: positions evenly spaced over the H steps (``start`` at t=0, ``goal`` at t=H-1);
+    the constant velocity that covers the line in ``(H - 1) * SIM_DT`` seconds (the data's velocities
+    are per second), each component clipped to the simulator's ``MAX_SPEED``; the constant action is the
+    unit vector toward the goal (zero when start == goal): the data's actions come from a saturating
+    waypoint controller, so their magnitude is about 1, and the tracking controller ignores planned
+    actions anyway. The result is normalized with the normalizer of the data, then the start state
+    (with its velocity) and the goal state (zero velocity, from the planner) are inpainted.
     """
 
     name = "line"
@@ -46,23 +72,26 @@ class LinePrior:
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
-        start_n, goal_n = _endpoints(conditions, horizon)
+        start_n, goal_n = _endpoints(conditions, horizon, batch)
         state = slice(ACT_DIM, None)
         start = self.normalizer.unnormalize(start_n.double(), state)[:, :2]
         goal = self.normalizer.unnormalize(goal_n.double(), state)[:, :2]
-        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
-        pos = start[:, None] + frac * (goal - start)[:, None]
         delta = goal - start
-        vel = (delta / ((horizon - 1) * SIM_DT))[:, None].expand(-1, horizon, -1)
+        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
+        pos = start[:, None] + frac * delta[:, None]
+        vel = (delta / (max(horizon - 1, 1) * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED)
         direction = delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9)
-        act = direction[:, None].expand(-1, horizon, -1)
-        traj = torch.cat([act, pos, vel], dim=-1)
+        traj = torch.cat([direction[:, None].expand(-1, horizon, -1), pos,
+                          vel[:, None].expand(-1, horizon, -1)], dim=-1)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
 
 class LearnedPrior:
-    """The thesis's learned prior: an MLP on (start, goal) trained on the same windows (``train-prior``)."""
+    """The thesis's learned prior: ``nets.prior_mlp.PriorMLP`` on (start, goal), deterministic.
+
+    The net is trained on the same windows as the process with :func:`train_prior_loss`.
+    """
 
     name = "learned"
 
@@ -71,29 +100,36 @@ class LearnedPrior:
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
-        start, goal = _endpoints(conditions, horizon)
+        start, goal = _endpoints(conditions, horizon, batch)
+        net_horizon = getattr(self.net, "horizon", horizon)
+        if net_horizon != horizon:
+            raise BridgeplanError(f"the learned prior was trained for horizon {net_horizon}, not {horizon}")
         with torch.no_grad():
-            x = self.net(start, goal)
+            x = self.net(start, goal).to(start.dtype)
         return apply_conditions(x, conditions)
 
 
 def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor) -> torch.Tensor:
-    """L2 between the net's trajectory for the window's (first, last) states and the window."""
+    """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``."""
     out = net(x0[:, 0, ACT_DIM:], x0[:, -1, ACT_DIM:])
     return torch.mean((out - x0) ** 2)
 
 
-PRIORS = ("gaussian", "line", "learned")
+def _learned(normalizer: Normalizer, net: torch.nn.Module | None) -> LearnedPrior:
+    if net is None:
+        raise BridgeplanError("the learned prior needs a trained network (--prior-run)")
+    return LearnedPrior(net)
 
 
-def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None):
+PRIORS: dict[str, Callable[[Normalizer, torch.nn.Module | None], Prior]] = {
+    "gaussian": lambda normalizer, net: GaussianPrior(),
+    "line": lambda normalizer, net: LinePrior(normalizer),
+    "learned": _learned,
+}
+
+
+def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None) -> Prior:
     """Build a prior by name; ``learned`` needs its trained ``net``."""
-    if name == "gaussian":
-        return GaussianPrior()
-    if name == "line":
-        return LinePrior(normalizer)
-    if name == "learned":
-        if net is None:
-            raise BridgeplanError("the learned prior needs a trained network (--prior-run)")
-        return LearnedPrior(net)
-    raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
+    if name not in PRIORS:
+        raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
+    return PRIORS[name](normalizer, net)

@@ -33,8 +33,7 @@ def load_windows(dataset: str, maze: str, horizon: int):
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
-    return TemporalUNet(TRANSITION_DIM, dim=config.model.dim, dim_mults=tuple(config.model.dim_mults),
-                        horizon=config.horizon)
+    return TemporalUNet.from_config(config.model, TRANSITION_DIM, horizon=config.horizon)
 
 
 def build_prior_net(horizon: int) -> PriorMLP:

@@ -2,12 +2,18 @@
 
 Conv1d(kernel 5) -> GroupNorm(8) -> Mish blocks; residual temporal blocks that add the
 diffusion-time embedding after their first block; Conv1d(3, stride 2) down, ConvTranspose1d(4,
-stride 2) up; no attention. ``dim=32, dim_mults=(1, 4, 8)`` is Diffuser's Maze2D network.
+stride 2) up; no attention. ``dim=32, dim_mults=(1, 4, 8)`` is Diffuser's Maze2D network
+(3,682,118 parameters with ``transition_dim=6``: Diffuser's "about 3.7 M").
+
+The network maps ``x`` ``[batch, horizon, transition_dim]`` and a float time ``t`` ``[batch]`` (DDPM
+passes its step index, the bridge its step index n) to a tensor of the same shape as ``x``; what the
+output means (x0 or I2SB's scaled difference) is the process's business.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -15,14 +21,45 @@ from torch import nn
 from bridgeplan.errors import BridgeplanError
 
 
+@dataclass(frozen=True)
+class UNetConfig:
+    """Size of a :class:`TemporalUNet` (``TrainConfig.model``)."""
+
+    dim: int = 32
+    """Base channel width (a positive multiple of 8, for GroupNorm(8)); also the time-embedding width."""
+    dim_mults: tuple[int, ...] = (1, 4, 8)
+    """Channel multipliers, one per level; each level after the first halves the horizon."""
+
+    def __post_init__(self):
+        object.__setattr__(self, "dim_mults", tuple(int(m) for m in self.dim_mults))
+        if self.dim <= 0 or self.dim % 8 or not self.dim_mults or min(self.dim_mults) <= 0:
+            raise BridgeplanError(f"U-Net needs dim a positive multiple of 8 (GroupNorm(8)) and positive "
+                                  f"multipliers, got dim={self.dim}, dim_mults={self.dim_mults}")
+
+    @property
+    def downsample_factor(self) -> int:
+        """The horizon must be divisible by this: ``2 ** (len(dim_mults) - 1)``."""
+        return 2 ** (len(self.dim_mults) - 1)
+
+    def check_horizon(self, horizon: int) -> None:
+        """:class:`BridgeplanError` unless ``horizon`` is a positive multiple of :attr:`downsample_factor`."""
+        if horizon <= 0 or horizon % self.downsample_factor:
+            raise BridgeplanError(f"horizon {horizon} must be positive and divisible by the U-Net's "
+                                  f"downsampling factor {self.downsample_factor} "
+                                  f"(dim_mults={self.dim_mults})")
+
+
 class SinusoidalEmbedding(nn.Module):
+    """Embedding of a float time: ``[sin(t w_k), cos(t w_k)]``, ``w_k = 10000^(-k / (half - 1))``."""
+
     def __init__(self, dim: int):
         super().__init__()
         self.dim = dim
 
     def forward(self, t: torch.Tensor) -> torch.Tensor:
         half = self.dim // 2
-        freqs = torch.exp(-math.log(10000) * torch.arange(half, device=t.device, dtype=torch.float32) / (half - 1))
+        k = torch.arange(half, device=t.device, dtype=torch.float32)
+        freqs = torch.exp(-math.log(10000) * k / (half - 1))
         args = t.float()[:, None] * freqs[None]
         return torch.cat([args.sin(), args.cos()], dim=-1)
 
@@ -31,7 +68,8 @@ class ConvBlock(nn.Sequential):
     """Conv1d -> GroupNorm -> Mish."""
 
     def __init__(self, c_in: int, c_out: int, kernel: int = 5, groups: int = 8):
-        super().__init__(nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, c_out), nn.Mish())
+        super().__init__(nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, c_out),
+                         nn.Mish())
 
 
 class ResidualTemporalBlock(nn.Module):
@@ -47,18 +85,21 @@ class ResidualTemporalBlock(nn.Module):
 
 
 class TemporalUNet(nn.Module):
-    """Maps a noisy trajectory and a diffusion time ``t`` (float, ``[batch]``) to a trajectory."""
+    """Maps a noisy trajectory and a diffusion time ``t`` (float, ``[batch]``) to a trajectory.
+
+    ``horizon``, when given, is checked against the downsampling factor at construction; every
+    forward call checks the horizon of its input as well.
+    """
 
     def __init__(self, transition_dim: int, dim: int = 32, dim_mults: tuple[int, ...] = (1, 4, 8),
                  horizon: int | None = None):
         super().__init__()
-        if dim <= 0 or dim % 8 or not dim_mults or min(dim_mults) <= 0:
-            raise BridgeplanError(f"U-Net needs dim a positive multiple of 8 (GroupNorm(8)) and positive "
-                                  f"multipliers, got dim={dim}, dim_mults={dim_mults}")
-        self.downsample_factor = 2 ** (len(dim_mults) - 1)
-        if horizon is not None and horizon % self.downsample_factor:
-            raise BridgeplanError(f"horizon {horizon} must be divisible by the U-Net's downsampling factor "
-                                  f"{self.downsample_factor} (dim_mults={tuple(dim_mults)})")
+        self.config = UNetConfig(dim, tuple(dim_mults))
+        self.transition_dim = transition_dim
+        self.downsample_factor = self.config.downsample_factor
+        if horizon is not None:
+            self.config.check_horizon(horizon)
+        dim, dim_mults = self.config.dim, self.config.dim_mults
         dims = [transition_dim, *(dim * m for m in dim_mults)]
         pairs = list(zip(dims[:-1], dims[1:]))
         self.time_mlp = nn.Sequential(SinusoidalEmbedding(dim), nn.Linear(dim, dim * 4), nn.Mish(),
@@ -79,9 +120,15 @@ class TemporalUNet(nn.Module):
                 nn.ConvTranspose1d(c_in, c_in, 4, stride=2, padding=1)]))
         self.final = nn.Sequential(ConvBlock(dim, dim), nn.Conv1d(dim, transition_dim, 1))
 
+    @classmethod
+    def from_config(cls, config: UNetConfig, transition_dim: int,
+                    horizon: int | None = None) -> "TemporalUNet":
+        return cls(transition_dim, config.dim, config.dim_mults, horizon)
+
     def forward(self, x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """``x`` ``[batch, horizon, transition_dim]``, ``t`` ``[batch]`` (any dtype) -> shape of ``x``."""
         if x.shape[1] % self.downsample_factor:
-            raise BridgeplanError(f"horizon {x.shape[1]} must be divisible by {self.downsample_factor}")
+            self.config.check_horizon(x.shape[1])
         h = x.transpose(1, 2)
         emb = self.time_mlp(t)
         skips = []

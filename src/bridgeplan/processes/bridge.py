@@ -54,7 +54,15 @@ class Bridge:
                                   f"(NFE < N), got {nfe}")
 
     def to_dict(self) -> dict:
+        """JSON-ready fields plus ``name``; inverted by :meth:`from_dict` and ``process_from_dict``."""
         return {"name": self.name, **asdict(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Bridge":
+        d = dict(d)
+        if d.pop("name", cls.name) != cls.name:
+            raise BridgeplanError(f"not a {cls.name} process: {d}")
+        return cls(**d)
 
     def marginal(self, x0: torch.Tensor, x1: torch.Tensor, n: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:
@@ -63,7 +71,8 @@ class Bridge:
                          for c in gaussian_product(self.std_fwd, self.std_bwd))
         x_n = mu0 * x0 + mu1 * x1
         if not self.ot_ode:
-            x_n = x_n + var.sqrt() * torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
+            eps = torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
+            x_n = x_n + var.sqrt() * eps
         return x_n
 
     def predict_x0(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:

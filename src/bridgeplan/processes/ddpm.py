@@ -19,8 +19,11 @@ SAMPLERS = ("ancestral", "ddim")
 class DDPM:
     """Diffusion over ``steps`` noise levels; sampled by ``sampler`` in any NFE from 1 to ``steps``.
 
+    The network predicts x0 from ``(x_t, t)``, ``t`` the step index 0..steps-1 as a float (Diffuser).
     ``ancestral`` with NFE = steps is Diffuser's chain; fewer NFE take evenly spaced steps (strided
-    ancestral, or DDIM with ``eta``).
+    ancestral, i.e. improved DDPM's respacing, or DDIM with ``eta``; ``eta = 0`` is deterministic).
+    To sample a trained DDPM another way, ``dataclasses.replace(process, sampler="ddim", eta=0.0)``:
+    the sampler does not change training.
     """
 
     steps: int = 64
@@ -33,6 +36,8 @@ class DDPM:
             raise BridgeplanError(f"diffusion steps must be >= 1, got {self.steps}")
         if self.sampler not in SAMPLERS:
             raise BridgeplanError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
+        if self.eta < 0:
+            raise BridgeplanError(f"eta must be >= 0, got {self.eta}")
 
     @cached_property
     def alpha_bar(self) -> torch.Tensor:
@@ -44,10 +49,19 @@ class DDPM:
 
     def validate_nfe(self, nfe: int) -> None:
         if not 1 <= nfe <= self.max_nfe:
-            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for ddpm with {self.steps} steps, got {nfe}")
+            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for ddpm with {self.steps} steps, "
+                                  f"got {nfe}")
 
     def to_dict(self) -> dict:
+        """JSON-ready fields plus ``name``; inverted by :meth:`from_dict` and ``process_from_dict``."""
         return {"name": self.name, **asdict(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "DDPM":
+        d = dict(d)
+        if d.pop("name", cls.name) != cls.name:
+            raise BridgeplanError(f"not a {cls.name} process: {d}")
+        return cls(**d)
 
     def predict_x0(self, model, x_t: torch.Tensor, t: int) -> torch.Tensor:
         tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)

@@ -87,5 +87,6 @@ def bridge_sample(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditio
         if m == 0:
             return apply_conditions(x0, conditions)
         noise = None if ot_ode else _noise(x, generator)
-        x = apply_conditions(bridge_posterior_step(x0, x, float(std_fwd[n]), float(std_fwd[m]), noise), conditions)
+        x = bridge_posterior_step(x0, x, float(std_fwd[n]), float(std_fwd[m]), noise)
+        x = apply_conditions(x, conditions)
     return x

@@ -1,0 +1,94 @@
+"""The temporal U-Net and the learned-prior MLP: sizes against closed forms, shapes, errors (tiny inputs)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.nets.prior_mlp import PriorMLP
+from bridgeplan.nets.unet import TemporalUNet, UNetConfig
+from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """These tensors are tiny: one thread is much faster than two on a shared, busy machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def n_params(module: torch.nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
+
+
+def diffuser_unet_params(transition_dim: int, dim: int, mults: tuple[int, ...]) -> int:
+    """Parameter count of Diffuser's temporal U-Net, layer by layer from its description."""
+    def conv(c_in, c_out, k):
+        return c_in * c_out * k + c_out
+
+    def block(c_in, c_out):  # Conv1d(5) -> GroupNorm -> Mish
+        return conv(c_in, c_out, 5) + 2 * c_out
+
+    def res(c_in, c_out):  # two blocks, the time projection Linear(dim, c_out), a 1x1 skip if needed
+        return block(c_in, c_out) + block(c_out, c_out) + dim * c_out + c_out + (
+            conv(c_in, c_out, 1) if c_in != c_out else 0)
+
+    dims = [transition_dim, *(dim * m for m in mults)]
+    pairs = list(zip(dims[:-1], dims[1:]))
+    total = dim * 4 * dim + 4 * dim + 4 * dim * dim + dim  # time MLP dim -> 4 dim -> dim
+    for k, (c_in, c_out) in enumerate(pairs):
+        total += res(c_in, c_out) + res(c_out, c_out) + (conv(c_out, c_out, 3) if k < len(pairs) - 1 else 0)
+    total += 2 * res(dims[-1], dims[-1])
+    for c_in, c_out in reversed(pairs[1:]):
+        total += res(2 * c_out, c_in) + res(c_in, c_in) + conv(c_in, c_in, 4)  # ConvTranspose1d(4)
+    return total + block(dim, dim) + conv(dim, transition_dim, 1)
+
+
+def test_diffuser_maze2d_unet_size():
+    net = TemporalUNet(TRANSITION_DIM, dim=32, dim_mults=(1, 4, 8))
+    count = n_params(net)
+    assert count == diffuser_unet_params(TRANSITION_DIM, 32, (1, 4, 8)) == 3_682_118
+    assert abs(count - 3.7e6) / 3.7e6 < 0.02  # Diffuser's "about 3.7 M" for Maze2D
+    assert n_params(TemporalUNet(TRANSITION_DIM, dim=16, dim_mults=(1, 2, 4))) == diffuser_unet_params(
+        TRANSITION_DIM, 16, (1, 2, 4))
+
+
+@pytest.mark.parametrize("dim, mults, horizon", [(8, (1, 2), 6), (16, (1, 2, 4), 16), (8, (1,), 5)])
+def test_unet_shape_and_time_dependence(dim, mults, horizon):
+    torch.manual_seed(0)
+    net = TemporalUNet(TRANSITION_DIM, dim=dim, dim_mults=mults, horizon=horizon)
+    x = torch.randn(3, horizon, TRANSITION_DIM)
+    out = net(x, torch.tensor([0.0, 3.0, 7.0]))
+    assert out.shape == x.shape
+    # integer step indices work too, and the time input changes the output
+    assert torch.allclose(net(x, torch.tensor([0, 3, 7])), out)
+    assert not torch.allclose(net(x, torch.tensor([1.0, 4.0, 8.0])), out)
+
+
+def test_unet_config_and_horizon_errors():
+    config = UNetConfig(32, (1, 4, 8))
+    assert config.downsample_factor == 4 and UNetConfig(8, (1,)).downsample_factor == 1
+    assert UNetConfig(8, [1, 2]).dim_mults == (1, 2)
+    with pytest.raises(BridgeplanError, match="divisible by the U-Net.s downsampling factor 4"):
+        TemporalUNet(TRANSITION_DIM, dim=8, dim_mults=(1, 2, 4), horizon=10)
+    net = TemporalUNet.from_config(UNetConfig(8, (1, 2, 4)), TRANSITION_DIM, horizon=8)
+    assert net.config == UNetConfig(8, (1, 2, 4))
+    with pytest.raises(BridgeplanError, match="horizon 6"):
+        net(torch.zeros(1, 6, TRANSITION_DIM), torch.zeros(1))
+    with pytest.raises(BridgeplanError, match="multiple of 8"):
+        UNetConfig(12, (1, 2))
+    with pytest.raises(BridgeplanError, match="multipliers"):
+        UNetConfig(8, ())
+
+
+def test_prior_mlp_shape_and_size():
+    horizon = 8
+    net = PriorMLP(OBS_DIM, horizon, TRANSITION_DIM)
+    width = horizon * TRANSITION_DIM
+    assert n_params(net) == (2 * OBS_DIM * width + width) + (width * width + width)
+    out = net(torch.randn(5, OBS_DIM), torch.randn(5, OBS_DIM))
+    assert out.shape == (5, horizon, TRANSITION_DIM)
+    assert isinstance(net.net[1], torch.nn.LeakyReLU) and net.net[1].negative_slope == 0.1
