@@ -1,4 +1,4 @@
-"""The Maze2D world: layouts, the batched simulator against gymnasium-robotics, expert, scores."""
+"""Layouts, tasks, the expert, the tracking controller, rollouts and the normalized score."""
 
 from __future__ import annotations
 
@@ -6,87 +6,122 @@ import numpy as np
 import pytest
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import WaypointExpert, shortest_path, tracking_actions
-from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
-from bridgeplan.maze.reference import CONVENTIONS, load_reference_returns, normalized_score
+from bridgeplan.maze.controllers import planned_target, tracking_action, tracking_actions
+from bridgeplan.maze.expert import WaypointExpert, shortest_path, waypoints
+from bridgeplan.maze.layouts import GOAL_RADIUS, MAZE_NAMES, get_maze
+from bridgeplan.maze.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
 from bridgeplan.maze.rollout import execute_plans, rollout
-from bridgeplan.maze.sim import BatchedPointMaze, _gym_env
+from bridgeplan.maze.sim import make_gym_env
 from bridgeplan.maze.tasks import sample_tasks
 
 
 @pytest.mark.parametrize("name", MAZE_NAMES)
-def test_layout_matches_gymnasium_robotics(name):
+def test_layout_and_coordinates_match_gymnasium_robotics(name):
     maze = get_maze(name)
-    env = _gym_env(maze.gym_id)
-    assert [list(r) for r in maze.grid] == env.maze.maze_map
+    gym_maze = make_gym_env(maze).unwrapped.maze
+    assert [list(r) for r in maze.grid] == [[int(c) for c in r] for r in gym_maze.maze_map]
     for cell in maze.free_cells:
-        assert np.allclose(maze.cell_to_xy(cell), env.maze.cell_rowcol_to_xy(cell))
-        assert tuple(maze.xy_to_cell(maze.cell_to_xy(cell))) == tuple(cell)
-    assert maze.is_free_cell(maze.eval_goal_cell)
+        xy = maze.cell_to_xy(cell)
+        np.testing.assert_allclose(xy, gym_maze.cell_rowcol_to_xy(cell), atol=1e-12)
+        for offset in ([0.49, 0.49], [-0.49, -0.49], [0.3, -0.2]):
+            p = xy + offset
+            np.testing.assert_array_equal(maze.xy_to_cell(p), gym_maze.cell_xy_to_rowcol(p))
+        assert maze.is_free_xy(xy)
+    assert not maze.is_free_xy(maze.cell_to_xy([0, 0]))
+    assert not maze.is_free_xy([np.nan, 0.0])
+    assert maze.grid[maze.eval_goal_cell[0]][maze.eval_goal_cell[1]] == 0
+    assert maze.episode_steps == {"open": 300, "umaze": 300, "medium": 600, "large": 800}[name]
 
 
-def test_batched_sim_matches_env_step_exactly():
-    import gymnasium as gym
+def test_eval_goals_and_unknown_maze():
+    assert {n: get_maze(n).eval_goal_cell for n in MAZE_NAMES} == {
+        "open": (2, 3), "umaze": (1, 1), "medium": (6, 6), "large": (7, 9)}
+    with pytest.raises(BridgeplanError, match="unknown maze 'maze9': choose from open, umaze, medium, large"):
+        get_maze("maze9")
 
+
+@pytest.mark.parametrize("multi_task", [False, True])
+def test_sample_tasks(multi_task):
     maze = get_maze("medium")
-    env = gym.make(maze.gym_id, continuing_task=True, reset_target=False)
-    obs, _ = env.reset(seed=0, options={"reset_cell": np.array([1, 1]), "goal_cell": np.array([6, 6])})
-    sim = BatchedPointMaze(maze, 1)
-    sim.reset(obs["observation"][None, :2], obs["desired_goal"][None])
-    rng = np.random.default_rng(0)
-    for _ in range(300):
-        action = rng.uniform(-1.5, 1.5, size=2)  # out-of-range actions are clipped by both
-        o, r, *_ = env.step(action)
-        so, sr = sim.step(action[None])
-        assert np.allclose(so[0], o["observation"], atol=1e-9, rtol=0) and sr[0] == r
+    starts, goals = sample_tasks(maze, 500, seed=5, multi_task=multi_task)
+    again = sample_tasks(maze, 500, seed=5, multi_task=multi_task)
+    np.testing.assert_array_equal(starts, again[0])
+    np.testing.assert_array_equal(goals, again[1])
+    assert not np.array_equal(starts, sample_tasks(maze, 500, seed=6, multi_task=multi_task)[0])
+    start_cells, goal_cells = maze.xy_to_cell(starts), maze.xy_to_cell(goals)
+    assert maze.is_free_cell(start_cells).all() and maze.is_free_cell(goal_cells).all()
+    assert (start_cells != goal_cells).any(axis=1).all()
+    for xy, cells in ((starts, start_cells), (goals, goal_cells)):
+        assert np.abs(xy - maze.cell_to_xy(cells)).max() <= 0.25
+    if multi_task:
+        assert len(np.unique(goal_cells, axis=0)) > 10
+    else:
+        assert (goal_cells == maze.eval_goal_cell).all()
+    assert len(np.unique(start_cells, axis=0)) == len(maze.free_cells) - (0 if multi_task else 1)
+    with pytest.raises(BridgeplanError):
+        sample_tasks(maze, 0, seed=0)
 
 
-def test_reset_to_given_start_and_goal():
+def test_shortest_path_and_waypoints():
     maze = get_maze("umaze")
-    sim = BatchedPointMaze(maze, 2)
-    starts, goals = np.array([[0.9, -0.9], [-1.0, 1.1]]), np.array([[-1.0, 1.0], [1.0, 1.0]])
-    obs = sim.reset(starts, goals)
-    assert np.array_equal(obs, np.concatenate([starts, np.zeros((2, 2))], axis=1))
-    assert np.array_equal(sim.goals, goals)
-    obs, reward = sim.step(np.zeros((2, 2)))
-    assert np.allclose(obs[:, :2], starts) and np.array_equal(reward, [0.0, 0.0])
-    with pytest.raises(BridgeplanError, match="inside a wall"):
-        sim.reset(np.array([[0.0, 0.0], [-1.0, 1.0]]), goals)  # (0, 0) is the U's middle wall
-    with pytest.raises(BridgeplanError, match="goal"):
-        sim.reset(starts, np.array([[5.0, 5.0], [1.0, 1.0]]))
-
-
-def test_tasks_single_and_multi():
-    maze = get_maze("large")
-    starts, goals = sample_tasks(maze, 300, seed=4)
-    assert np.all(maze.xy_to_cell(goals) == maze.eval_goal_cell)
-    assert np.all(np.abs(goals - maze.cell_to_xy(maze.eval_goal_cell)) <= 0.25)
-    assert not np.any(np.all(maze.xy_to_cell(starts) == maze.eval_goal_cell, axis=1))
-    assert len({tuple(c) for c in maze.xy_to_cell(starts)}) == len(maze.free_cells) - 1
-    again = sample_tasks(maze, 300, seed=4)
-    assert np.array_equal(again[0], starts) and np.array_equal(again[1], goals)
-    ms, mg = sample_tasks(maze, 300, seed=4, multi_task=True)
-    assert len({tuple(c) for c in maze.xy_to_cell(mg)}) > 10
-    assert not np.any(np.all(maze.xy_to_cell(ms) == maze.xy_to_cell(mg), axis=1))
-
-
-def test_shortest_path():
-    maze = get_maze("umaze")
-    assert shortest_path(maze, (1, 1), (3, 1)) == [(1, 1), (1, 2), (1, 3), (2, 3), (3, 3), (3, 2), (3, 1)]
+    path = shortest_path(maze, (1, 1), (3, 1))
+    assert path == [(1, 1), (1, 2), (1, 3), (2, 3), (3, 3), (3, 2), (3, 1)]
+    assert shortest_path(maze, (1, 1), (1, 1)) == [(1, 1)]
+    with pytest.raises(BridgeplanError, match="wall"):
+        shortest_path(maze, (0, 0), (1, 1))
+    goal = np.array([-1.1, -0.9])
+    w = waypoints(maze, maze.cell_to_xy((1, 1)), goal)
+    np.testing.assert_allclose(w[:-1], maze.cell_to_xy(np.array(path[1:-1])))
+    np.testing.assert_array_equal(w[-1], goal)
+    jittered = waypoints(maze, maze.cell_to_xy((1, 1)), goal, jitter=0.2, rng=np.random.default_rng(0))
+    shift = jittered - w
+    assert (shift[:-1] <= 0).all() and (shift[:-1] >= -0.2).all() and (shift[-1] == 0).all()
 
 
 @pytest.mark.parametrize("name", MAZE_NAMES)
 def test_expert_reaches_goal_from_every_free_cell(name):
+    """Noise-free, batched: from every free cell to the evaluation goal and to a random other goal."""
     maze = get_maze(name)
+    rng = np.random.default_rng(0)
     free = maze.free_cells
-    starts = maze.cell_to_xy(free)
-    goals = np.repeat(maze.cell_to_xy(np.array(maze.eval_goal_cell))[None], len(free), axis=0)
+    starts = np.concatenate([maze.cell_to_xy(free)] * 2) + rng.uniform(-0.25, 0.25, (2 * len(free), 2))
+    eval_goals = np.repeat(maze.eval_goal_xy[None], len(free), axis=0)
+    other = free[(np.arange(len(free)) + 1 + rng.integers(len(free) - 1, size=len(free))) % len(free)]
+    goals = np.concatenate([eval_goals, maze.cell_to_xy(other)])
+    goals += rng.uniform(-0.25, 0.25, (2 * len(free), 2))
     expert = WaypointExpert(maze)
-    expert.reset(starts, goals)
+    expert.plan(starts, goals)
     result = rollout(maze, lambda t, obs: expert(obs), starts, goals)
     assert result.success.all()
-    # it stays at the goal once there: most of the episode earns reward from nearby cells
-    assert result.returns.max() > 0.8 * maze.episode_steps
+    # it stays there: the last state is within the goal radius
+    assert (np.linalg.norm(result.states[:, -1, :2] - goals, axis=1) <= GOAL_RADIUS).all()
+    assert result.states.shape == (2 * len(free), maze.episode_steps + 1, 4)
+    assert result.actions.shape == (2 * len(free), maze.episode_steps, 2)
+    assert np.abs(result.actions).max() <= 1.0
+
+
+def test_stale_expert_drives_straight_at_the_goal():
+    maze = get_maze("umaze")
+    start, goal = maze.cell_to_xy([[3, 1]]), maze.cell_to_xy([[1, 1]])
+    expert = WaypointExpert(maze)
+    expert.plan(start, goal)
+    expert.exhaust()
+    obs = np.concatenate([start, [[0.0, 0.0]]], axis=1)
+    np.testing.assert_array_equal(expert(obs), [[0.0, 1.0]])  # straight up, into the wall
+    assert not rollout(maze, lambda t, o: expert(o), start, goal, steps=300).success[0]
+
+
+def test_tracking_controller():
+    state = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    nxt = np.array([[0.1, 0.2, 1.5, -0.1], [5.0, -5.0, 0.0, 0.0]])
+    np.testing.assert_allclose(tracking_action(state, nxt), [[0.6, 0.1], [1.0, -1.0]])
+    plans = np.arange(2 * 3 * 4, dtype=float).reshape(2, 3, 4)
+    np.testing.assert_array_equal(planned_target(plans, 0), plans[:, 1])
+    held = planned_target(plans, 2)
+    np.testing.assert_array_equal(held[:, :2], plans[:, -1, :2])
+    np.testing.assert_array_equal(held[:, 2:], 0.0)
+    np.testing.assert_array_equal(planned_target(plans, 50), held)
+    np.testing.assert_array_equal(tracking_actions(state, plans, 0), tracking_action(state, plans[:, 1]))
 
 
 def test_tracking_controller_follows_a_plan_and_holds_the_end():
@@ -94,24 +129,49 @@ def test_tracking_controller_follows_a_plan_and_holds_the_end():
     start, goal = np.array([[-2.0, 0.0]]), np.array([[2.0, 0.0]])
     horizon = 100
     x = np.linspace(-2.0, 2.0, horizon)
-    plan = np.stack([x, np.zeros(horizon), np.full(horizon, 4.0 / (horizon - 1) / 0.01), np.zeros(horizon)], axis=1)
+    speed = 4.0 / (horizon - 1) / 0.01
+    plan = np.stack([x, np.zeros(horizon), np.full(horizon, speed), np.zeros(horizon)], axis=1)
     result = execute_plans(maze, start, goal, plan[None])
-    assert result.success[0] == 1.0
+    assert result.success[0]
     assert np.linalg.norm(result.states[0, -1, :2] - goal[0]) < 0.1  # held at the plan's end
-    a = tracking_actions(np.zeros((1, 4)), plan[None], horizon + 5)
-    assert np.allclose(a, np.clip(plan[-1, :2], -1, 1))
+    np.testing.assert_allclose(tracking_actions(np.zeros((1, 4)), plan[None], horizon + 5),
+                               np.clip(plan[-1:, :2], -1, 1))
 
 
-def test_normalized_score_conventions():
+def test_execute_plans_tracks_an_expert_trajectory():
+    """Plans made of an expert's own states are tracked to the goal."""
+    maze = get_maze("umaze")
+    starts, goals = sample_tasks(maze, 8, seed=1)
+    expert = WaypointExpert(maze)
+    expert.plan(starts, goals)
+    demo = rollout(maze, lambda t, obs: expert(obs), starts, goals, steps=250)
+    assert demo.success.all()
+    result = execute_plans(maze, starts, goals, demo.states)
+    assert result.success.all()
+    assert result.returns.min() > 100
+    with pytest.raises(BridgeplanError, match="plans"):
+        execute_plans(maze, starts, goals, demo.states[:, :, :2])
+
+
+def test_normalized_score():
     ref = load_reference_returns()
+    assert set(ref) == set(MAZE_NAMES)
     for name in MAZE_NAMES:
-        r = ref[name]
-        assert r["episodes"] >= 100 and r["random"] < r["expert"] and r["random"] < r["expert_stale"]
-        for conv in CONVENTIONS:
-            high = r["expert"] if conv == "minari" else r["expert_stale"]
-            mean, se = normalized_score(name, [r["random"], high], conv)
+        assert ref[name]["episodes"] == 100 and ref[name]["seed"] == 123
+        assert ref[name]["expert"] > ref[name]["random"] and ref[name]["expert_stale"] > ref[name]["random"]
+        for convention in CONVENTIONS:
+            low, high = reference_bounds(name, convention)
+            mean, se = normalized_score(name, [low, high], convention)
             assert mean == pytest.approx(50.0) and se == pytest.approx(50.0)
-    with pytest.raises(BridgeplanError, match="convention"):
-        normalized_score("umaze", [1.0, 2.0], "atari")
+    returns = np.array([100.0, 150.0, 200.0, 250.0])
+    low, high = reference_bounds("umaze", "minari")
+    scores = 100 * (returns - low) / (high - low)
+    mean, se = normalized_score("umaze", returns, "minari")
+    assert mean == pytest.approx(scores.mean()) and se == pytest.approx(scores.std(ddof=1) / 2)
+    assert np.isnan(normalized_score("umaze", [100.0], "d4rl")[1])
+    with pytest.raises(BridgeplanError, match="unknown score convention 'd5rl'"):
+        normalized_score("umaze", returns, "d5rl")
     with pytest.raises(BridgeplanError, match="unknown maze"):
-        get_maze("maze9")
+        normalized_score("nomaze", returns, "minari")
+    with pytest.raises(BridgeplanError):
+        normalized_score("umaze", [], "minari")

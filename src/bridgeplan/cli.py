@@ -12,22 +12,60 @@ from pathlib import Path
 from bridgeplan.errors import BridgeplanError
 
 
+def _positive(name: str, value: int) -> int:
+    if value <= 0:
+        raise BridgeplanError(f"{name} must be positive, got {value}")
+    return value
+
+
 def _add_data_commands(sub) -> None:
     p = sub.add_parser("data", help="generate, inspect offline datasets")
     data = p.add_subparsers(dest="data_command", required=True)
-    g = data.add_parser("generate", help="a noisy expert stream in the Minari format (D4RL recipe)")
+    g = data.add_parser("generate", help="a noisy expert stream in the Minari format (Minari's D4RL recipe)")
     g.add_argument("--maze", required=True, help="open, umaze, medium or large")
     g.add_argument("--steps", type=int, default=1_000_000, help="transitions (default 1 M)")
     g.add_argument("--seed", type=int, default=123)
-    g.add_argument("--out", default=None, help="dataset directory (default datasets/<maze>-<steps>)")
+    g.add_argument("--out", default=None,
+                   help="dataset directory (default datasets/<maze>-<steps>, or under "
+                        "$BRIDGEPLAN_DATASETS when set)")
+    g.add_argument("--workers", type=int, default=1,
+                   help="parallel processes, each generating its own independently seeded stream (default 1)")
     g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
     g.add_argument("--no-progress", action="store_true")
     g.set_defaults(func=_cmd_data_generate)
-    i = data.add_parser("info", help="summarize a dataset (Minari directory or id, or D4RL hdf5)")
+    i = data.add_parser("info", help="summarize a dataset (Minari directory or id, or D4RL maze2d hdf5)")
     i.add_argument("path")
+    i.add_argument("--maze", default=None, help="the maze, if the dataset does not tell it")
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=_cmd_data_info)
 
+
+def _cmd_data_generate(args) -> int:
+    from bridgeplan.data.datasets import default_dataset_path, generate_dataset, load_stream
+    from bridgeplan.data.info import format_summary, summarize
+    from bridgeplan.maze.layouts import get_maze
+
+    maze = get_maze(args.maze)
+    _positive("--steps", args.steps)
+    _positive("--workers", args.workers)
+    out = Path(args.out) if args.out else default_dataset_path(maze.name, args.steps)
+    generate_dataset(maze.name, args.steps, args.seed, out, force=args.force, progress=not args.no_progress,
+                     workers=args.workers)
+    print(format_summary(summarize(load_stream(out))))
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_data_info(args) -> int:
+    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.data.info import format_summary, summarize
+
+    info = summarize(load_stream(args.path, maze=args.maze))
+    print(json.dumps(info, indent=2) if args.json else format_summary(info))
+    return 0
+
+
+def _add_reference_commands(sub) -> None:
     p = sub.add_parser("reference", help="reference returns of the normalized score")
     ref = p.add_subparsers(dest="reference_command", required=True)
     s = ref.add_parser("show", help="the shipped reference returns")
@@ -36,37 +74,17 @@ def _add_data_commands(sub) -> None:
     m.add_argument("--maze", default=None, help="one maze (default: all)")
     m.add_argument("--episodes", type=int, default=100)
     m.add_argument("--seed", type=int, default=123)
+    m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
     m.set_defaults(func=_cmd_reference_measure)
 
 
-def _cmd_data_generate(args) -> int:
-    from bridgeplan.data import generate_dataset, load_stream
-    from bridgeplan.data.info import format_summary, summarize
-
-    if args.steps <= 0:
-        raise BridgeplanError(f"--steps must be positive, got {args.steps}")
-    out = Path(args.out) if args.out else Path("datasets") / f"{args.maze}-{args.steps}"
-    generate_dataset(args.maze, args.steps, args.seed, out, force=args.force, progress=not args.no_progress)
-    print(format_summary(summarize(load_stream(str(out)))))
-    print(f"wrote {out}")
-    return 0
-
-
-def _cmd_data_info(args) -> int:
-    from bridgeplan.data import load_stream
-    from bridgeplan.data.info import format_summary, summarize
-
-    info = summarize(load_stream(args.path))
-    print(json.dumps(info, indent=2) if args.json else format_summary(info))
-    return 0
-
-
 def _reference_table(ref: dict) -> str:
-    lines = [f"{'maze':<8} {'episodes':>8} {'random':>8} {'expert':>8} {'stale expert (d4rl)':>20}"]
+    lines = [f"{'maze':<8} {'episodes':>8} {'seed':>5} {'random':>8} {'expert':>8} {'stale expert':>13}"]
     for name, r in ref.items():
-        lines.append(f"{name:<8} {r['episodes']:>8} {r['random']:>8.2f} {r['expert']:>8.2f} {r['expert_stale']:>20.2f}")
-    return "\n".join(lines) + ("\nminari convention: random..expert; d4rl convention: random..stale expert "
-                                "(seed %d)" % next(iter(ref.values()))["seed"])
+        lines.append(f"{name:<8} {r['episodes']:>8} {r['seed']:>5} {r['random']:>8.2f} {r['expert']:>8.2f} "
+                     f"{r['expert_stale']:>13.2f}")
+    return "\n".join(lines) + ("\nscore conventions: minari = random..expert, d4rl = random..stale expert "
+                               "(D4RL's reference procedure)")
 
 
 def _cmd_reference_show(args) -> int:
@@ -80,10 +98,13 @@ def _cmd_reference_measure(args) -> int:
     from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
     from bridgeplan.maze.reference import measure_reference_returns
 
-    if args.episodes <= 0:
-        raise BridgeplanError(f"--episodes must be positive, got {args.episodes}")
     names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
-    print(_reference_table({n: measure_reference_returns(n, args.episodes, args.seed) for n in names}))
+    _positive("--episodes", args.episodes)
+    measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
+    print(_reference_table(measured))
+    if args.out:
+        Path(args.out).write_text(json.dumps(measured, indent=2) + "\n")
+        print(f"wrote {args.out}")
     return 0
 
 
@@ -385,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bridgeplan", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     _add_data_commands(sub)
+    _add_reference_commands(sub)
     _add_train_commands(sub)
     _add_eval_commands(sub)
     _add_experiment_commands(sub)

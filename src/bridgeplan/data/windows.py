@@ -1,8 +1,9 @@
 """Fixed-horizon training windows ``[horizon, actions + state]``, normalized to [-1, 1].
 
-Windows are cut from continuous segments only (they cross goal changes, as Diffuser's did, but
-never a reset or a file boundary). The start/goal conditions of a window are its own first and
-last states (``train.conditions_of``).
+Windows are cut from continuous segments only: they cross goal changes (as Diffuser's did) but
+never a reset, a stream boundary or a gap in a file. A window is returned as ``x [H, 6]`` alone
+(float32, normalized); its start/goal conditions are its own first and last states,
+``{0: x[0, 2:], H - 1: x[-1, 2:]}``, which the trainer takes from ``x``.
 """
 
 from __future__ import annotations
@@ -15,19 +16,28 @@ from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
 
 
+def window_starts(stream: Stream, horizon: int) -> np.ndarray:
+    """Start index of every window ``[s, s + horizon)`` that lies inside one continuous segment."""
+    if horizon < 2:
+        raise BridgeplanError(f"horizon must be at least 2, got {horizon}")
+    starts = [np.arange(lo, hi - horizon + 1) for lo, hi in stream.segment_bounds() if hi - lo >= horizon]
+    if not starts:
+        longest = max((hi - lo for lo, hi in stream.segment_bounds()), default=0)
+        raise BridgeplanError(f"horizon {horizon} is longer than every continuous segment of the dataset "
+                              f"(longest: {longest} steps)")
+    return np.concatenate(starts).astype(np.int64)
+
+
 class WindowDataset(torch.utils.data.Dataset):
+    """All windows of ``horizon`` steps of ``stream``, normalized by ``normalizer`` (fit on
+    ``stream.transitions()``); ``dataset[i]`` is ``x [horizon, 6]`` float32, columns
+    ``(ax, ay, x, y, vx, vy)``; ``dataset.batch(indices)`` gathers ``[B, horizon, 6]`` at once."""
+
     def __init__(self, stream: Stream, horizon: int, normalizer: Normalizer):
-        if horizon < 2:
-            raise BridgeplanError(f"horizon must be at least 2, got {horizon}")
-        starts = [np.arange(lo, hi - horizon + 1) for lo, hi in stream.segment_bounds() if hi - lo >= horizon]
-        if not starts:
-            longest = max(hi - lo for lo, hi in stream.segment_bounds())
-            raise BridgeplanError(f"horizon {horizon} is longer than every continuous segment of the dataset "
-                                  f"(longest: {longest} steps)")
-        self.horizon = horizon
-        self.starts = torch.as_tensor(np.concatenate(starts))
+        self.horizon = int(horizon)
+        self.starts = torch.as_tensor(window_starts(stream, self.horizon))
         self.data = torch.as_tensor(normalizer.normalize(stream.transitions()), dtype=torch.float32)
-        self._offsets = torch.arange(horizon)
+        self._offsets = torch.arange(self.horizon)
 
     def __len__(self) -> int:
         return len(self.starts)
@@ -38,4 +48,4 @@ class WindowDataset(torch.utils.data.Dataset):
 
     def batch(self, indices: torch.Tensor) -> torch.Tensor:
         """Windows ``[len(indices), horizon, 6]`` in one gather."""
-        return self.data[self.starts[indices][:, None] + self._offsets]
+        return self.data[self.starts[torch.as_tensor(indices)][:, None] + self._offsets]

@@ -1,7 +1,14 @@
-"""The shortest-path expert and the Diffuser tracking controller.
+"""The shortest-path expert: BFS on the cell grid plus a PD waypoint controller (D4RL / Minari).
 
-Every planner in the project is executed through :func:`tracking_actions`; the expert (BFS on the
-cell grid plus a PD waypoint controller) generates the data and the reference returns.
+Noise-free it is the reference expert of the normalized score; with waypoint jitter and action noise
+(:data:`WAYPOINT_JITTER`, :data:`ACTION_NOISE`) it follows Minari's ``D4RL/pointmaze`` data recipe
+(``bridgeplan.data.generate`` runs the same law in a scalar loop for speed).
+
+Control law: ``a = clip(10 (w - p) - 1 * v [+ N(0, 0.5^2)], -1, 1)`` with ``w`` the current
+waypoint: the centres of the cells along the shortest path after the current cell, the last one
+replaced by the goal position itself. A waypoint counts as reached within 0.1; the controller then
+moves on to the next (never past the last). The noise is added to the raw PD output and the sum is
+clipped once, as in Minari's generation script.
 """
 
 from __future__ import annotations
@@ -11,19 +18,30 @@ from functools import lru_cache
 
 import numpy as np
 
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import Maze
 
-P_GAIN, D_GAIN = 10.0, -1.0
-"""Waypoint controller ``a = clip(P (w - p) + D v)`` (D4RL/Minari)."""
+P_GAIN = 10.0
+D_GAIN = -1.0
 WAYPOINT_RADIUS = 0.1
 """A waypoint counts as reached within this distance; the controller moves on to the next."""
+WAYPOINT_JITTER = 0.2
+"""Data recipe: every waypoint but the last is shifted by -U(0, 0.2) per coordinate."""
+ACTION_NOISE = 0.5
+"""Data recipe: N(0, 0.5^2) noise on each action component, then clipped to [-1, 1]."""
+
+Cell = tuple[int, int]
 
 
 @lru_cache(maxsize=None)
-def _next_hop(maze: Maze) -> dict[tuple[int, int], dict[tuple[int, int], tuple[int, int]]]:
-    """``hop[goal][cell]``: the neighbour of ``cell`` one step closer to ``goal`` (BFS from every goal)."""
-    free = {tuple(int(v) for v in c) for c in maze.free_cells}
-    hops = {}
+def _next_hops(maze: Maze) -> dict[Cell, dict[Cell, Cell]]:
+    """``hops[goal][cell]``: the neighbour of ``cell`` one step closer to ``goal`` (one BFS per goal).
+
+    Neighbours are visited in a fixed order (down, up, right, left), so ties are broken
+    deterministically.
+    """
+    free = {(int(i), int(j)) for i, j in maze.free_cells}
+    hops: dict[Cell, dict[Cell, Cell]] = {}
     for goal in free:
         hop = {goal: goal}
         queue = deque([goal])
@@ -38,63 +56,89 @@ def _next_hop(maze: Maze) -> dict[tuple[int, int], dict[tuple[int, int], tuple[i
     return hops
 
 
-def shortest_path(maze: Maze, start_cell, goal_cell) -> list[tuple[int, int]]:
-    """Cells from ``start_cell`` to ``goal_cell`` inclusive, 4-connected, shortest."""
-    start, goal = tuple(int(v) for v in start_cell), tuple(int(v) for v in goal_cell)
-    hop = _next_hop(maze)[goal]
+def shortest_path(maze: Maze, start_cell, goal_cell) -> list[Cell]:
+    """Cells from ``start_cell`` to ``goal_cell`` inclusive, 4-connected, shortest (BFS)."""
+    start, goal = (int(start_cell[0]), int(start_cell[1])), (int(goal_cell[0]), int(goal_cell[1]))
+    hops = _next_hops(maze)
+    if goal not in hops or start not in hops:
+        bad = goal if goal not in hops else start
+        raise BridgeplanError(f"cell {list(bad)} is a wall or outside the {maze.name} maze")
+    hop = hops[goal]
+    if start not in hop:
+        raise BridgeplanError(f"no path from cell {list(start)} to cell {list(goal)} in the {maze.name} maze")
     path = [start]
     while path[-1] != goal:
         path.append(hop[path[-1]])
     return path
 
 
-def waypoints(maze: Maze, position: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """Cell centres along the shortest path after the current cell, the last one replaced by the goal."""
+def waypoints(maze: Maze, position, goal, jitter: float = 0.0,
+              rng: np.random.Generator | None = None) -> np.ndarray:
+    """Waypoints ``[K, 2]`` from ``position`` to ``goal``: centres of the path's cells after the current
+    cell, the last replaced by ``goal``. ``jitter > 0`` shifts every waypoint but the last by
+    ``-U(0, jitter)`` per coordinate (drawn from ``rng``)."""
+    goal = np.asarray(goal, dtype=np.float64)
     cells = shortest_path(maze, maze.xy_to_cell(position), maze.xy_to_cell(goal))[1:]
-    points = maze.cell_to_xy(np.asarray(cells, dtype=float).reshape(-1, 2))
-    return np.concatenate([points[:-1], np.asarray(goal, float)[None]]) if len(points) else np.asarray(goal, float)[None]
+    points = np.empty((max(len(cells), 1), 2))
+    if len(cells) > 1:
+        points[:-1] = maze.cell_to_xy(np.asarray(cells[:-1], dtype=np.float64))
+        if jitter > 0:
+            if rng is None:
+                raise ValueError("waypoint jitter needs an rng")
+            points[:-1] -= rng.uniform(0.0, jitter, size=(len(cells) - 1, 2))
+    points[-1] = goal
+    return points
+
+
+def pd_action(waypoint: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """The unclipped PD output ``10 (w - p) - v`` for ``waypoint [N, 2]`` and ``state [N, 4]``."""
+    return P_GAIN * (waypoint - state[:, :2]) + D_GAIN * state[:, 2:]
 
 
 class WaypointExpert:
     """A batch of waypoint controllers, one per episode, each following its own shortest path.
 
-    ``replan=False`` keeps each controller's waypoints across :meth:`reset` calls for the same goal,
-    as D4RL's reference expert did (its waypoints go stale after the first episode).
+    ``expert.plan(positions, goals)`` plans every episode afresh (call it at every episode start);
+    ``expert(obs [N, 4]) -> actions [N, 2]``. Options for Minari's data recipe: ``jitter`` (0.2) and
+    ``action_noise`` (0.5), drawn from ``rng`` (a Generator or a seed).
+
+    :meth:`exhaust` gives D4RL's stale reference controller: its waypoint list is used up, so it
+    heads straight for the goal, walls ignored.
     """
 
-    def __init__(self, maze: Maze, replan: bool = True):
-        self.maze, self.replan = maze, replan
+    def __init__(self, maze: Maze, jitter: float = 0.0, action_noise: float = 0.0,
+                 rng: np.random.Generator | int | None = None):
+        self.maze, self.jitter, self.action_noise = maze, float(jitter), float(action_noise)
+        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.paths: list[np.ndarray] = []
-        self.index = np.zeros(0, dtype=int)
-        self._goals: np.ndarray | None = None
+        self.index = np.zeros(0, dtype=np.int64)
+        self.current = np.zeros((0, 2))
+        self.goals = np.zeros((0, 2))
 
-    def reset(self, positions: np.ndarray, goals: np.ndarray) -> None:
-        goals = np.asarray(goals, float)
-        same = (self._goals is not None and len(self._goals) == len(goals) and np.allclose(self._goals, goals))
-        if self.replan or not same:
-            self.paths = [waypoints(self.maze, p, g) for p, g in zip(positions, goals)]
-            self.index = np.zeros(len(goals), dtype=int)
-            self._goals = goals.copy()
+    def plan(self, positions, goals) -> None:
+        """Plan a shortest path for every episode from its position to its goal."""
+        positions, goals = np.asarray(positions, np.float64), np.asarray(goals, np.float64)
+        self.paths = [waypoints(self.maze, p, g, self.jitter, self.rng) for p, g in zip(positions, goals)]
+        self.index = np.zeros(len(self.paths), dtype=np.int64)
+        self.current = np.stack([path[0] for path in self.paths])
+        self.goals = goals.copy()
+
+    def exhaust(self, episodes=None) -> None:
+        """Use up the waypoint list of ``episodes`` (all by default): they drive straight at their goal."""
+        episodes = range(len(self.paths)) if episodes is None else np.atleast_1d(episodes)
+        for k in episodes:
+            self.paths[k] = self.goals[k][None].copy()
+            self.index[k] = 0
+            self.current[k] = self.goals[k]
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        actions = np.empty((len(obs), 2))
-        for k, path in enumerate(self.paths):
-            w = path[self.index[k]]
-            if np.hypot(*(w - obs[k, :2])) <= WAYPOINT_RADIUS and self.index[k] < len(path) - 1:
-                self.index[k] += 1
-                w = path[self.index[k]]
-            actions[k] = P_GAIN * (w - obs[k, :2]) + D_GAIN * obs[k, 2:]
+        obs = np.asarray(obs, dtype=np.float64)
+        dist = np.linalg.norm(self.current - obs[:, :2], axis=1)
+        lengths = np.fromiter((len(p) for p in self.paths), dtype=np.int64, count=len(self.paths))
+        for k in np.flatnonzero((dist <= WAYPOINT_RADIUS) & (self.index < lengths - 1)):
+            self.index[k] += 1
+            self.current[k] = self.paths[k][self.index[k]]
+        actions = pd_action(self.current, obs)
+        if self.action_noise > 0:
+            actions += self.rng.normal(0.0, self.action_noise, size=actions.shape)
         return np.clip(actions, -1.0, 1.0)
-
-
-def tracking_actions(states: np.ndarray, plans: np.ndarray, t: int) -> np.ndarray:
-    """Diffuser's controller at step ``t``: follow the next planned state's position and velocity.
-
-    ``a = (p_{t+1} - p) + (v_{t+1} - v)``; once the plan ``[N, H, 4]`` has ended, hold its last
-    position with zero velocity.
-    """
-    if t + 1 < plans.shape[1]:
-        target = plans[:, t + 1]
-    else:
-        target = np.concatenate([plans[:, -1, :2], np.zeros_like(plans[:, -1, 2:])], axis=1)
-    return np.clip((target[:, :2] - states[:, :2]) + (target[:, 2:] - states[:, 2:]), -1.0, 1.0)

@@ -1,4 +1,8 @@
-"""Batched episodes: a policy or a batch of plans, executed in lockstep."""
+"""Batched episodes: a policy, or a batch of plans through the tracking controller, in lockstep.
+
+Evaluation is a continuing task: the goal stays for the whole episode and every step within 0.45
+of it earns reward 1, so reaching the goal fast and staying there earns more.
+"""
 
 from __future__ import annotations
 
@@ -7,38 +11,55 @@ from typing import Callable
 
 import numpy as np
 
-from bridgeplan.maze.expert import tracking_actions
-from bridgeplan.maze.layouts import Maze
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.controllers import tracking_actions
+from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.sim import BatchedPointMaze
+
+Policy = Callable[[int, np.ndarray], np.ndarray]
+"""``policy(step_index, obs [N, 4]) -> actions [N, 2]``."""
 
 
 @dataclass
 class RolloutResult:
     returns: np.ndarray
-    """``[N]`` sum of sparse rewards (the goal stays; every step within 0.45 earns 1)."""
+    """``[N]`` sum of the sparse rewards over the episode."""
     success: np.ndarray
-    """``[N]`` 1.0 where the episode was ever within 0.45 of the goal."""
+    """``[N]`` bool: the point mass was within 0.45 of the goal at some step."""
     states: np.ndarray
     """``[N, steps + 1, 4]`` observed states, the initial one first."""
+    actions: np.ndarray
+    """``[N, steps, 2]`` the actions applied (clipped to [-1, 1])."""
 
 
-def rollout(maze: Maze, policy: Callable[[int, np.ndarray], np.ndarray], starts_xy: np.ndarray,
-            goals_xy: np.ndarray, steps: int | None = None) -> RolloutResult:
-    """Run ``policy(t, obs [N, 4]) -> actions [N, 2]`` for ``steps`` (the maze's episode length)."""
-    steps = maze.episode_steps if steps is None else steps
-    sim = BatchedPointMaze(maze, len(starts_xy))
+def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None = None) -> RolloutResult:
+    """Run ``policy`` from ``starts_xy [N, 2]`` toward ``goals_xy [N, 2]`` for ``steps`` (default: the
+    maze's episode length), all episodes in lockstep."""
+    steps = maze.episode_steps if steps is None else int(steps)
+    if steps <= 0:
+        raise BridgeplanError(f"episode steps must be positive, got {steps}")
+    sim = BatchedPointMaze(maze, len(np.asarray(starts_xy)))
     obs = sim.reset(starts_xy, goals_xy)
-    states = np.empty((len(obs), steps + 1, 4))
+    n = len(obs)
+    states = np.empty((n, steps + 1, 4))
+    actions = np.empty((n, steps, 2))
     states[:, 0] = obs
-    returns = np.zeros(len(obs))
+    returns = np.zeros(n)
     for t in range(steps):
-        obs, reward = sim.step(policy(t, obs))
+        act = np.clip(np.asarray(policy(t, obs), dtype=np.float64), -1.0, 1.0)
+        actions[:, t] = act
+        obs, reward = sim.step(act)
         states[:, t + 1] = obs
         returns += reward
-    return RolloutResult(returns, (returns > 0).astype(np.float64), states)
+    dist = np.linalg.norm(states[:, 1:, :2] - sim.goals[:, None], axis=2)
+    return RolloutResult(returns, (dist <= GOAL_RADIUS).any(axis=1), states, actions)
 
 
-def execute_plans(maze: Maze, starts_xy: np.ndarray, goals_xy: np.ndarray, plans: np.ndarray,
-                  steps: int | None = None) -> RolloutResult:
-    """Track planned states ``[N, H, 4]`` open loop with Diffuser's controller."""
+def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None) -> RolloutResult:
+    """Execute planned states ``plans [N, H, 4]`` open loop with Diffuser's tracking controller
+    (:mod:`bridgeplan.maze.controllers`) for ``steps`` (default: the maze's episode length)."""
+    plans = np.asarray(plans, dtype=np.float64)
+    if plans.ndim != 3 or plans.shape[2] != 4 or len(plans) != len(np.asarray(starts_xy)):
+        raise BridgeplanError(f"plans must have shape [N, H, 4] with N = {len(np.asarray(starts_xy))} "
+                              f"episodes, got {list(plans.shape)}")
     return rollout(maze, lambda t, obs: tracking_actions(obs, plans, t), starts_xy, goals_xy, steps)

@@ -9,20 +9,22 @@ from bridgeplan.maze.layouts import POSITION_NOISE, Maze
 
 
 def sample_tasks(maze: Maze, n: int, seed: int, multi_task: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` starts and goals ``[n, 2]``: cell centres plus U(-0.25, 0.25) noise, like gymnasium-robotics.
+    """``n`` starts and goals, each ``[n, 2]`` (x, y): cell centres plus U(-0.25, 0.25) noise per coordinate.
 
-    Single-task: the goal cell is the maze's evaluation cell and the start a uniformly random other free
-    cell. Multi-task: start and goal are two distinct random free cells.
+    Single-task: the goal cell is the maze's evaluation cell, the start cell a uniformly random other
+    free cell. Multi-task ("Multi2D"): goal and start are two distinct uniformly random free cells.
+    Reproducible: the same (maze, n, seed, multi_task) always gives the same tasks (the tasks of a
+    smaller ``n`` are not a prefix of a larger one: compare runs with equal ``n``).
     """
     if n <= 0:
         raise BridgeplanError(f"number of episodes must be positive, got {n}")
     rng = np.random.default_rng(seed)
     free = maze.free_cells
-    goal_cells = np.empty((n, 2), dtype=int)
-    start_cells = np.empty((n, 2), dtype=int)
-    for k in range(n):
-        goal = free[rng.integers(len(free))] if multi_task else np.asarray(maze.eval_goal_cell)
-        others = free[np.any(free != goal, axis=1)]
-        goal_cells[k], start_cells[k] = goal, others[rng.integers(len(others))]
+    if multi_task:
+        goal_idx = rng.integers(len(free), size=n)
+    else:
+        goal_idx = np.full(n, int(np.flatnonzero((free == maze.eval_goal_cell).all(axis=1))[0]))
+    start_idx = rng.integers(len(free) - 1, size=n)
+    start_idx += start_idx >= goal_idx  # uniform over the free cells other than the goal cell
     noise = rng.uniform(-POSITION_NOISE, POSITION_NOISE, size=(2, n, 2))
-    return maze.cell_to_xy(start_cells) + noise[0], maze.cell_to_xy(goal_cells) + noise[1]
+    return maze.cell_to_xy(free[start_idx]) + noise[0], maze.cell_to_xy(free[goal_idx]) + noise[1]

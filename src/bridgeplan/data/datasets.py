@@ -1,0 +1,147 @@
+"""Dataset files: generate one (Minari format, written atomically), load any into a :class:`Stream`.
+
+``load_stream(path_or_id)`` is the one entry point for training. It accepts our dataset directories,
+official Minari ``D4RL/pointmaze/*`` datasets (by directory or id) and legacy D4RL ``maze2d-*.hdf5``
+files, and goes through a flat ``.npz`` cache next to the source (states, actions, segment starts,
+maze, source), valid while the source file keeps its size and modification time.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.data.d4rl_io import read_d4rl
+from bridgeplan.data.generate import generate_streams
+from bridgeplan.data.minari_io import (
+    DATA_FILE,
+    read_minari,
+    replace_directory,
+    resolve_minari_path,
+    write_minari_into,
+)
+from bridgeplan.data.stream import Stream
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.layouts import get_maze
+
+CACHE_VERSION = 1
+CACHE_NAME = "bridgeplan-cache.npz"
+DATASETS_ENV = "BRIDGEPLAN_DATASETS"
+"""Environment variable: the default root of generated datasets (default ``datasets`` in the cwd)."""
+
+
+def default_dataset_path(maze_name: str, steps: int, root: str | Path | None = None) -> Path:
+    """``<root>/<maze>-<steps>``; root: the argument, else ``$BRIDGEPLAN_DATASETS``, else ``datasets``."""
+    return Path(root or os.environ.get(DATASETS_ENV) or "datasets") / f"{maze_name}-{steps}"
+
+
+def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
+    """The :class:`Stream` of freshly generated streams (each a continuous segment)."""
+    starts = np.cumsum([0] + [len(s) for s in streams[:-1]])
+    return Stream(maze_name, np.concatenate([s.observations[:-1] for s in streams]),
+                  np.concatenate([s.actions for s in streams]), starts,
+                  episodes=sum(len(s.episode_starts) for s in streams),
+                  goals_reached=sum(s.goals_reached for s in streams), source=source)
+
+
+def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Path | None = None,
+                     force: bool = False, progress: bool = True, workers: int = 1) -> Path:
+    """Generate a noisy expert dataset of ``steps`` transitions and write it as a Minari dataset
+    directory ``out`` (default :func:`default_dataset_path`), with its cache; returns ``out``.
+
+    Atomic: the dataset is built in a temporary directory beside ``out`` and renamed into place; an
+    existing ``out`` is only replaced with ``force``. Nothing is left behind on error or interrupt.
+    """
+    maze = get_maze(maze_name)
+    if steps <= 0:
+        raise BridgeplanError(f"steps must be positive, got {steps}")
+    if workers <= 0:
+        raise BridgeplanError(f"workers must be positive, got {workers}")
+    out = Path(out) if out is not None else default_dataset_path(maze.name, steps)
+    if (out.exists() or out.is_symlink()) and not force:
+        raise BridgeplanError(f"{out} already exists; pass --force to overwrite it")
+    if out.exists() and not out.is_dir():
+        raise BridgeplanError(f"{out} exists and is not a directory")
+    streams = generate_streams(maze, steps, seed, workers=workers, progress=progress)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp.", dir=out.parent))
+    try:
+        built = write_minari_into(tmp, streams, maze, seed)
+        stream = stream_from_generated(maze.name, streams, str(out))
+        write_cache(built / DATA_FILE, built / CACHE_NAME, stream)
+        replace_directory(built, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def _source(path_or_id: str) -> tuple[str, Path, Path]:
+    """(kind, source file, cache file) of a dataset path or Minari id; kind is ``minari`` or ``d4rl``."""
+    directory = resolve_minari_path(path_or_id)
+    if directory is not None:
+        return "minari", directory / DATA_FILE, directory / CACHE_NAME
+    path = Path(path_or_id)
+    if path.is_file():
+        return "d4rl", path, path.with_name(path.name + "." + CACHE_NAME)
+    if path.is_dir():
+        raise BridgeplanError(f"{path} is not a Minari dataset (no {DATA_FILE} in it)")
+    raise BridgeplanError(f"no dataset at {path_or_id} (expected a Minari dataset directory or id, "
+                          f"or a D4RL maze2d .hdf5 file)")
+
+
+def _stamp(source: Path) -> np.ndarray:
+    try:
+        stat = source.stat()
+    except OSError:
+        raise BridgeplanError(f"{source} is missing: the dataset is incomplete") from None
+    return np.array([CACHE_VERSION, stat.st_size, stat.st_mtime_ns], dtype=np.int64)
+
+
+def write_cache(source: Path, cache: Path, stream: Stream) -> bool:
+    """Write the flat copy of ``stream`` (atomically); False if the directory is not writable."""
+    tmp = cache.with_name(f".{cache.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, stamp=_stamp(source), maze=stream.maze, states=stream.states, actions=stream.actions,
+                     segment_starts=stream.segment_starts, episodes=stream.episodes,
+                     goals_reached=stream.goals_reached, source=stream.source)
+        os.replace(tmp, cache)
+        return True
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        return False
+
+
+def read_cache(source: Path, cache: Path) -> Stream | None:
+    """The cached stream if the cache is there and matches ``source``; None otherwise."""
+    if not cache.exists():
+        return None
+    try:
+        with np.load(cache, allow_pickle=False) as z:
+            if not np.array_equal(z["stamp"], _stamp(source)):
+                return None
+            return Stream(str(z["maze"]), z["states"], z["actions"], z["segment_starts"], int(z["episodes"]),
+                          int(z["goals_reached"]), str(z["source"]))
+    except (OSError, ValueError, KeyError, EOFError):
+        return None  # a broken cache is rebuilt
+
+
+def load_stream(path_or_id: str | Path, maze: str | None = None, use_cache: bool = True) -> Stream:
+    """Load a dataset (Minari directory or id, or D4RL maze2d hdf5 file) as a :class:`Stream`, through
+    the flat-array cache. ``maze`` overrides the maze named by the dataset (needed for a D4RL file
+    whose name and data do not tell it)."""
+    kind, source, cache = _source(str(path_or_id))
+    if use_cache:
+        stream = read_cache(source, cache)
+        if stream is not None and (maze is None or get_maze(maze).name == stream.maze):
+            return stream
+    if not source.exists():
+        raise BridgeplanError(f"{source} is missing: the dataset is incomplete")
+    stream = read_minari(source.parent.parent, maze) if kind == "minari" else read_d4rl(source, maze)
+    if use_cache:
+        write_cache(source, cache, stream)
+    return stream

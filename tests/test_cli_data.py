@@ -1,0 +1,95 @@
+"""The `bridgeplan data` and `bridgeplan reference` commands, and their one-line errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from bridgeplan.cli import main
+from bridgeplan.data.datasets import CACHE_NAME
+
+
+def _error(capsys, argv) -> str:
+    """Run ``main(argv)``, expect exit code 2 and exactly one ``error:`` line on stderr."""
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    return lines[0]
+
+
+def test_generate_info_force(tmp_path, capsys):
+    out = tmp_path / "u"
+    assert main(["data", "generate", "--maze", "umaze", "--steps", "1500", "--seed", "3", "--out", str(out),
+                 "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "transitions: 1500" in printed and f"wrote {out}" in printed
+    assert main(["data", "info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["maze"] == "umaze" and info["transitions"] == 1500 and info["segments"] == 1
+    before = sorted(p.name for p in out.rglob("*"))
+    line = _error(capsys, ["data", "generate", "--maze", "umaze", "--steps", "10", "--out", str(out),
+                           "--no-progress"])
+    assert "already exists; pass --force" in line
+    assert sorted(p.name for p in out.rglob("*")) == before
+    assert main(["data", "generate", "--maze", "umaze", "--steps", "700", "--out", str(out), "--force",
+                 "--no-progress", "--workers", "2"]) == 0
+    assert "transitions: 700" in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["u"]
+
+
+def test_default_location(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("BRIDGEPLAN_DATASETS", raising=False)
+    assert main(["data", "generate", "--maze", "open", "--steps", "300", "--no-progress"]) == 0
+    assert (tmp_path / "datasets" / "open-300" / "data" / "main_data.hdf5").exists()
+    monkeypatch.setenv("BRIDGEPLAN_DATASETS", str(tmp_path / "elsewhere"))
+    assert main(["data", "generate", "--maze", "open", "--steps", "300", "--no-progress"]) == 0
+    assert (tmp_path / "elsewhere" / "open-300").is_dir()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--maze", "maze9"], "unknown maze 'maze9': choose from open, umaze, medium, large"),
+    (["--maze", "umaze", "--steps", "0"], "--steps must be positive, got 0"),
+    (["--maze", "umaze", "--steps", "-5"], "--steps must be positive, got -5"),
+    (["--maze", "umaze", "--workers", "0"], "--workers must be positive, got 0"),
+])
+def test_generate_rejects_bad_input(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)
+    line = _error(capsys, ["data", "generate", "--no-progress", "--out", str(tmp_path / "ds"), *argv])
+    assert line == f"error: {message}"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_info_rejects_bad_files(tmp_path, capsys, tiny_dataset):
+    assert "no dataset at" in _error(capsys, ["data", "info", str(tmp_path / "missing")])
+    assert "not a Minari dataset" in _error(capsys, ["data", "info", str(tmp_path)])
+    foreign = tmp_path / "maze2d-umaze-v1.hdf5"
+    foreign.write_bytes(b"\x89PNG not a dataset")
+    assert "not an hdf5 file" in _error(capsys, ["data", "info", str(foreign)])
+    # a truncated Minari dataset (copied without its cache)
+    broken = tmp_path / "broken"
+    shutil.copytree(tiny_dataset, broken)
+    (broken / CACHE_NAME).unlink()
+    data = broken / "data" / "main_data.hdf5"
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    assert "truncated" in _error(capsys, ["data", "info", str(broken)])
+    assert not (broken / CACHE_NAME).exists()
+    (broken / "data" / "metadata.json").unlink()
+    assert "not a Minari dataset" in _error(capsys, ["data", "info", str(broken)])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken", "maze2d-umaze-v1.hdf5"]
+
+
+def test_reference_commands(capsys):
+    assert main(["reference", "show"]) == 0
+    shown = capsys.readouterr().out
+    for name in ("open", "umaze", "medium", "large", "minari", "d4rl"):
+        assert name in shown
+    assert main(["reference", "measure", "--maze", "umaze", "--episodes", "4"]) == 0
+    assert "umaze" in capsys.readouterr().out
+    line = _error(capsys, ["reference", "measure", "--episodes", "0"])
+    assert line == "error: --episodes must be positive, got 0"
+    assert "unknown maze" in _error(capsys, ["reference", "measure", "--maze", "x"])
