@@ -175,18 +175,23 @@ def _cmd_train(args) -> int:
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:
         model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
-    config = cfg.replace(base, dataset=args.dataset, process=process, model=model, **over)
+    config = cfg.replace(base, dataset=_dataset_ref(args.dataset), process=process, model=model, **over)
     run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
     train(config, run_dir, resume=args.resume, progress=not args.no_progress)
     print(f"run: {run_dir}")
     return 0
 
 
+def _dataset_ref(dataset: str) -> str:
+    """A dataset path made absolute (so a run finds it from anywhere); a Minari id stays as it is."""
+    return str(Path(dataset).resolve()) if Path(dataset).exists() else dataset
+
+
 def _cmd_train_prior(args) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train_prior
 
-    config = cfg.replace(cfg.PriorTrainConfig(maze=args.maze, dataset=args.dataset),
+    config = cfg.replace(cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset)),
                          **_overrides(args, _COMMON))
     run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
     train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
@@ -322,7 +327,7 @@ def _cmd_experiment(args) -> int:
         model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
     if model:
         overrides["model"] = model
-    settings = SweepSettings(maze=args.maze, dataset=args.dataset, dataset_steps=args.dataset_steps,
+    settings = SweepSettings(maze=args.maze, dataset=_dataset_ref(args.dataset) if args.dataset else "", dataset_steps=args.dataset_steps,
                              preset=args.preset, train_steps=args.train_steps, prior_steps=args.prior_steps,
                              checkpoint_every=args.checkpoint_every, episodes=args.episodes,
                              seeds=_seeds(args.seeds),

@@ -129,12 +129,11 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
 
 def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, every: int = 4) -> None:
     """Replay executed states in MuJoCo's renderer (headless: MUJOCO_GL=egl) and save an animated GIF."""
-    import gymnasium as gym
-    import gymnasium_robotics
     from PIL import Image
 
-    gym.register_envs(gymnasium_robotics)
-    env = gym.make(maze.gym_id, render_mode="rgb_array", width=320, height=320)
+    from bridgeplan.maze.sim import make_gym_env
+
+    env = make_gym_env(maze, render_mode="rgb_array", width=320, height=320)
     env.reset(seed=0)
     point = env.unwrapped.point_env
     env.unwrapped.goal = np.asarray(goal, dtype=np.float64)

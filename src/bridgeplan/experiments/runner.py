@@ -107,7 +107,7 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
         return settings
     from bridgeplan.data import generate_dataset
 
-    path = Path(settings.results_dir) / "data" / f"{settings.maze}-{settings.dataset_steps}"
+    path = (Path(settings.results_dir) / "data" / f"{settings.maze}-{settings.dataset_steps}").resolve()
     if not path.exists():
         generate_dataset(settings.maze, settings.dataset_steps, seed=123, out=path)
     return dataclasses.replace(settings, dataset=str(path))
