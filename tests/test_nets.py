@@ -11,15 +11,6 @@ from bridgeplan.nets.unet import TemporalUNet, UNetConfig
 from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """These tensors are tiny: one thread is much faster than two on a shared, busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def n_params(module: torch.nn.Module) -> int:
     return sum(p.numel() for p in module.parameters())
 

@@ -17,15 +17,6 @@ NORMALIZER = Normalizer(low=(-1.0, -1.0, -2.0, -1.0, -5.0, -5.0), high=(1.0, 1.0
 STATE = slice(ACT_DIM, None)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """These tensors are tiny: one thread is much faster than two on a shared, busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def conditions(start_xy, goal_xy, start_v=None):
     """Normalized planner-style conditions: the start with a velocity, the goal at rest."""
     start_xy = torch.as_tensor(start_xy, dtype=torch.float32)

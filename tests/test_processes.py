@@ -17,15 +17,6 @@ from bridgeplan.trajectory import ACT_DIM
 B, H, D = 5, 8, 6
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """These tensors are tiny: one thread is much faster than two on a shared, busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def oracle(x0: torch.Tensor, process):
     """A network that sees the truth: its output makes predict_x0 return x0 exactly."""
     def model(x_n, t):

@@ -40,22 +40,34 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
     return {"score": scores, "return": _mean_se(returns), "success_rate": _mean_se(success)}
 
 
+def prepare_episodes(run: Path, episodes: int, nfe: int | None, seed: int, multi_task: bool = False,
+                     snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
+                     eta: float = 0.0):
+    """The planner of a run, its maze, the checked NFE, seeded tasks and the planning generator.
+
+    Returns ``(planner, info, maze, nfe, (starts_xy, goals_xy, start_states), generator)``.
+    """
+    if episodes <= 0:
+        raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta)
+    nfe = planner.process.max_nfe if nfe is None else nfe
+    planner.process.validate_nfe(nfe)
+    maze = get_maze(info["config"].maze)
+    starts_xy, goals_xy = sample_tasks(maze, episodes, seed=seed, multi_task=multi_task)
+    starts = np.concatenate([starts_xy, np.zeros_like(starts_xy)], axis=1)
+    gen = torch.Generator(device=planner.device).manual_seed(seed)
+    return planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen
+
+
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
              multi_task: bool = False, batch_size: int = 0, snapshot: int | None = None,
              device: str = "auto", sampler: str | None = None, eta: float = 0.0) -> dict:
     """Evaluate a trained run; returns the result dict (see the README for its fields)."""
-    if episodes <= 0:
-        raise BridgeplanError(f"episodes must be positive, got {episodes}")
     if batch_size < 0:
         raise BridgeplanError(f"batch size must be positive (or 0 for all episodes at once), got {batch_size}")
-    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta)
+    planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen = prepare_episodes(
+        run, episodes, nfe, seed, multi_task, snapshot, device, sampler, eta)
     config = info["config"]
-    nfe = planner.process.max_nfe if nfe is None else nfe
-    planner.process.validate_nfe(nfe)
-    maze = get_maze(config.maze)
-    starts_xy, goals_xy = sample_tasks(maze, episodes, seed=seed, multi_task=multi_task)
-    starts = np.concatenate([starts_xy, np.zeros_like(starts_xy)], axis=1)
-    gen = torch.Generator(device=planner.device).manual_seed(seed)
 
     batch = batch_size or episodes
     plans, prior_s, sample_s = [], 0.0, 0.0

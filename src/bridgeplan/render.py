@@ -83,23 +83,14 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written."""
     import torch
 
-    from bridgeplan.errors import BridgeplanError
-    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.evaluate import prepare_episodes
     from bridgeplan.maze.rollout import execute_plans
-    from bridgeplan.maze.tasks import sample_tasks
-    from bridgeplan.runs import load_planner, load_windows
+    from bridgeplan.runs import load_windows
 
-    if episodes <= 0:
-        raise BridgeplanError(f"episodes must be positive, got {episodes}")
     run = Path(run)
-    planner, info = load_planner(run, device=device)
+    planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen = prepare_episodes(
+        run, episodes, nfe, seed, multi_task, device=device)
     config = info["config"]
-    nfe = planner.process.max_nfe if nfe is None else nfe
-    planner.process.validate_nfe(nfe)
-    maze = get_maze(config.maze)
-    starts_xy, goals_xy = sample_tasks(maze, episodes, seed=seed, multi_task=multi_task)
-    starts = np.concatenate([starts_xy, np.zeros_like(starts_xy)], axis=1)
-    gen = torch.Generator(device=planner.device).manual_seed(seed)
     plan = planner.plan(starts, goals_xy, nfe, gen)
     result = execute_plans(maze, starts_xy, goals_xy, plan.states)
     base = Path(out) if out else run / "render" / f"step{info['step']}-nfe{nfe}-seed{seed}.png"
