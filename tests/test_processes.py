@@ -160,7 +160,7 @@ def test_bridge_marginal_endpoints_and_moments():
         assert abs(float(x_n.var()) - float(var[n])) < 0.05 * float(var[n]) + 1e-12
     # step 0 is (almost) the data and the last step (almost) the prior
     assert float(mu0[0]) > 0.99 and float(mu1[-1]) > 0.99
-    ot = Bridge(steps=20, ot_ode=True).marginal(x0[:3], x1[:3], torch.tensor([0, 10, 19]))
+    ot = Bridge(steps=20, beta_max=0.3, ot_ode=True).marginal(x0[:3], x1[:3], torch.tensor([0, 10, 19]))
     assert torch.allclose(ot[:, 0, 0], mu0[[0, 10, 19]] * 0.5 + mu1[[0, 10, 19]] * -0.8)
 
 

@@ -23,8 +23,9 @@ class ProcessConfig:
     """``ddpm`` (Diffuser's baseline) or ``bridge`` (I2SB)."""
     steps: int = 64
     """Number of diffusion steps N the network is trained with."""
-    beta_max: float = 0.3
-    """Bridge only: the largest beta of I2SB's symmetric schedule (I2SB used 0.3 and 1.0)."""
+    beta_max: float = 1.0
+    """Bridge only: the largest beta of I2SB's symmetric schedule (I2SB used 0.3 and 1.0). 1.0 is the
+    default because it scored far better on umaze (line prior, NFE 1: 88.8 vs 57.9; docs/results)."""
     ot_ode: bool = False
     """Bridge only: drop the noise of the training marginal and of the sampler (I2SB's OT-ODE)."""
 

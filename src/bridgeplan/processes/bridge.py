@@ -22,7 +22,7 @@ class Bridge:
     """
 
     steps: int = 16
-    beta_max: float = 0.3
+    beta_max: float = 1.0
     ot_ode: bool = False
     name = "bridge"
 
