@@ -8,8 +8,16 @@ import torch
 from bridgeplan.data.normalizer import Normalizer
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
-from bridgeplan.priors import (MAX_SPEED, PRIORS, SIM_DT, GaussianPrior, LearnedPrior, LinePrior, make_prior,
-                               train_prior_loss)
+from bridgeplan.priors import (
+    MAX_SPEED,
+    PRIORS,
+    SIM_DT,
+    GaussianPrior,
+    LearnedPrior,
+    LinePrior,
+    make_prior,
+    train_prior_loss,
+)
 from bridgeplan.trajectory import ACT_DIM, OBS_DIM, TRANSITION_DIM
 
 B, H = 4, 8

@@ -10,8 +10,13 @@ import torch
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM, Bridge, make_process, process_from_dict
 from bridgeplan.processes.samplers import bridge_posterior_step
-from bridgeplan.processes.schedules import (bridge_stds, cosine_betas, gaussian_product, i2sb_betas,
-                                            spaced_steps)
+from bridgeplan.processes.schedules import (
+    bridge_stds,
+    cosine_betas,
+    gaussian_product,
+    i2sb_betas,
+    spaced_steps,
+)
 from bridgeplan.trajectory import ACT_DIM
 
 B, H, D = 5, 8, 6

@@ -327,7 +327,8 @@ def _cmd_experiment(args) -> int:
         model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
     if model:
         overrides["model"] = model
-    settings = SweepSettings(maze=args.maze, dataset=_dataset_ref(args.dataset) if args.dataset else "", dataset_steps=args.dataset_steps,
+    settings = SweepSettings(maze=args.maze, dataset=_dataset_ref(args.dataset) if args.dataset else "",
+                             dataset_steps=args.dataset_steps,
                              preset=args.preset, train_steps=args.train_steps, prior_steps=args.prior_steps,
                              checkpoint_every=args.checkpoint_every, episodes=args.episodes,
                              seeds=_seeds(args.seeds),

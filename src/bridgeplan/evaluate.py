@@ -80,10 +80,12 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     result = execute_plans(maze, starts_xy, goals_xy, planned)
 
     out = {
-        "run": str(run), "step": info["step"], "train_seconds": info["elapsed_seconds"], "maze": maze.name, "process": config.process.name,
+        "run": str(run), "step": info["step"], "train_seconds": info["elapsed_seconds"], "maze": maze.name,
+        "process": config.process.name,
         "prior": config.prior if config.process.name == "bridge" else "gaussian",
         "diffusion_steps": config.process.steps, "nfe": nfe,
-        "sampler": getattr(planner.process, "sampler", "i2sb"), "eta": getattr(planner.process, "eta", None), "episodes": episodes, "seed": seed,
+        "sampler": getattr(planner.process, "sampler", "i2sb"), "eta": getattr(planner.process, "eta", None),
+        "episodes": episodes, "seed": seed,
         "multi_task": multi_task, "horizon": config.horizon, "episode_steps": maze.episode_steps,
         **score_returns(maze.name, result.returns, result.success),
         "plan_ms_per_plan": 1000.0 * (prior_s + sample_s) / episodes,

@@ -31,8 +31,8 @@ def _aggregate(rows: list[dict]) -> list[tuple[int, float, float, int]]:
         means = np.array([r["score_minari"] for r in rs])
         if len(rs) == 1:
             se = rs[0]["score_minari_se"]
-        else:  # spread across seeds and within each, combined
-            se = float(np.sqrt(means.var(ddof=1) / len(rs) + np.mean([r["score_minari_se"] ** 2 for r in rs]) / len(rs)))
+        else:  # across seeds: the spread of the per-seed means (it already contains the episode noise)
+            se = float(means.std(ddof=1) / np.sqrt(len(rs)))
         out.append((step, float(means.mean()), se, len(rs)))
     return out
 
@@ -75,7 +75,8 @@ def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
         rows = store.rows(name)
         title = EXPERIMENTS[name].title if name in EXPERIMENTS else name
         lines += [f"## {name}: {title}", "", f"![{name}]({png.name})", "",
-                  "| series | step | train s | NFE | episodes | seeds | score (minari) | score (d4rl) | success | plan ms |",
+                  "| series | step | train s | NFE | episodes | seeds | score (minari) | score (d4rl) | success "
+                  "| plan ms |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for label, srows in _series(rows).items():
             for step, mean, se, seeds in _aggregate(srows):

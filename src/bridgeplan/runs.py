@@ -21,7 +21,7 @@ from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
 
 def load_windows(dataset: str, maze: str, horizon: int):
     """Training windows of ``dataset`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
-    from bridgeplan.data import load_stream, WindowDataset
+    from bridgeplan.data import WindowDataset, load_stream
 
     if not dataset:
         raise BridgeplanError("no dataset given: pass --dataset (see `bridgeplan data generate`)")

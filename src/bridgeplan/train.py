@@ -19,12 +19,18 @@ import torch
 from tqdm import tqdm
 
 from bridgeplan import config as cfg
-from bridgeplan.checkpoint import CHECKPOINT_NAME, code_version, load_checkpoint, save_checkpoint, write_config
+from bridgeplan.checkpoint import (
+    CHECKPOINT_NAME,
+    code_version,
+    load_checkpoint,
+    save_checkpoint,
+    write_config,
+)
 from bridgeplan.device import resolve_device
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
-from bridgeplan.processes import make_process
 from bridgeplan.priors import train_prior_loss
+from bridgeplan.processes import make_process
+from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
 from bridgeplan.trajectory import ACT_DIM
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
