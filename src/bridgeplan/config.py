@@ -123,7 +123,7 @@ def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> Trai
         base = TrainConfig(
             maze=maze, preset=preset, horizon=horizon,
             model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),
-            process=ProcessConfig(steps=20),
+            process=ProcessConfig(steps=16),  # the thesis's 16 diffusion steps
             steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
             # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
             ema_every=1, ema_start=200, checkpoint_every=1000, log_every=50,
