@@ -79,3 +79,13 @@ def test_render_writes_pngs(tiny_runs, tmp_path):
                  "--pairs"]) == 0
     for path in (out, tmp_path / "plan-pairs.png"):
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_learned_prior_for_another_horizon_is_refused(tiny_dataset, tiny_runs, tmp_path, capsys):
+    prior = tiny_runs["bridge"].parent / "prior"  # trained for horizon 32
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2, "--process", "bridge", "--prior", "learned",
+                           "--prior-run", str(prior), "--horizon", "64")) == 2
+    err = capsys.readouterr().err
+    assert "trained for horizon 32, not 64" in err
+    assert not (run / "checkpoint.pt").exists()

@@ -44,6 +44,17 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys):
         ResultsStore(results / "results.sqlite").rows())
 
 
+@pytest.mark.parametrize("args, message", [
+    (["nfe1", "--maze", "maze9"], "unknown maze"),
+    (["priors", "--diffusion-steps", "4", "--fixed-nfe", "8"], "allows 1..3"),
+    (["nfe1", "--train-steps", "0"], "must be positive"),
+])
+def test_bad_sweeps_leave_no_store(tmp_path, capsys, args, message):
+    assert main(["experiment", *args, "--results", str(tmp_path / "r")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
 def test_unknown_experiment(tmp_path, capsys):
     assert main(["experiment", "nope", "--results", str(tmp_path / "r")]) == 2
     assert "unknown experiment" in capsys.readouterr().err

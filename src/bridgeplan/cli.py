@@ -320,7 +320,10 @@ def _cmd_experiment(args) -> int:
     for name in ("train_steps", "prior_steps", "checkpoint_every", "episodes", "dataset_steps"):
         if getattr(args, name) <= 0:
             raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
+    from bridgeplan.config import preset_config
+
     experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe)
+    preset_config(args.maze, args.preset)  # an unknown maze or preset fails before the store is touched
     overrides = _overrides(args, ("horizon", "batch_size", "device"))
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:
