@@ -1,6 +1,6 @@
 """Generative processes behind one interface (see ``ddpm.py`` and ``bridge.py``).
 
-Every process is a frozen dataclass (``to_dict``/``from_dict``) with
+Every process is a frozen dataclass (``to_dict``, inverted by ``process_from_dict``) with
 
 - ``training_loss(model, x0, x1, conditions, generator=None) -> scalar`` (``x0`` the clean normalized
   window ``[B, H, D]``, ``x1`` the prior sample for it, ignored by DDPM),

@@ -54,15 +54,8 @@ class Bridge:
                                   f"(NFE < N), got {nfe}")
 
     def to_dict(self) -> dict:
-        """JSON-ready fields plus ``name``; inverted by :meth:`from_dict` and ``process_from_dict``."""
+        """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
         return {"name": self.name, **asdict(self)}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "Bridge":
-        d = dict(d)
-        if d.pop("name", cls.name) != cls.name:
-            raise BridgeplanError(f"not a {cls.name} process: {d}")
-        return cls(**d)
 
     def marginal(self, x0: torch.Tensor, x1: torch.Tensor, n: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:

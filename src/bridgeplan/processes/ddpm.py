@@ -53,15 +53,8 @@ class DDPM:
                                   f"got {nfe}")
 
     def to_dict(self) -> dict:
-        """JSON-ready fields plus ``name``; inverted by :meth:`from_dict` and ``process_from_dict``."""
+        """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
         return {"name": self.name, **asdict(self)}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "DDPM":
-        d = dict(d)
-        if d.pop("name", cls.name) != cls.name:
-            raise BridgeplanError(f"not a {cls.name} process: {d}")
-        return cls(**d)
 
     def predict_x0(self, model, x_t: torch.Tensor, t: int) -> torch.Tensor:
         tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)
