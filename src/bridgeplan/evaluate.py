@@ -7,6 +7,7 @@ floor), and for a bridge from an informative prior, with the prior sample alone.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import platform
 from collections import defaultdict
@@ -106,8 +107,7 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
 def _prior_only(planner, prior_name: str | None, maze, starts, starts_xy, goals_xy, seed: int) -> dict:
     """The same episodes executed from the prior's sample alone (no network)."""
     prior = planner.prior if prior_name is None else make_prior(prior_name, planner.normalizer)
-    floor_planner = type(planner)(planner.model, planner.process, prior, planner.normalizer,
-                                  planner.horizon, planner.device)
+    floor_planner = dataclasses.replace(planner, prior=prior)
     gen = torch.Generator(device=planner.device).manual_seed(seed)
     plan = floor_planner.plan(starts, goals_xy, 1, gen, prior_only=True)
     result = execute_plans(maze, starts_xy, goals_xy, plan.states)

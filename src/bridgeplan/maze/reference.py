@@ -24,7 +24,7 @@ import numpy as np
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.expert import WaypointExpert
-from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
+from bridgeplan.maze.layouts import get_maze
 from bridgeplan.maze.rollout import rollout
 from bridgeplan.maze.tasks import sample_tasks
 
@@ -56,10 +56,6 @@ def measure_reference_returns(maze_name: str, episodes: int = REFERENCE_EPISODES
         out[key] = round(float(result.returns.mean()), 3)
         out[f"{key}_success"] = round(float(result.success.mean()), 3)
     return out
-
-
-def measure_all(episodes: int = REFERENCE_EPISODES, seed: int = REFERENCE_SEED) -> dict:
-    return {name: measure_reference_returns(name, episodes, seed) for name in MAZE_NAMES}
 
 
 def load_reference_returns() -> dict:
