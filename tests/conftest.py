@@ -1,4 +1,4 @@
-"""Shared fixtures: one tiny umaze dataset for the whole session (a few thousand steps)."""
+"""Shared fixtures: one tiny umaze dataset (a few thousand steps) and two tiny trained runs on it."""
 
 from __future__ import annotations
 
@@ -22,3 +22,20 @@ def tiny_dataset(tmp_path_factory) -> str:
     assert main(["data", "generate", "--maze", "umaze", "--steps", str(TINY_STEPS), "--seed", "1",
                  "--out", str(root), "--no-progress"]) == 0
     return str(root)
+
+
+@pytest.fixture(scope="session")
+def tiny_runs(tiny_dataset, tmp_path_factory) -> dict:
+    """A DDPM run and a bridge run from a learned prior (horizon 32, 3 steps each), trained through the CLI."""
+    from bridgeplan.cli import main
+    from tests.test_train import train_args
+
+    root = tmp_path_factory.mktemp("runs")
+    prior = root / "prior"
+    assert main(["train-prior", "--maze", "umaze", "--dataset", tiny_dataset, "--run-dir", str(prior),
+                 "--horizon", "32", "--steps", "3", "--no-progress", "--device", "cpu"]) == 0
+    runs = {"ddpm": root / "ddpm", "bridge": root / "bridge"}
+    assert main(train_args(tiny_dataset, runs["ddpm"], 3)) == 0
+    assert main(train_args(tiny_dataset, runs["bridge"], 3, "--process", "bridge", "--prior", "learned",
+                           "--prior-run", str(prior))) == 0
+    return runs

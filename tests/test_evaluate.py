@@ -11,19 +11,6 @@ from bridgeplan.cli import main
 from tests.test_train import train_args
 
 
-@pytest.fixture(scope="module")
-def tiny_runs(tiny_dataset, tmp_path_factory):
-    root = tmp_path_factory.mktemp("runs")
-    prior = root / "prior"
-    assert main(["train-prior", "--maze", "umaze", "--dataset", tiny_dataset, "--run-dir", str(prior),
-                 "--horizon", "32", "--steps", "3", "--no-progress", "--device", "cpu"]) == 0
-    runs = {"ddpm": root / "ddpm", "bridge": root / "bridge"}
-    assert main(train_args(tiny_dataset, runs["ddpm"], 3)) == 0
-    assert main(train_args(tiny_dataset, runs["bridge"], 3, "--process", "bridge", "--prior", "learned",
-                           "--prior-run", str(prior))) == 0
-    return runs
-
-
 @pytest.mark.parametrize("process, nfe", [("ddpm", None), ("ddpm", 2), ("bridge", 1), ("bridge", None)])
 def test_eval_json_fields(tiny_runs, tmp_path, capsys, process, nfe):
     out = tmp_path / "result.json"
@@ -61,6 +48,7 @@ def test_eval_is_reproducible(tiny_runs, tmp_path):
     (["--nfe", "0"], "nfe"),
     (["--nfe", "6"], "nfe"),
     (["--episodes", "0"], "episodes must be positive"),
+    (["--batch-size", "0"], "batch size must be positive"),
 ])
 def test_eval_bad_input(tiny_runs, capsys, bad, message):
     assert main(["eval", str(tiny_runs["bridge"]), "--device", "cpu", *bad]) == 2

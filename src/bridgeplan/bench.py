@@ -1,52 +1,124 @@
-"""Benchmarks: planning latency, sampler overhead, training-step overhead, evaluation throughput.
+"""Benchmarks: planning latency, overheads, torch.compile, evaluation throughput and score per planning budget.
 
-Each figure is the median over repeats after warm-up; the machine is recorded beside it.
-Not part of the tests: ``bridgeplan bench`` writes JSON and a Markdown table.
+Timings are medians over repeats after warm-up; the machine is recorded beside them. Not part of the
+tests: ``bridgeplan bench`` writes ``bench.json`` (with its settings) and a Markdown table ``bench.md``.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import json
 import os
 import platform
 import statistics
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from bridgeplan.checkpoint import atomic_write_text, code_version
-from bridgeplan.config import preset_config
+from bridgeplan.config import PRESETS, preset_config
 from bridgeplan.data.normalizer import Normalizer
 from bridgeplan.device import resolve_device
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.processes import DDPM, Bridge
-from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
+from bridgeplan.runs import build_model, build_prior_net
+from bridgeplan.trajectory import TRANSITION_DIM
+
+DIFFUSION_STEPS = 16
+"""N of the untrained networks timed here (the ``cpu-small`` default); timings depend on NFE, not on N."""
 
 
-def median_seconds(fn, repeats: int, warmup: int = 2, device: torch.device | None = None) -> float:
+@dataclass(frozen=True)
+class BenchConfig:
+    """What ``bridgeplan bench`` measures."""
+
+    presets: tuple[str, ...] = ("cpu-small", "diffuser")
+    """Networks to time (untrained; timing does not depend on the weights)."""
+    batch_sizes: tuple[int, ...] = (1, 64)
+    """Plans per call for the latency, overhead and compile figures."""
+    nfes: tuple[int, ...] = (1, 2, 4, 8, 15)
+    """Network calls per plan for the latency table."""
+    repeats: int = 5
+    """Timed repeats per latency figure (after 2 warm-up calls)."""
+    overhead_repeats: int = 30
+    """Interleaved rounds for the overhead ratios (plan vs bare forward; train step vs bare step)."""
+    compile: bool = True
+    """Also time ``torch.compile``'d forward passes against eager ones (compilation takes minutes on a CPU)."""
+    eval_run: str = ""
+    """A trained run: time 200 of its umaze episodes at NFE 1, planning included."""
+    budget_runs: tuple[str, ...] = ()
+    """Trained runs (one per method, ideally at equal training steps) for the score-per-budget table."""
+    budgets: tuple[int, ...] = (1, 2, 4, 8)
+    """Network-call budgets K of the score-per-budget table."""
+    budget_episodes: int = 200
+    """Episodes per evaluation of the score-per-budget table."""
+    device: str = "auto"
+    """``auto`` (CUDA if present), ``cpu``, ``cuda``, ..."""
+
+    def validate(self) -> None:
+        for name in ("repeats", "overhead_repeats", "budget_episodes"):
+            if getattr(self, name) <= 0:
+                raise BridgeplanError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        for name in ("batch_sizes", "nfes", "budgets"):
+            values = getattr(self, name)
+            if not values or min(values) <= 0:
+                raise BridgeplanError(f"{name.replace('_', '-')} must be positive integers, got {list(values)}")
+        for preset in self.presets:
+            if preset not in PRESETS:
+                raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+        for run in (self.eval_run, *self.budget_runs):
+            if run and not Path(run).exists():
+                raise BridgeplanError(f"no run at {run}")
+        resolve_device(self.device)
+
+
+def median_seconds(fn, repeats: int, device: torch.device, warmup: int = 2) -> float:
     for _ in range(warmup):
         fn()
-    times = []
-    for _ in range(repeats):
-        if device is not None and device.type == "cuda":
-            torch.cuda.synchronize(device)
-        t0 = time.perf_counter()
+    return statistics.median(_timed(fn, device) for _ in range(repeats))
+
+
+def _timed(fn, device: torch.device) -> float:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    t0 = time.perf_counter()
+    fn()
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter() - t0
+
+
+def _interleaved_ratios(fns: dict[str, object], base: str, rounds: int, device: torch.device) -> dict[str, float]:
+    """Median time of each function over the median time of ``base``, timed in alternating rounds.
+
+    Alternating keeps a slow patch of the machine (another process, a frequency change) from landing
+    on one side of a ratio only.
+    """
+    for fn in fns.values():
         fn()
-        if device is not None and device.type == "cuda":
-            torch.cuda.synchronize(device)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+        fn()
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(rounds):
+        for name, fn in fns.items():
+            times[name].append(_timed(fn, device))
+    base_s = statistics.median(times[base])
+    return {name: statistics.median(t) / base_s for name, t in times.items() if name != base} | {
+        f"{base}_ms": 1000 * base_s}
 
 
-def machine() -> dict:
-    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
-            "code_version": code_version()}
+def machine(device: torch.device) -> dict:
+    out = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+           "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
+           "device": str(device), "code_version": code_version()}
+    if device.type == "cuda":
+        out["gpu"] = torch.cuda.get_device_name(device)
+    return out
 
 
 def _normalizer() -> Normalizer:
@@ -54,141 +126,266 @@ def _normalizer() -> Normalizer:
     return Normalizer((-1, -1, -1.5, -1.5, -5.3, -5.3), (1, 1, 1.5, 1.5, 5.3, 5.3))
 
 
-def _planners(model, horizon: int, device, steps: int) -> dict[str, Planner]:
+def _planners(model, horizon: int, device) -> dict[str, Planner]:
     norm = _normalizer()
-    learned = PriorMLP(OBS_DIM, horizon, TRANSITION_DIM).to(device).eval()
+    learned = build_prior_net(horizon).to(device).eval()
+    gaussian = make_prior("gaussian", norm)
     out = {
-        "ddpm (ancestral)": Planner(model, DDPM(steps), make_prior("gaussian", norm), norm, horizon, device),
-        "ddpm (ddim)": Planner(model, DDPM(steps, sampler="ddim"), make_prior("gaussian", norm), norm, horizon, device),
+        "ddpm (ancestral)": Planner(model, DDPM(DIFFUSION_STEPS), gaussian, norm, horizon, device),
+        "ddpm (ddim)": Planner(model, DDPM(DIFFUSION_STEPS, sampler="ddim"), gaussian, norm, horizon, device),
     }
     for prior in ("gaussian", "line", "learned"):
-        out[f"bridge ({prior})"] = Planner(model, Bridge(steps), make_prior(prior, norm, net=learned), norm,
-                                           horizon, device)
+        out[f"bridge ({prior})"] = Planner(model, Bridge(DIFFUSION_STEPS), make_prior(prior, norm, net=learned),
+                                           norm, horizon, device)
     return out
 
 
-def planning_latency(preset: str, batch_sizes=(1, 64), nfes=(1, 2, 4, 8, 15), repeats: int = 5,
-                     device: str = "auto") -> list[dict]:
-    """Milliseconds per plan call (whole batch) vs NFE, per method, prior time shown separately."""
-    dev = resolve_device(device)
-    config = preset_config("umaze", preset)
-    from bridgeplan.runs import build_model
+def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.repeat([[0.9, -0.9, 0.0, 0.0]], batch, 0), np.repeat([[-1.0, 1.0]], batch, 0)
 
+
+def planning_latency(preset: str, bench: BenchConfig, dev: torch.device) -> list[dict]:
+    """Milliseconds per plan call (whole batch) vs NFE, per method; prior sampling time shown separately."""
+    config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     rows = []
-    starts = np.array([[0.9, -0.9, 0.0, 0.0]])
-    goals = np.array([[-1.0, 1.0]])
-    for name, planner in _planners(model, config.horizon, dev, 16).items():
-        for batch in batch_sizes:
-            s, g = np.repeat(starts, batch, 0), np.repeat(goals, batch, 0)
-            for nfe in nfes:
-                if nfe > planner.process.max_nfe:
-                    continue
-                gen = torch.Generator(device=dev).manual_seed(0)
-                cond = planner.conditions(s, g)
-                with torch.inference_mode():
-                    prior_s = median_seconds(lambda: planner.prior.sample(cond, config.horizon, batch, gen),
-                                             repeats, device=dev)
-                total = median_seconds(lambda: planner.plan(s, g, nfe, gen), repeats, device=dev)
+    for name, planner in _planners(model, config.horizon, dev).items():
+        for batch in bench.batch_sizes:
+            starts, goals = _tasks(batch)
+            cond = planner.conditions(starts, goals)
+            gen = torch.Generator(device=dev).manual_seed(0)
+            with torch.inference_mode():
+                prior_s = median_seconds(lambda: planner.prior.sample(cond, config.horizon, batch, gen),
+                                         bench.repeats, dev)
+            for nfe in (n for n in bench.nfes if n <= planner.process.max_nfe):
+                plan_s = median_seconds(lambda: planner.plan(starts, goals, nfe, gen), bench.repeats, dev)
                 rows.append({"preset": preset, "method": name, "batch": batch, "nfe": nfe,
-                             "plan_ms": 1000 * total, "prior_ms": 1000 * prior_s})
+                             "plan_ms": 1000 * plan_s, "prior_ms": 1000 * prior_s})
     return rows
 
 
-def overhead_ratios(preset: str, batch: int = 64, repeats: int = 10, device: str = "auto") -> dict:
-    """Plan at NFE 1 over one bare forward pass; training step over bare forward+backward+Adam."""
-    from bridgeplan.runs import build_model
-
-    dev = resolve_device(device)
+def plan_overhead(preset: str, batch: int, bench: BenchConfig, dev: torch.device) -> dict:
+    """Plan at NFE 1 over one bare forward pass of the same network on an input of the same shape."""
     config = preset_config("umaze", preset)
-    model = build_model(config).to(dev)
+    model = build_model(config).to(dev).eval()
     x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
     t = torch.zeros(batch, device=dev)
+    starts, goals = _tasks(batch)
+    gen = torch.Generator(device=dev).manual_seed(0)
 
-    def bare_forward():
+    def forward():
         with torch.inference_mode():
             model(x, t)
 
-    planners = _planners(model.eval(), config.horizon, dev, 16)
-    s = np.repeat([[0.9, -0.9, 0.0, 0.0]], batch, 0)
-    g = np.repeat([[-1.0, 1.0]], batch, 0)
-    gen = torch.Generator(device=dev).manual_seed(0)
-    forward = median_seconds(bare_forward, repeats, device=dev)
-    plan = {name: median_seconds(lambda p=p: p.plan(s, g, 1, gen), repeats, device=dev) / forward
-            for name, p in planners.items()}
+    fns = {"forward": forward} | {name: (lambda p=p: p.plan(starts, goals, 1, gen))
+                                  for name, p in _planners(model, config.horizon, dev).items()}
+    ratios = _interleaved_ratios(fns, "forward", bench.overhead_repeats, dev)
+    return {"preset": preset, "batch": batch, "forward_ms": ratios.pop("forward_ms"), "plan_nfe1_over_forward": ratios}
 
-    model.train()
-    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+
+def _windows(horizon: int):
+    """Training windows of a small freshly generated umaze stream, and their normalizer."""
+    from bridgeplan.data import WindowDataset
+    from bridgeplan.data.datasets import stream_from_generated
+    from bridgeplan.data.generate import generate_stream
+    from bridgeplan.maze.layouts import get_maze
+
+    stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), 20 * horizon, seed=0)])
+    normalizer = Normalizer.fit(stream.transitions())
+    return WindowDataset(stream, horizon, normalizer), normalizer
+
+
+def train_overhead(preset: str, bench: BenchConfig, dev: torch.device) -> dict:
+    """One optimizer step of the training loop over a bare forward+backward+Adam step on a prepared batch.
+
+    The loop's step is ``TrainJob``'s own (window sampling, prior sample, process loss, EMA update), at the
+    preset's batch size; the bare step is an MSE of the same network on a batch already on the device.
+    """
+    from bridgeplan.train import planner_job
+
+    config = preset_config("umaze", preset)
+    windows, normalizer = _windows(config.horizon)
+    job = planner_job(config, normalizer, dev)
+    model = job.model.train()
+    opt = torch.optim.Adam(model.parameters(), lr=config.lr)
+    ema = copy.deepcopy(model).requires_grad_(False)
+    gen = torch.Generator(device=dev).manual_seed(0)
+    step = config.ema_start  # past the EMA's warm-up copy: the steady state of a long run
+    x = windows.batch(torch.arange(config.batch_size)).to(dev)
+    t = torch.zeros(config.batch_size, device=dev)
 
     def bare_step():
-        loss = ((model(x, t) - x) ** 2).mean()
-        loss.backward()
+        ((model(x, t) - x) ** 2).mean().backward()
         opt.step()
         opt.zero_grad(set_to_none=True)
 
-    from bridgeplan.train import conditions_of
+    def train_step():
+        nonlocal step
+        job.accumulate_gradients(windows, gen, dev)
+        step += 1
+        job.apply_gradients(opt, ema, step)
 
-    process = DDPM(16)
-    prior = make_prior("gaussian", _normalizer())
-
-    def train_step():  # what train.py's loop does per optimizer step (grad_accum 1)
-        cond = conditions_of(x)
-        x1 = prior.sample(cond, config.horizon, batch, generator=gen)
-        loss = process.training_loss(model, x, x1, cond, generator=gen)
-        loss.backward()
-        loss.item()
-        opt.step()
-        opt.zero_grad(set_to_none=True)
-
-    bare = median_seconds(bare_step, repeats, device=dev)
-    step = median_seconds(train_step, repeats, device=dev)
-    return {"preset": preset, "batch": batch, "forward_ms": 1000 * forward, "plan_nfe1_over_forward": plan,
-            "train_step_ms": 1000 * step, "bare_train_step_ms": 1000 * bare, "train_step_over_bare": step / bare}
+    ratios = _interleaved_ratios({"bare": bare_step, "train": train_step}, "bare", bench.overhead_repeats, dev)
+    return {"preset": preset, "batch": config.batch_size, "bare_train_step_ms": ratios["bare_ms"],
+            "train_step_ms": ratios["bare_ms"] * ratios["train"], "train_step_over_bare": ratios["train"]}
 
 
-def run_bench(out_dir: Path, presets=("cpu-small", "diffuser"), device: str = "auto", repeats: int = 5,
-              eval_run: str | None = None) -> Path:
-    """Run the suite and write ``bench.json`` and ``bench.md`` into ``out_dir``."""
-    if repeats <= 0:
-        raise BridgeplanError(f"repeats must be positive, got {repeats}")
-    resolve_device(device)
-    result = {"machine": machine(), "latency": [], "overhead": []}
-    for preset in presets:
-        result["latency"] += planning_latency(preset, repeats=repeats, device=device)
-        result["overhead"].append(overhead_ratios(preset, repeats=max(repeats, 5), device=device))
-    if eval_run:
-        from bridgeplan.evaluate import evaluate
+def compile_speedup(preset: str, bench: BenchConfig, dev: torch.device) -> list[dict]:
+    """Forward pass of ``torch.compile(model)`` against the eager model, and what compiling costs."""
+    config = preset_config("umaze", preset)
+    model = build_model(config).to(dev).eval()
+    compiled = torch.compile(model)
+    rows = []
+    for batch in bench.batch_sizes:
+        x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+        t = torch.zeros(batch, device=dev)
+        with torch.inference_mode():
+            compile_s = _timed(lambda: compiled(x, t), dev)  # the first call at a new shape compiles
+            max_diff = float((compiled(x, t) - model(x, t)).abs().max())
+            eager_s = median_seconds(lambda: model(x, t), bench.repeats, dev)
+            compiled_s = median_seconds(lambda: compiled(x, t), bench.repeats, dev)
+        rows.append({"preset": preset, "batch": batch, "eager_ms": 1000 * eager_s, "compiled_ms": 1000 * compiled_s,
+                     "speedup": eager_s / compiled_s, "first_call_s": compile_s, "max_abs_diff": max_diff})
+    return rows
 
-        t0 = time.perf_counter()
-        r = evaluate(Path(eval_run), episodes=200, nfe=1, device=device)
-        result["eval_throughput"] = {"run": eval_run, "episodes": 200, "nfe": 1,
-                                     "seconds": time.perf_counter() - t0,
-                                     "score_minari": r["score"]["minari"]}
+
+def eval_throughput(run: str, device: str) -> dict:
+    """Wall time of ``bridgeplan eval RUN --episodes 200 --nfe 1``, planning, rollouts and floors included."""
+    from bridgeplan.evaluate import evaluate
+
+    t0 = time.perf_counter()
+    result = evaluate(Path(run), episodes=200, nfe=1, device=device)
+    return {"run": run, "episodes": 200, "nfe": 1, "seconds": time.perf_counter() - t0,
+            "plan_ms_per_plan": result["plan_ms_per_plan"], "score_minari": result["score"]["minari"]}
+
+
+def score_per_budget(bench: BenchConfig) -> dict:
+    """Every run evaluated at each budget K (DDPM with both samplers), and the best score within K calls.
+
+    ``best`` holds, per method and K, the evaluation with the highest mean Minari score among those
+    with NFE <= K; a method whose process allows fewer calls than K keeps its best at fewer.
+    """
+    from bridgeplan.evaluate import evaluate
+    from bridgeplan.runs import load_planner
+
+    evals = []
+    for run in bench.budget_runs:
+        planner, info = load_planner(Path(run), device=bench.device)
+        samplers = ("ancestral", "ddim") if info["config"].process.name == "ddpm" else (None,)
+        for sampler in samplers:
+            for nfe in (k for k in bench.budgets if k <= planner.process.max_nfe):
+                r = evaluate(Path(run), episodes=bench.budget_episodes, nfe=nfe, sampler=sampler,
+                             device=bench.device)
+                method = "ddpm" if r["process"] == "ddpm" else f"bridge ({r['prior']})"
+                evals.append({"method": method, "run": run, "step": r["step"],
+                              "train_minutes": r["train_seconds"] / 60, "nfe": nfe, "sampler": r["sampler"],
+                              "score_minari": r["score"]["minari"], "score_d4rl": r["score"]["d4rl"],
+                              "success_rate": r["success_rate"]["mean"], "plan_ms_per_plan": r["plan_ms_per_plan"],
+                              "floor_line_minari": r["floor_line"]["score"]["minari"]})
+    best = []
+    for method in dict.fromkeys(e["method"] for e in evals):
+        for k in bench.budgets:
+            within = [e for e in evals if e["method"] == method and e["nfe"] <= k]
+            top = max(within, key=lambda e: e["score_minari"]["mean"])
+            best.append({"method": method, "budget": k, "nfe": top["nfe"], "sampler": top["sampler"],
+                         "step": top["step"], "score_minari": top["score_minari"]})
+    return {"episodes": bench.budget_episodes, "evaluations": evals, "best": best}
+
+
+def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
+    """Run the suite and write ``bench.json`` and ``bench.md`` into ``out_dir``; returns the Markdown path."""
+    bench.validate()
+    dev = resolve_device(bench.device)
+    result = {"bench": dataclasses.asdict(bench), "machine": machine(dev), "latency": [], "plan_overhead": [],
+              "train_overhead": [], "compile": []}
+    for preset in bench.presets:
+        progress(f"[{preset}] planning latency")
+        result["latency"] += planning_latency(preset, bench, dev)
+        progress(f"[{preset}] overheads")
+        result["plan_overhead"] += [plan_overhead(preset, b, bench, dev) for b in bench.batch_sizes]
+        result["train_overhead"].append(train_overhead(preset, bench, dev))
+        if bench.compile:
+            progress(f"[{preset}] torch.compile")
+            result["compile"] += compile_speedup(preset, bench, dev)
+    if bench.eval_run:
+        progress("evaluation throughput")
+        result["eval_throughput"] = eval_throughput(bench.eval_run, bench.device)
+    if bench.budget_runs:
+        progress("score per planning budget")
+        result["score_per_budget"] = score_per_budget(bench)
     out_dir = Path(out_dir)
     atomic_write_text(out_dir / "bench.json", json.dumps(result, indent=2) + "\n")
     atomic_write_text(out_dir / "bench.md", format_bench(result))
     return out_dir / "bench.md"
 
 
+def _table(header: list[str], rows: list[list]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
+        "| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+
+
 def format_bench(result: dict) -> str:
     m = result["machine"]
+    where = m.get("gpu", f"{m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch threads")
     lines = ["# bridgeplan bench", "",
-             f"Machine: {m['processor']}, {m['cpu_count']} cores, torch {m['torch']} with {m['torch_threads']} "
-             f"threads; code {m['code_version']}. Medians over repeats after 2 warm-up calls.", "",
-             "## Planning latency (ms per plan call for the whole batch; prior sampling separately)", "",
-             "| preset | method | batch | NFE | plan ms | of which prior ms |", "|---|---|---|---|---|---|"]
-    for r in result["latency"]:
-        lines.append(f"| {r['preset']} | {r['method']} | {r['batch']} | {r['nfe']} | {r['plan_ms']:.1f} | "
-                     f"{r['prior_ms']:.2f} |")
-    lines += ["", "## Overheads", "",
-              "| preset | batch | forward ms | plan@NFE1 / forward (worst method) | train step ms | "
-              "bare step ms | train / bare |", "|---|---|---|---|---|---|---|"]
-    for o in result["overhead"]:
-        worst = max(o["plan_nfe1_over_forward"].items(), key=lambda kv: kv[1])
-        lines.append(f"| {o['preset']} | {o['batch']} | {o['forward_ms']:.1f} | {worst[1]:.2f} ({worst[0]}) | "
-                     f"{o['train_step_ms']:.1f} | {o['bare_train_step_ms']:.1f} | {o['train_step_over_bare']:.2f} |")
+             f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
+             f"with N = {DIFFUSION_STEPS} for the timings; medians over {result['bench']['repeats']} repeats after "
+             f"2 warm-up calls, ratios over {result['bench']['overhead_repeats']} interleaved rounds.", "",
+             "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
+             "of it and shown separately.", ""]
+    lines += _table(["preset", "method", "batch", "NFE", "plan ms", "of which prior ms"],
+                    [[r["preset"], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}", f"{r['prior_ms']:.2f}"]
+                     for r in result["latency"]])
+    lines += ["", "## Overheads", "", "Plan at NFE 1 over one bare forward pass of the same network and input "
+              "shape (target <= 1.2):", ""]
+    methods = list(result["plan_overhead"][0]["plan_nfe1_over_forward"]) if result["plan_overhead"] else []
+    lines += _table(["preset", "batch", "forward ms", *methods],
+                    [[o["preset"], o["batch"], f"{o['forward_ms']:.2f}",
+                      *(f"{o['plan_nfe1_over_forward'][k]:.2f}" for k in methods)] for o in result["plan_overhead"]])
+    lines += ["", "Training step of `train.py` over a bare forward+backward+Adam step on a prepared batch "
+              "(target <= 1.15):", ""]
+    lines += _table(["preset", "batch", "train step ms", "bare step ms", "train / bare"],
+                    [[o["preset"], o["batch"], f"{o['train_step_ms']:.1f}", f"{o['bare_train_step_ms']:.1f}",
+                      f"{o['train_step_over_bare']:.2f}"] for o in result["train_overhead"]])
+    if result["compile"]:
+        lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode); the "
+                  "first call at each shape compiles.", ""]
+        lines += _table(["preset", "batch", "eager ms", "compiled ms", "speedup", "first call s"],
+                        [[c["preset"], c["batch"], f"{c['eager_ms']:.2f}", f"{c['compiled_ms']:.2f}",
+                          f"{c['speedup']:.2f}", f"{c['first_call_s']:.1f}"] for c in result["compile"]])
     if "eval_throughput" in result:
         e = result["eval_throughput"]
-        lines += ["", f"Evaluation throughput: {e['episodes']} umaze episodes at NFE {e['nfe']} in "
-                      f"{e['seconds']:.1f} s, planning included ({e['run']})."]
+        lines += ["", "## Evaluation throughput", "",
+                  f"{e['episodes']} umaze episodes at NFE {e['nfe']} in {e['seconds']:.1f} s, planning, rollouts "
+                  f"and the straight-line floor included ({e['plan_ms_per_plan']:.2f} ms per plan; run {e['run']}, "
+                  f"score {e['score_minari']['mean']:.1f} ± {e['score_minari']['se']:.1f})."]
+    if "score_per_budget" in result:
+        lines += _format_budget(result["score_per_budget"])
     return "\n".join(lines) + "\n"
+
+
+def _format_budget(s: dict) -> list[str]:
+    budgets = sorted({b["budget"] for b in s["best"]})
+    methods = list(dict.fromkeys(b["method"] for b in s["best"]))
+    first = {e["method"]: e for e in s["evaluations"]}
+    steps = {e["method"]: e["step"] for e in s["evaluations"]}
+    lines = ["", "## Score per planning budget", "",
+             f"Best normalized score (Minari convention, mean ± standard error over {s['episodes']} episodes, "
+             "seed 0) within K network calls per plan, over NFE <= K and, for DDPM, both samplers "
+             "(ancestral strided and DDIM eta 0); in brackets the NFE and sampler that reached it.", ""]
+    rows = []
+    for method in methods:
+        cells = []
+        for k in budgets:
+            b = next(b for b in s["best"] if b["method"] == method and b["budget"] == k)
+            sc = b["score_minari"]
+            cells.append(f"{sc['mean']:.1f} ± {sc['se']:.1f} ({b['nfe']}, {b['sampler']})")
+        rows.append([method, steps[method], f"{first[method]['train_minutes']:.1f}", *cells])
+    lines += _table(["method", "train steps", "train min", *(f"K = {k}" for k in budgets)], rows)
+    floor = s["evaluations"][0]["floor_line_minari"]
+    lines += ["", f"No network (the straight line tracked by the controller, same episodes): "
+                  f"{floor['mean']:.1f} ± {floor['se']:.1f}."]
+    if len(set(steps.values())) > 1:
+        lines += ["", f"**Unequal training budgets**: the runs were trained for {sorted(set(steps.values()))} "
+                      "steps; compare with care."]
+    return lines

@@ -226,10 +226,12 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
-    p.add_argument("--batch-size", type=int, default=0, help="plans per batch (0: all episodes at once)")
+    p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
     p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
     p.add_argument("--sampler", default=None, help="ddpm runs: ancestral (default; strided below N) or ddim")
     p.add_argument("--eta", type=float, default=0.0, help="DDIM's eta (0: deterministic)")
+    p.add_argument("--compile", action="store_true",
+                   help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
@@ -253,10 +255,11 @@ def _cmd_eval(args) -> int:
 
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
-                      device=args.device, sampler=args.sampler, eta=args.eta)
+                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile)
     run_dir = Path(args.run) if Path(args.run).is_dir() else Path(args.run).parent
     name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
-        "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "")
+        "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
+        "-compiled" if args.compile else "")
     out = Path(args.out) if args.out else run_dir / "eval" / f"{name}.json"
     write_result(result, out)
     if args.json:
@@ -358,24 +361,39 @@ def _cmd_report(args) -> int:
 
 
 def _add_bench_command(sub) -> None:
-    p = sub.add_parser("bench", help="planning latency, overheads and evaluation throughput (JSON + Markdown)")
-    p.add_argument("--out", default="bench", help="output directory")
-    p.add_argument("--presets", default="cpu-small,diffuser", help="comma-separated presets")
-    p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--eval-run", default=None, help="a trained run: also time 200 episodes at NFE 1")
-    p.add_argument("--device", default="auto")
+    p = sub.add_parser("bench", help="planning latency, overheads, torch.compile, evaluation throughput and score "
+                                     "per planning budget (JSON + Markdown)",
+                       description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and "
+                                   "diffuser networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes).")
+    p.add_argument("--out", default="bench", help="output directory (bench.json, bench.md)")
+    p.add_argument("--presets", help="comma-separated presets to time")
+    p.add_argument("--batch-sizes", help="comma-separated plans per call")
+    p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
+    p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
+    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio")
+    p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
+    p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
+    p.add_argument("--budget-runs", help="comma-separated trained runs, one per method at equal training steps: "
+                                         "the score-per-budget table")
+    p.add_argument("--budgets", help="comma-separated network-call budgets K")
+    p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
+    p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
     p.set_defaults(func=_cmd_bench)
 
 
 def _cmd_bench(args) -> int:
-    from bridgeplan.bench import run_bench
-    from bridgeplan.config import PRESETS
+    from bridgeplan.bench import BenchConfig, run_bench
 
-    presets = tuple(args.presets.split(","))
-    for preset in presets:
-        if preset not in PRESETS:
-            raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
-    path = run_bench(Path(args.out), presets, device=args.device, repeats=args.repeats, eval_run=args.eval_run)
+    given = {"presets": args.presets and tuple(args.presets.split(",")),
+             "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
+             "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
+             "budget_episodes": args.budget_episodes, "device": args.device,
+             "compile": False if args.no_compile else None}
+    for name in ("batch_sizes", "nfes", "budgets"):
+        text = getattr(args, name)
+        given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
+    bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
+    path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(path.read_text())
     return 0
 

@@ -17,6 +17,9 @@ def resolve_device(name: str = "auto") -> torch.device:
         raise BridgeplanError(f"unknown device {name!r}: {e}") from None
     if device.type == "cuda" and not torch.cuda.is_available():
         raise BridgeplanError(f"device {name!r} asked for, but CUDA is not available on this machine")
+    if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
+        raise BridgeplanError(f"device {name!r} asked for, but this machine has {torch.cuda.device_count()} "
+                              "CUDA device(s)")
     if device.type == "mps" and not torch.backends.mps.is_available():
         raise BridgeplanError(f"device {name!r} asked for, but MPS is not available on this machine")
     return device

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import platform
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -43,14 +44,14 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
 
 def prepare_episodes(run: Path, episodes: int, nfe: int | None, seed: int, multi_task: bool = False,
                      snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
-                     eta: float = 0.0):
+                     eta: float = 0.0, compile: bool = False):
     """The planner of a run, its maze, the checked NFE, seeded tasks and the planning generator.
 
     Returns ``(planner, info, maze, nfe, (starts_xy, goals_xy, start_states), generator)``.
     """
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
-    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta)
+    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
     maze = get_maze(info["config"].maze)
@@ -61,16 +62,27 @@ def prepare_episodes(run: Path, episodes: int, nfe: int | None, seed: int, multi
 
 
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
-             multi_task: bool = False, batch_size: int = 0, snapshot: int | None = None,
-             device: str = "auto", sampler: str | None = None, eta: float = 0.0) -> dict:
-    """Evaluate a trained run; returns the result dict (see the README for its fields)."""
-    if batch_size < 0:
-        raise BridgeplanError(f"batch size must be positive (or 0 for all episodes at once), got {batch_size}")
+             multi_task: bool = False, batch_size: int | None = None, snapshot: int | None = None,
+             device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False) -> dict:
+    """Evaluate a trained run; returns the result dict (its fields: README, "Evaluation output").
+
+    ``batch_size``: plans per network batch (default: all episodes at once). ``compile``: plan with
+    ``torch.compile``; compilation happens in an untimed warm-up call with a generator of its own, so the
+    plans and the reported planning time are those of the compiled network alone.
+    """
+    if batch_size is not None and batch_size <= 0:
+        raise BridgeplanError(f"batch size must be positive, got {batch_size}")
     planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen = prepare_episodes(
-        run, episodes, nfe, seed, multi_task, snapshot, device, sampler, eta)
+        run, episodes, nfe, seed, multi_task, snapshot, device, sampler, eta, compile)
     config = info["config"]
 
-    batch = batch_size or episodes
+    batch = min(batch_size or episodes, episodes)
+    compile_s = 0.0
+    if compile:
+        t0 = time.perf_counter()
+        for size in {batch, episodes % batch} - {0}:  # every batch shape the loop below will use
+            planner.plan(starts[:size], goals_xy[:size], nfe, torch.Generator(device=planner.device).manual_seed(0))
+        compile_s = time.perf_counter() - t0
     plans, prior_s, sample_s = [], 0.0, 0.0
     for lo in range(0, episodes, batch):
         plan = planner.plan(starts[lo:lo + batch], goals_xy[lo:lo + batch], nfe, gen)
@@ -92,6 +104,7 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
         "plan_ms_per_plan": 1000.0 * (prior_s + sample_s) / episodes,
         "prior_ms_per_plan": 1000.0 * prior_s / episodes,
         "batch_size": batch,
+        "compiled": compile, "compile_seconds": compile_s,
         "per_start_cell": _per_start_cell(maze, starts_xy, result.returns),
         "floor_line": _prior_only(planner, "line", maze, starts, starts_xy, goals_xy, seed),
     }
@@ -141,7 +154,8 @@ def format_table(result: dict) -> str:
         f"  return:                    {result['return']['mean']:7.1f} ± {result['return']['se']:.1f}",
         f"  success rate:              {result['success_rate']['mean']:7.3f}",
         f"  plan time:                 {result['plan_ms_per_plan']:7.2f} ms/plan "
-        f"(prior {result['prior_ms_per_plan']:.2f} ms; batch {result['batch_size']})",
+        f"(prior {result['prior_ms_per_plan']:.2f} ms; batch {result['batch_size']}"
+        + (f"; compiled in {result['compile_seconds']:.0f} s, untimed)" if result["compiled"] else ")"),
     ]
     for key in [k for k in result if k.startswith(("floor_", "prior_only_"))]:
         f = result[key]

@@ -64,10 +64,11 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
 
 
 def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
-                 eta: float = 0.0) -> tuple[Planner, dict]:
+                 eta: float = 0.0, compile: bool = False) -> tuple[Planner, dict]:
     """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``).
 
     ``sampler``/``eta`` choose DDPM's sampler (``ancestral`` or ``ddim``); the bridge has one.
+    ``compile`` wraps the network in ``torch.compile`` (off by default: see the benchmark in docs/results).
     """
     run = Path(run)
     path = run if run.is_file() else (
@@ -84,6 +85,8 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     model = build_model(config)
     model.load_state_dict(state["ema"])
     model.to(dev).eval()
+    if compile:
+        model = torch.compile(model)
     params = config.process.params()
     if sampler is not None:
         if config.process.name != "ddpm":

@@ -1,9 +1,10 @@
 """Training: the planner (DDPM or bridge) and the learned prior, with EMA and exact resume.
 
-One loop (:func:`_fit`) serves both: it owns the optimizer, gradient accumulation, EMA, the RNG,
-the time budget, NaN detection, TensorBoard scalars and checkpoints. Everything needed to resume
-lives in one file, ``RUN/checkpoint.pt``; EMA snapshots ``RUN/snapshots/step_*.pt`` are what the
-experiments evaluate across training steps.
+One loop (:func:`_fit`) serves both: it owns the optimizer, the EMA copy, the RNG, the time budget,
+NaN detection, TensorBoard scalars and checkpoints; :class:`TrainJob` does one optimizer step (the
+benchmark times that same step). Everything needed to resume lives in one file,
+``RUN/checkpoint.pt``; EMA snapshots ``RUN/snapshots/step_*.pt`` are what the experiments evaluate
+across training steps.
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ _RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "chec
 
 
 @dataclass
-class _Job:
-    """What distinguishes the planner's training from the prior's, for the shared loop."""
+class TrainJob:
+    """What distinguishes the planner's training from the prior's, and one optimizer step of either."""
 
     kind: str
     config: object
@@ -48,6 +49,30 @@ class _Job:
     normalizer_dict: dict
     grad_accum: int = 1
     ema: tuple[float, int, int] | None = None  # (decay, every, start)
+
+    def accumulate_gradients(self, windows, gen: torch.Generator, device: torch.device) -> float:
+        """Draw ``grad_accum`` batches of windows, backpropagate their loss; returns the summed loss."""
+        total = 0.0
+        for _ in range(self.grad_accum):
+            idx = torch.randint(len(windows), (self.config.batch_size,), generator=gen, device=device)
+            x0 = windows.batch(idx.cpu()).to(device)
+            loss = self.loss(x0, gen) / self.grad_accum
+            loss.backward()
+            total += loss.item()
+        return total
+
+    def apply_gradients(self, optimizer: torch.optim.Optimizer, ema: torch.nn.Module | None, step: int) -> None:
+        """The optimizer step, then the EMA update for the new ``step`` count (a copy before ``start``)."""
+        optimizer.step()
+        optimizer.zero_grad(set_to_none=True)
+        if ema is None:
+            return
+        decay, every, start = self.ema
+        if step < start:
+            ema.load_state_dict(self.model.state_dict())
+        elif step % every == 0:
+            with torch.no_grad():
+                torch._foreach_lerp_(list(ema.parameters()), list(self.model.parameters()), 1.0 - decay)
 
 
 def conditions_of(x0: torch.Tensor) -> dict[int, torch.Tensor]:
@@ -59,6 +84,11 @@ def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress
     """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
+    return _fit(planner_job(config, normalizer, device), windows, run_dir, resume, device, progress)
+
+
+def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> TrainJob:
+    """The planner's network (fresh, on ``device``), its loss and EMA settings."""
     model = build_model(config).to(device)
     process = make_process(config.process.name, **config.process.params())
     prior = build_prior(config, normalizer, device)
@@ -68,9 +98,8 @@ def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
         return process.training_loss(model, x0, x1, conditions, generator=gen)
 
-    job = _Job("planner", config, model, loss, normalizer.to_dict(), config.grad_accum,
-               (config.ema_decay, config.ema_every, config.ema_start))
-    return _fit(job, windows, run_dir, resume, device, progress)
+    return TrainJob("planner", config, model, loss, normalizer.to_dict(), config.grad_accum,
+                    (config.ema_decay, config.ema_every, config.ema_start))
 
 
 def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = False,
@@ -79,7 +108,7 @@ def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = Fals
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
     net = build_prior_net(config.horizon).to(device)
-    job = _Job("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
+    job = TrainJob("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
     return _fit(job, windows, run_dir, resume, device, progress)
 
 
@@ -103,7 +132,7 @@ def _check_resumable(saved: dict, current: dict, path: Path) -> None:
         raise BridgeplanError(f"checkpoint {path} was trained with a different config ({detail})")
 
 
-def _fit(job: _Job, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
+def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
     config = job.config
     run_dir = Path(run_dir)
     ckpt_path = run_dir / CHECKPOINT_NAME
@@ -158,29 +187,14 @@ def _fit(job: _Job, windows, run_dir: Path, resume: bool, device: torch.device, 
     elapsed0 = elapsed
     try:
         while step < config.steps and elapsed < budget:
-            total = 0.0
-            for _ in range(job.grad_accum):
-                idx = torch.randint(len(windows), (config.batch_size,), generator=gen, device=device)
-                x0 = windows.batch(idx.cpu()).to(device)
-                loss = job.loss(x0, gen) / job.grad_accum
-                loss.backward()
-                total += loss.item()
+            total = job.accumulate_gradients(windows, gen, device)
             if not math.isfinite(total):
                 raise BridgeplanError(
                     f"loss became {total} at step {step + 1}; stopped. The last good checkpoint "
                     f"(step {last_saved}) is kept in {ckpt_path}" if last_saved else
                     f"loss became {total} at step {step + 1}; stopped before any checkpoint was written")
-            optimizer.step()
-            optimizer.zero_grad(set_to_none=True)
             step += 1
-            if ema is not None:
-                decay, every, start = job.ema
-                if step < start:
-                    ema.load_state_dict(model.state_dict())
-                elif step % every == 0:
-                    with torch.no_grad():
-                        for pe, pm in zip(ema.parameters(), model.parameters()):
-                            pe.lerp_(pm, 1.0 - decay)
+            job.apply_gradients(optimizer, ema, step)
             elapsed = elapsed0 + time.perf_counter() - t_start
             bar.update(1)
             if step % config.log_every == 0:

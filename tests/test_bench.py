@@ -1,0 +1,60 @@
+"""`bridgeplan bench` through the real CLI with tiny settings: what it writes, and its refusals."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bridgeplan.cli import main
+
+TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "--repeats", "1",
+              "--overhead-repeats", "2", "--no-compile", "--device", "cpu"]
+
+
+def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
+    runs = f"{tiny_runs['ddpm']},{tiny_runs['bridge']}"
+    assert main(["bench", "--out", str(tmp_path), *TINY_BENCH, "--budget-runs", runs, "--budgets", "1,2,4",
+                 "--budget-episodes", "4"]) == 0
+    result = json.loads((tmp_path / "bench.json").read_text())
+    markdown = (tmp_path / "bench.md").read_text()
+    assert capsys.readouterr().out.strip() == markdown.strip()
+    assert result["bench"]["presets"] == ["cpu-small"] and result["machine"]["device"] == "cpu"
+
+    methods = {r["method"] for r in result["latency"]}
+    assert methods == {"ddpm (ancestral)", "ddpm (ddim)", "bridge (gaussian)", "bridge (line)", "bridge (learned)"}
+    assert {(r["batch"], r["nfe"]) for r in result["latency"]} == {(1, 1), (1, 2)}
+    assert all(r["plan_ms"] > r["prior_ms"] > 0 for r in result["latency"])
+    (overhead,) = result["plan_overhead"]
+    assert set(overhead["plan_nfe1_over_forward"]) == methods
+    assert all(0 < v < 100 for v in overhead["plan_nfe1_over_forward"].values())
+    (train,) = result["train_overhead"]
+    assert train["batch"] == 32 and train["train_step_over_bare"] > 0
+    assert result["compile"] == []
+
+    budget = result["score_per_budget"]
+    evals = budget["evaluations"]
+    # the tiny runs: DDPM with N=6 under both samplers, the bridge (N=6, NFE < N) at every budget
+    assert sorted((e["method"], e["sampler"], e["nfe"]) for e in evals if e["method"] == "ddpm") == [
+        ("ddpm", s, k) for s in ("ancestral", "ddim") for k in (1, 2, 4)]
+    assert sorted(e["nfe"] for e in evals if e["method"] == "bridge (learned)") == [1, 2, 4]
+    for best in budget["best"]:
+        within = [e["score_minari"]["mean"] for e in evals if e["method"] == best["method"]
+                  and e["nfe"] <= best["budget"]]
+        assert best["score_minari"]["mean"] == max(within) and best["nfe"] <= best["budget"]
+    assert "## Score per planning budget" in markdown and "| ddpm | 3 |" in markdown
+    assert "Unequal training budgets" not in markdown
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--device", "cuda:7"], "cuda"),
+    (["--batch-sizes", "0"], "--batch-sizes takes positive integers"),
+    (["--repeats", "0"], "repeats must be positive"),
+    (["--presets", "huge"], "unknown preset"),
+    (["--budget-runs", "no/such/run"], "no run at no/such/run"),
+])
+def test_bench_bad_input(tmp_path, capsys, bad, message):
+    assert main(["bench", "--out", str(tmp_path), "--no-compile", *bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "bench.json").exists()
