@@ -26,7 +26,8 @@ def tiny_dataset(tmp_path_factory) -> str:
 
 @pytest.fixture(scope="session")
 def tiny_runs(tiny_dataset, tmp_path_factory) -> dict:
-    """A DDPM run and a bridge run from a learned prior (horizon 32, 3 steps each), trained through the CLI."""
+    """A DDPM run and a bridge run from a learned prior (horizon 32, 3 steps each, EMA snapshots at steps 2
+    and 3), trained through the CLI."""
     from bridgeplan.cli import main
     from tests.test_train import train_args
 
@@ -35,7 +36,7 @@ def tiny_runs(tiny_dataset, tmp_path_factory) -> dict:
     assert main(["train-prior", "--maze", "umaze", "--dataset", tiny_dataset, "--run-dir", str(prior),
                  "--horizon", "32", "--steps", "3", "--no-progress", "--device", "cpu"]) == 0
     runs = {"ddpm": root / "ddpm", "bridge": root / "bridge"}
-    assert main(train_args(tiny_dataset, runs["ddpm"], 3)) == 0
-    assert main(train_args(tiny_dataset, runs["bridge"], 3, "--process", "bridge", "--prior", "learned",
-                           "--prior-run", str(prior))) == 0
+    assert main(train_args(tiny_dataset, runs["ddpm"], 3, "--checkpoint-every", "2")) == 0
+    assert main(train_args(tiny_dataset, runs["bridge"], 3, "--checkpoint-every", "2", "--process", "bridge",
+                           "--prior", "learned", "--prior-run", str(prior))) == 0
     return runs

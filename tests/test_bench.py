@@ -15,7 +15,7 @@ TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "
 def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     runs = f"{tiny_runs['ddpm']},{tiny_runs['bridge']}"
     assert main(["bench", "--out", str(tmp_path), *TINY_BENCH, "--budget-runs", runs, "--budgets", "1,2,4",
-                 "--budget-episodes", "4"]) == 0
+                 "--budget-steps", "2,3", "--budget-episodes", "4"]) == 0
     result = json.loads((tmp_path / "bench.json").read_text())
     markdown = (tmp_path / "bench.md").read_text()
     assert capsys.readouterr().out.strip() == markdown.strip()
@@ -29,20 +29,24 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     assert set(overhead["plan_nfe1_over_forward"]) == methods
     assert all(0 < v < 100 for v in overhead["plan_nfe1_over_forward"].values())
     (train,) = result["train_overhead"]
-    assert train["batch"] == 32 and train["train_step_over_bare"] > 0
+    assert (train["batch"], train["grad_accum"]) == (32, 1) and train["train_step_over_bare"] > 0
+    assert "| cpu-small | 32 x 1 |" in markdown
     assert result["compile"] == []
 
     budget = result["score_per_budget"]
     evals = budget["evaluations"]
-    # the tiny runs: DDPM with N=6 under both samplers, the bridge (N=6, NFE < N) at every budget
-    assert sorted((e["method"], e["sampler"], e["nfe"]) for e in evals if e["method"] == "ddpm") == [
-        ("ddpm", s, k) for s in ("ancestral", "ddim") for k in (1, 2, 4)]
-    assert sorted(e["nfe"] for e in evals if e["method"] == "bridge (learned)") == [1, 2, 4]
+    # the tiny runs at both snapshots: DDPM with N=6 under both samplers, the bridge (N=6, NFE < N) at every K
+    assert sorted((e["method"], e["step"], e["sampler"], e["nfe"]) for e in evals if e["method"] == "ddpm") == [
+        ("ddpm", step, s, k) for step in (2, 3) for s in ("ancestral", "ddim") for k in (1, 2, 4)]
+    assert sorted((e["step"], e["nfe"]) for e in evals if e["method"] == "bridge (learned)") == [
+        (step, k) for step in (2, 3) for k in (1, 2, 4)]
+    assert len(budget["best"]) == 2 * 2 * 3  # methods x training steps x budgets
     for best in budget["best"]:
         within = [e["score_minari"]["mean"] for e in evals if e["method"] == best["method"]
-                  and e["nfe"] <= best["budget"]]
+                  and e["step"] == best["step"] and e["nfe"] <= best["budget"]]
         assert best["score_minari"]["mean"] == max(within) and best["nfe"] <= best["budget"]
-    assert "## Score per planning budget" in markdown and "| ddpm | 3 |" in markdown
+    assert "## Score per planning budget" in markdown
+    assert "| ddpm | 2 |" in markdown and "| ddpm | 3 |" in markdown
     assert "Unequal training budgets" not in markdown
 
 
@@ -52,9 +56,18 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (["--repeats", "0"], "repeats must be positive"),
     (["--presets", "huge"], "unknown preset"),
     (["--budget-runs", "no/such/run"], "no run at no/such/run"),
+    (["--budget-steps", "0"], "--budget-steps takes positive integers"),
 ])
 def test_bench_bad_input(tmp_path, capsys, bad, message):
     assert main(["bench", "--out", str(tmp_path), "--no-compile", *bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "bench.json").exists()
+
+
+def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_path, capsys):
+    assert main(["bench", "--out", str(tmp_path), *TINY_BENCH, "--budget-runs", str(tiny_runs["ddpm"]),
+                 "--budget-steps", "3,5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: no snapshot at step 5 in {tiny_runs['ddpm']} (have: [2, 3])"]
     assert not (tmp_path / "bench.json").exists()

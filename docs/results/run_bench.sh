@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # The benchmark committed in docs/results/bench.{md,json}: four cpu-small planners on umaze trained for the same
 # number of optimizer steps (DDPM; the bridge from the Gaussian, line and learned priors), then `bridgeplan bench`
-# with the score-per-budget table over them. Run from the repository root after `bash scripts/setup.sh`.
-# About 35 minutes on a 2-core CPU: the trainings run two at a time with one thread each; the bench runs alone.
+# with the score-per-budget table over their EMA snapshots at 7000 and 14000 steps. Run from the repository root
+# after `bash scripts/setup.sh`. About 1.5 hours on a 2-core CPU: the trainings run two at a time with one
+# thread each (a run already there is resumed to STEPS); the bench runs alone.
 set -euo pipefail
 export MUJOCO_GL=egl
 B=.venv/bin/bridgeplan
 R=results/bench
-STEPS=${STEPS:-7000}
+STEPS=${STEPS:-14000}
 DATA=$R/umaze-1000000
 [ -d $DATA ] || $B data generate --maze umaze --out $DATA --no-progress
 P=$R/runs/prior-learned
@@ -22,4 +23,5 @@ train ddpm --process ddpm & train bridge-gaussian --process bridge --prior gauss
 train bridge-line --process bridge --prior line & train bridge-learned --process bridge --prior learned --prior-run $P & wait
 # the bench itself, alone on the machine (torch's default threads)
 $B bench --out docs/results --eval-run $R/runs/ddpm \
-  --budget-runs $R/runs/ddpm,$R/runs/bridge-gaussian,$R/runs/bridge-line,$R/runs/bridge-learned
+  --budget-runs $R/runs/ddpm,$R/runs/bridge-gaussian,$R/runs/bridge-line,$R/runs/bridge-learned \
+  --budget-steps 7000,$STEPS

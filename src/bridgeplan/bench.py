@@ -6,12 +6,14 @@ tests: ``bridgeplan bench`` writes ``bench.json`` (with its settings) and a Mark
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import json
 import os
 import platform
 import statistics
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +29,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.processes import DDPM, Bridge
-from bridgeplan.runs import build_model, build_prior_net
+from bridgeplan.runs import build_model, build_prior_net, snapshot_path, snapshot_steps
 from bridgeplan.trajectory import TRANSITION_DIM
 
 DIFFUSION_STEPS = 16
@@ -54,6 +56,8 @@ class BenchConfig:
     """A trained run: time 200 of its umaze episodes at NFE 1, planning included."""
     budget_runs: tuple[str, ...] = ()
     """Trained runs (one per method, ideally at equal training steps) for the score-per-budget table."""
+    budget_steps: tuple[int, ...] = ()
+    """Training budgets: evaluate each budget run's EMA snapshot at these steps (empty: its latest checkpoint)."""
     budgets: tuple[int, ...] = (1, 2, 4, 8)
     """Network-call budgets K of the score-per-budget table."""
     budget_episodes: int = 200
@@ -65,9 +69,9 @@ class BenchConfig:
         for name in ("repeats", "overhead_repeats", "budget_episodes"):
             if getattr(self, name) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
-        for name in ("batch_sizes", "nfes", "budgets"):
+        for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
             values = getattr(self, name)
-            if not values or min(values) <= 0:
+            if (name != "budget_steps" and not values) or min(values, default=1) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive integers, got {list(values)}")
         for preset in self.presets:
             if preset not in PRESETS:
@@ -75,6 +79,10 @@ class BenchConfig:
         for run in (self.eval_run, *self.budget_runs):
             if run and not Path(run).exists():
                 raise BridgeplanError(f"no run at {run}")
+        for run in self.budget_runs:
+            missing = [step for step in self.budget_steps if not snapshot_path(Path(run), step).exists()]
+            if missing:
+                raise BridgeplanError(f"no snapshot at step {missing[0]} in {run} (have: {snapshot_steps(run)})")
         resolve_device(self.device)
 
 
@@ -199,7 +207,8 @@ def train_overhead(preset: str, bench: BenchConfig, dev: torch.device) -> dict:
     """One optimizer step of the training loop over a bare forward+backward+Adam step on a prepared batch.
 
     The loop's step is ``TrainJob``'s own (window sampling, prior sample, process loss, EMA update), at the
-    preset's batch size; the bare step is an MSE of the same network on a batch already on the device.
+    preset's batch size and gradient accumulation; the bare step does the same number of forward+backward
+    passes (an MSE of the same network on a batch already on the device) before its one Adam step.
     """
     from bridgeplan.train import planner_job
 
@@ -215,7 +224,8 @@ def train_overhead(preset: str, bench: BenchConfig, dev: torch.device) -> dict:
     t = torch.zeros(config.batch_size, device=dev)
 
     def bare_step():
-        ((model(x, t) - x) ** 2).mean().backward()
+        for _ in range(config.grad_accum):
+            ((model(x, t) - x) ** 2).mean().backward()
         opt.step()
         opt.zero_grad(set_to_none=True)
 
@@ -226,27 +236,54 @@ def train_overhead(preset: str, bench: BenchConfig, dev: torch.device) -> dict:
         job.apply_gradients(opt, ema, step)
 
     ratios = _interleaved_ratios({"bare": bare_step, "train": train_step}, "bare", bench.overhead_repeats, dev)
-    return {"preset": preset, "batch": config.batch_size, "bare_train_step_ms": ratios["bare_ms"],
-            "train_step_ms": ratios["bare_ms"] * ratios["train"], "train_step_over_bare": ratios["train"]}
+    return {"preset": preset, "batch": config.batch_size, "grad_accum": config.grad_accum,
+            "bare_train_step_ms": ratios["bare_ms"], "train_step_ms": ratios["bare_ms"] * ratios["train"],
+            "train_step_over_bare": ratios["train"]}
 
 
 def compile_speedup(preset: str, bench: BenchConfig, dev: torch.device) -> list[dict]:
-    """Forward pass of ``torch.compile(model)`` against the eager model, and what compiling costs."""
+    """Forward pass of ``torch.compile(model)`` against the eager model, and what compiling costs.
+
+    Each shape is compiled twice against an inductor cache that starts empty: cold, then again after
+    ``torch._dynamo.reset()`` from what the first compile cached (what a later ``eval --compile`` on the
+    same machine pays). The steady-state times are interleaved rounds, like the overhead ratios.
+    """
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
-    compiled = torch.compile(model)
     rows = []
-    for batch in bench.batch_sizes:
-        x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
-        t = torch.zeros(batch, device=dev)
-        with torch.inference_mode():
-            compile_s = _timed(lambda: compiled(x, t), dev)  # the first call at a new shape compiles
+    with _empty_inductor_cache(), torch.inference_mode():
+        for batch in bench.batch_sizes:
+            x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+            t = torch.zeros(batch, device=dev)
+            first_call_s = {}
+            for cache in ("cold", "cached"):
+                torch._dynamo.reset()
+                compiled = torch.compile(model)
+                first_call_s[cache] = _timed(lambda: compiled(x, t), dev)  # the first call compiles
             max_diff = float((compiled(x, t) - model(x, t)).abs().max())
-            eager_s = median_seconds(lambda: model(x, t), bench.repeats, dev)
-            compiled_s = median_seconds(lambda: compiled(x, t), bench.repeats, dev)
-        rows.append({"preset": preset, "batch": batch, "eager_ms": 1000 * eager_s, "compiled_ms": 1000 * compiled_s,
-                     "speedup": eager_s / compiled_s, "first_call_s": compile_s, "max_abs_diff": max_diff})
+            ratios = _interleaved_ratios({"compiled": lambda: compiled(x, t), "eager": lambda: model(x, t)},
+                                         "compiled", bench.overhead_repeats, dev)
+            rows.append({"preset": preset, "batch": batch, "eager_ms": ratios["compiled_ms"] * ratios["eager"],
+                         "compiled_ms": ratios["compiled_ms"], "speedup": ratios["eager"],
+                         "compile_cold_s": first_call_s["cold"], "compile_cached_s": first_call_s["cached"],
+                         "max_abs_diff": max_diff})
+    torch._dynamo.reset()
     return rows
+
+
+@contextlib.contextmanager
+def _empty_inductor_cache():
+    """Point inductor's on-disk cache at a fresh temporary directory, so a compile is timed cold."""
+    previous = os.environ.get("TORCHINDUCTOR_CACHE_DIR")
+    with tempfile.TemporaryDirectory(prefix="bridgeplan-inductor-") as cache_dir:
+        os.environ["TORCHINDUCTOR_CACHE_DIR"] = cache_dir
+        try:
+            yield
+        finally:
+            if previous is None:
+                del os.environ["TORCHINDUCTOR_CACHE_DIR"]
+            else:
+                os.environ["TORCHINDUCTOR_CACHE_DIR"] = previous
 
 
 def eval_throughput(run: str, device: str) -> dict:
@@ -262,8 +299,10 @@ def eval_throughput(run: str, device: str) -> dict:
 def score_per_budget(bench: BenchConfig) -> dict:
     """Every run evaluated at each budget K (DDPM with both samplers), and the best score within K calls.
 
-    ``best`` holds, per method and K, the evaluation with the highest mean Minari score among those
-    with NFE <= K; a method whose process allows fewer calls than K keeps its best at fewer.
+    Each run is evaluated at each of ``budget_steps`` (its EMA snapshots) or, without them, at its latest
+    checkpoint. ``best`` holds, per method, training step and K, the evaluation with the highest mean
+    Minari score among those with NFE <= K; a method whose process allows fewer calls than K keeps its
+    best at fewer.
     """
     from bridgeplan.evaluate import evaluate
     from bridgeplan.runs import load_planner
@@ -272,23 +311,25 @@ def score_per_budget(bench: BenchConfig) -> dict:
     for run in bench.budget_runs:
         planner, info = load_planner(Path(run), device=bench.device)
         samplers = ("ancestral", "ddim") if info["config"].process.name == "ddpm" else (None,)
-        for sampler in samplers:
-            for nfe in (k for k in bench.budgets if k <= planner.process.max_nfe):
-                r = evaluate(Path(run), episodes=bench.budget_episodes, nfe=nfe, sampler=sampler,
-                             device=bench.device)
-                method = "ddpm" if r["process"] == "ddpm" else f"bridge ({r['prior']})"
-                evals.append({"method": method, "run": run, "step": r["step"],
-                              "train_minutes": r["train_seconds"] / 60, "nfe": nfe, "sampler": r["sampler"],
-                              "score_minari": r["score"]["minari"], "score_d4rl": r["score"]["d4rl"],
-                              "success_rate": r["success_rate"]["mean"], "plan_ms_per_plan": r["plan_ms_per_plan"],
-                              "floor_line_minari": r["floor_line"]["score"]["minari"]})
+        for snapshot in bench.budget_steps or (None,):
+            for sampler in samplers:
+                for nfe in (k for k in bench.budgets if k <= planner.process.max_nfe):
+                    r = evaluate(Path(run), episodes=bench.budget_episodes, nfe=nfe, sampler=sampler,
+                                 snapshot=snapshot, device=bench.device)
+                    method = "ddpm" if r["process"] == "ddpm" else f"bridge ({r['prior']})"
+                    evals.append({"method": method, "run": run, "step": r["step"],
+                                  "train_minutes": r["train_seconds"] / 60, "nfe": nfe, "sampler": r["sampler"],
+                                  "score_minari": r["score"]["minari"], "score_d4rl": r["score"]["d4rl"],
+                                  "success_rate": r["success_rate"]["mean"],
+                                  "plan_ms_per_plan": r["plan_ms_per_plan"],
+                                  "floor_line_minari": r["floor_line"]["score"]["minari"]})
     best = []
-    for method in dict.fromkeys(e["method"] for e in evals):
+    for method, step in dict.fromkeys((e["method"], e["step"]) for e in evals):
         for k in bench.budgets:
-            within = [e for e in evals if e["method"] == method and e["nfe"] <= k]
+            within = [e for e in evals if (e["method"], e["step"]) == (method, step) and e["nfe"] <= k]
             top = max(within, key=lambda e: e["score_minari"]["mean"])
             best.append({"method": method, "budget": k, "nfe": top["nfe"], "sampler": top["sampler"],
-                         "step": top["step"], "score_minari": top["score_minari"]})
+                         "step": step, "train_minutes": top["train_minutes"], "score_minari": top["score_minari"]})
     return {"episodes": bench.budget_episodes, "evaluations": evals, "best": best}
 
 
@@ -342,17 +383,20 @@ def format_bench(result: dict) -> str:
     lines += _table(["preset", "batch", "forward ms", *methods],
                     [[o["preset"], o["batch"], f"{o['forward_ms']:.2f}",
                       *(f"{o['plan_nfe1_over_forward'][k]:.2f}" for k in methods)] for o in result["plan_overhead"]])
-    lines += ["", "Training step of `train.py` over a bare forward+backward+Adam step on a prepared batch "
-              "(target <= 1.15):", ""]
-    lines += _table(["preset", "batch", "train step ms", "bare step ms", "train / bare"],
-                    [[o["preset"], o["batch"], f"{o['train_step_ms']:.1f}", f"{o['bare_train_step_ms']:.1f}",
-                      f"{o['train_step_over_bare']:.2f}"] for o in result["train_overhead"]])
+    lines += ["", "Training step of `train.py` over a bare step on prepared batches: as many forward+backward "
+              "passes as the loop accumulates, then one Adam step (target <= 1.15):", ""]
+    lines += _table(["preset", "batch x accumulated", "train step ms", "bare step ms", "train / bare"],
+                    [[o["preset"], f"{o['batch']} x {o['grad_accum']}", f"{o['train_step_ms']:.1f}",
+                      f"{o['bare_train_step_ms']:.1f}", f"{o['train_step_over_bare']:.2f}"]
+                     for o in result["train_overhead"]])
     if result["compile"]:
-        lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode); the "
-                  "first call at each shape compiles.", ""]
-        lines += _table(["preset", "batch", "eager ms", "compiled ms", "speedup", "first call s"],
+        lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode), "
+                  f"medians over {result['bench']['overhead_repeats']} interleaved rounds. The first call at each "
+                  "shape compiles: cold (empty inductor cache) and again from the cache the cold compile wrote.", ""]
+        lines += _table(["preset", "batch", "eager ms", "compiled ms", "speedup", "compile cold s", "compile cached s"],
                         [[c["preset"], c["batch"], f"{c['eager_ms']:.2f}", f"{c['compiled_ms']:.2f}",
-                          f"{c['speedup']:.2f}", f"{c['first_call_s']:.1f}"] for c in result["compile"]])
+                          f"{c['speedup']:.2f}", f"{c['compile_cold_s']:.1f}", f"{c['compile_cached_s']:.1f}"]
+                         for c in result["compile"]])
     if "eval_throughput" in result:
         e = result["eval_throughput"]
         lines += ["", "## Evaluation throughput", "",
@@ -366,26 +410,25 @@ def format_bench(result: dict) -> str:
 
 def _format_budget(s: dict) -> list[str]:
     budgets = sorted({b["budget"] for b in s["best"]})
-    methods = list(dict.fromkeys(b["method"] for b in s["best"]))
-    first = {e["method"]: e for e in s["evaluations"]}
-    steps = {e["method"]: e["step"] for e in s["evaluations"]}
+    rows = list(dict.fromkeys((b["method"], b["step"]) for b in s["best"]))
+    rows.sort(key=lambda r: r[1])  # one block per training budget, methods in their given order
     lines = ["", "## Score per planning budget", "",
              f"Best normalized score (Minari convention, mean ± standard error over {s['episodes']} episodes, "
              "seed 0) within K network calls per plan, over NFE <= K and, for DDPM, both samplers "
              "(ancestral strided and DDIM eta 0); in brackets the NFE and sampler that reached it.", ""]
-    rows = []
-    for method in methods:
-        cells = []
-        for k in budgets:
-            b = next(b for b in s["best"] if b["method"] == method and b["budget"] == k)
-            sc = b["score_minari"]
-            cells.append(f"{sc['mean']:.1f} ± {sc['se']:.1f} ({b['nfe']}, {b['sampler']})")
-        rows.append([method, steps[method], f"{first[method]['train_minutes']:.1f}", *cells])
-    lines += _table(["method", "train steps", "train min", *(f"K = {k}" for k in budgets)], rows)
+    table = []
+    for method, step in rows:
+        cells = [b for b in s["best"] if (b["method"], b["step"]) == (method, step)]
+        by_k = {b["budget"]: b for b in cells}
+        table.append([method, step, f"{cells[0]['train_minutes']:.1f}",
+                      *(f"{by_k[k]['score_minari']['mean']:.1f} ± {by_k[k]['score_minari']['se']:.1f} "
+                        f"({by_k[k]['nfe']}, {by_k[k]['sampler']})" for k in budgets)])
+    lines += _table(["method", "train steps", "train min", *(f"K = {k}" for k in budgets)], table)
     floor = s["evaluations"][0]["floor_line_minari"]
     lines += ["", f"No network (the straight line tracked by the controller, same episodes): "
                   f"{floor['mean']:.1f} ± {floor['se']:.1f}."]
-    if len(set(steps.values())) > 1:
-        lines += ["", f"**Unequal training budgets**: the runs were trained for {sorted(set(steps.values()))} "
-                      "steps; compare with care."]
+    steps_per_method = {m: {st for mm, st in rows if mm == m} for m, _ in rows}
+    if len({frozenset(v) for v in steps_per_method.values()}) > 1:
+        steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_method.items())
+        lines += ["", f"**Unequal training budgets** (steps): {steps}; compare with care."]
     return lines

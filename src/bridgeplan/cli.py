@@ -375,6 +375,8 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
     p.add_argument("--budget-runs", help="comma-separated trained runs, one per method at equal training steps: "
                                          "the score-per-budget table")
+    p.add_argument("--budget-steps", help="comma-separated training steps: evaluate the budget runs' EMA "
+                                          "snapshots there (default: their latest checkpoints)")
     p.add_argument("--budgets", help="comma-separated network-call budgets K")
     p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
     p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
@@ -389,7 +391,7 @@ def _cmd_bench(args) -> int:
              "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
              "budget_episodes": args.budget_episodes, "device": args.device,
              "compile": False if args.no_compile else None}
-    for name in ("batch_sizes", "nfes", "budgets"):
+    for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
         text = getattr(args, name)
         given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})

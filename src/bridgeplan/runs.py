@@ -63,6 +63,16 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
     return make_prior("learned", normalizer, net=net.to(device).eval())
 
 
+def snapshot_path(run: Path, step: int) -> Path:
+    """Where training saves the EMA snapshot of ``step`` in ``run``."""
+    return Path(run) / "snapshots" / f"step_{step:08d}.pt"
+
+
+def snapshot_steps(run: Path) -> list[int]:
+    """The training steps of the EMA snapshots saved in ``run``, ascending."""
+    return sorted(int(p.stem.split("_")[1]) for p in (Path(run) / "snapshots").glob("step_*.pt"))
+
+
 def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
                  eta: float = 0.0, compile: bool = False) -> tuple[Planner, dict]:
     """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``).
@@ -72,10 +82,9 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     """
     run = Path(run)
     path = run if run.is_file() else (
-        run / "snapshots" / f"step_{snapshot:08d}.pt" if snapshot is not None else run / "checkpoint.pt")
+        snapshot_path(run, snapshot) if snapshot is not None else run / "checkpoint.pt")
     if snapshot is not None and not path.exists():
-        have = sorted(int(p.stem.split("_")[1]) for p in (run / "snapshots").glob("step_*.pt"))
-        raise BridgeplanError(f"no snapshot at step {snapshot} in {run} (have: {have or 'none'})")
+        raise BridgeplanError(f"no snapshot at step {snapshot} in {run} (have: {snapshot_steps(run) or 'none'})")
     state = load_checkpoint(path)
     if state["kind"] != "planner":
         raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a planner")

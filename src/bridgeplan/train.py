@@ -31,7 +31,7 @@ from bridgeplan.device import resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.processes import make_process
-from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
+from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows, snapshot_path
 from bridgeplan.trajectory import ACT_DIM
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
@@ -175,7 +175,7 @@ def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.devi
             "generator": gen.get_state(), "torch_rng": torch.get_rng_state()}
         save_checkpoint(ckpt_path, state)
         weights = (ema if ema is not None else model).state_dict()
-        save_checkpoint(run_dir / "snapshots" / f"step_{step:08d}.pt", snapshot_state() | {"ema": weights})
+        save_checkpoint(snapshot_path(run_dir, step), snapshot_state() | {"ema": weights})
 
     writer = _tensorboard(run_dir)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf

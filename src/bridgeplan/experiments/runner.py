@@ -69,6 +69,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     import torch
 
     from bridgeplan.evaluate import evaluate
+    from bridgeplan.runs import snapshot_steps
     from bridgeplan.train import train
 
     if threads:
@@ -79,8 +80,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     if done < config.steps:
         train(config, run_dir, resume=done >= 0, progress=progress)
     store = ResultsStore(Path(settings.results_dir) / "results.sqlite")
-    snapshots = sorted(int(p.stem.split("_")[1]) for p in (run_dir / "snapshots").glob("step_*.pt"))
-    snapshots = [s for s in snapshots if s <= config.steps]
+    snapshots = [s for s in snapshot_steps(run_dir) if s <= config.steps]
     rows = []
     for exp in experiments:
         for series in exp.series:
