@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import pytest
 
@@ -71,3 +72,16 @@ def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"error: no snapshot at step 5 in {tiny_runs['ddpm']} (have: [2, 3])"]
     assert not (tmp_path / "bench.json").exists()
+
+
+def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
+    """Two DDPM runs (say two seeds) are two rows, never one best pooled over both."""
+    twin = tmp_path / "ddpm-twin"
+    shutil.copytree(tiny_runs["ddpm"], twin)
+    assert main(["bench", "--out", str(tmp_path / "out"), *TINY_BENCH, "--budget-runs",
+                 f"{tiny_runs['ddpm']},{twin}", "--budgets", "1", "--budget-episodes", "2"]) == 0
+    capsys.readouterr()
+    best = json.loads((tmp_path / "out" / "bench.json").read_text())["score_per_budget"]["best"]
+    assert sorted(b["run"] for b in best) == sorted([str(tiny_runs["ddpm"]), str(twin)])
+    markdown = (tmp_path / "out" / "bench.md").read_text()
+    assert "| ddpm (ddpm) | 3 |" in markdown and "| ddpm (ddpm-twin) | 3 |" in markdown

@@ -55,7 +55,7 @@ class BenchConfig:
     eval_run: str = ""
     """A trained run: time 200 of its umaze episodes at NFE 1, planning included."""
     budget_runs: tuple[str, ...] = ()
-    """Trained runs (one per method, ideally at equal training steps) for the score-per-budget table."""
+    """Trained runs for the score-per-budget table, one row each (ideally one per method, at equal training steps)."""
     budget_steps: tuple[int, ...] = ()
     """Training budgets: evaluate each budget run's EMA snapshot at these steps (empty: its latest checkpoint)."""
     budgets: tuple[int, ...] = (1, 2, 4, 8)
@@ -300,9 +300,9 @@ def score_per_budget(bench: BenchConfig) -> dict:
     """Every run evaluated at each budget K (DDPM with both samplers), and the best score within K calls.
 
     Each run is evaluated at each of ``budget_steps`` (its EMA snapshots) or, without them, at its latest
-    checkpoint. ``best`` holds, per method, training step and K, the evaluation with the highest mean
-    Minari score among those with NFE <= K; a method whose process allows fewer calls than K keeps its
-    best at fewer.
+    checkpoint. ``best`` holds, per run, training step and K, the evaluation with the highest mean Minari
+    score among those with NFE <= K (never pooled across runs, so two seeds of one method stay two rows);
+    a method whose process allows fewer calls than K keeps its best at fewer.
     """
     from bridgeplan.evaluate import evaluate
     from bridgeplan.runs import load_planner
@@ -324,12 +324,13 @@ def score_per_budget(bench: BenchConfig) -> dict:
                                   "plan_ms_per_plan": r["plan_ms_per_plan"],
                                   "floor_line_minari": r["floor_line"]["score"]["minari"]})
     best = []
-    for method, step in dict.fromkeys((e["method"], e["step"]) for e in evals):
+    for run, step in dict.fromkeys((e["run"], e["step"]) for e in evals):
         for k in bench.budgets:
-            within = [e for e in evals if (e["method"], e["step"]) == (method, step) and e["nfe"] <= k]
+            within = [e for e in evals if (e["run"], e["step"]) == (run, step) and e["nfe"] <= k]
             top = max(within, key=lambda e: e["score_minari"]["mean"])
-            best.append({"method": method, "budget": k, "nfe": top["nfe"], "sampler": top["sampler"],
-                         "step": step, "train_minutes": top["train_minutes"], "score_minari": top["score_minari"]})
+            best.append({"method": top["method"], "run": run, "budget": k, "nfe": top["nfe"],
+                         "sampler": top["sampler"], "step": step, "train_minutes": top["train_minutes"],
+                         "score_minari": top["score_minari"]})
     return {"episodes": bench.budget_episodes, "evaluations": evals, "best": best}
 
 
@@ -410,25 +411,26 @@ def format_bench(result: dict) -> str:
 
 def _format_budget(s: dict) -> list[str]:
     budgets = sorted({b["budget"] for b in s["best"]})
-    rows = list(dict.fromkeys((b["method"], b["step"]) for b in s["best"]))
-    rows.sort(key=lambda r: r[1])  # one block per training budget, methods in their given order
+    rows = sorted(dict.fromkeys((b["run"], b["step"]) for b in s["best"]), key=lambda r: r[1])
+    method = {b["run"]: b["method"] for b in s["best"]}
+    shared = {m for m in method.values() if list(method.values()).count(m) > 1}
+    label = {run: f"{m} ({Path(run).name})" if m in shared else m for run, m in method.items()}
     lines = ["", "## Score per planning budget", "",
              f"Best normalized score (Minari convention, mean ± standard error over {s['episodes']} episodes, "
              "seed 0) within K network calls per plan, over NFE <= K and, for DDPM, both samplers "
              "(ancestral strided and DDIM eta 0); in brackets the NFE and sampler that reached it.", ""]
     table = []
-    for method, step in rows:
-        cells = [b for b in s["best"] if (b["method"], b["step"]) == (method, step)]
-        by_k = {b["budget"]: b for b in cells}
-        table.append([method, step, f"{cells[0]['train_minutes']:.1f}",
+    for run, step in rows:  # one block per training budget, runs in their given order
+        by_k = {b["budget"]: b for b in s["best"] if (b["run"], b["step"]) == (run, step)}
+        table.append([label[run], step, f"{by_k[budgets[0]]['train_minutes']:.1f}",
                       *(f"{by_k[k]['score_minari']['mean']:.1f} ± {by_k[k]['score_minari']['se']:.1f} "
                         f"({by_k[k]['nfe']}, {by_k[k]['sampler']})" for k in budgets)])
     lines += _table(["method", "train steps", "train min", *(f"K = {k}" for k in budgets)], table)
     floor = s["evaluations"][0]["floor_line_minari"]
     lines += ["", f"No network (the straight line tracked by the controller, same episodes): "
                   f"{floor['mean']:.1f} ± {floor['se']:.1f}."]
-    steps_per_method = {m: {st for mm, st in rows if mm == m} for m, _ in rows}
-    if len({frozenset(v) for v in steps_per_method.values()}) > 1:
-        steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_method.items())
+    steps_per_run = {label[r]: {st for rr, st in rows if rr == r} for r in method}
+    if len({frozenset(v) for v in steps_per_run.values()}) > 1:
+        steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_run.items())
         lines += ["", f"**Unequal training budgets** (steps): {steps}; compare with care."]
     return lines

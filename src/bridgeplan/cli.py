@@ -373,8 +373,8 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio")
     p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
     p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
-    p.add_argument("--budget-runs", help="comma-separated trained runs, one per method at equal training steps: "
-                                         "the score-per-budget table")
+    p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
+                                         "training steps): the score-per-budget table")
     p.add_argument("--budget-steps", help="comma-separated training steps: evaluate the budget runs' EMA "
                                           "snapshots there (default: their latest checkpoints)")
     p.add_argument("--budgets", help="comma-separated network-call budgets K")
