@@ -23,7 +23,7 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     assert result["bench"]["presets"] == ["cpu-small"] and result["machine"]["device"] == "cpu"
 
     methods = {r["method"] for r in result["latency"]}
-    assert methods == {"ddpm (ancestral)", "ddpm (ddim)", "bridge (gaussian)", "bridge (line)", "bridge (learned)"}
+    assert methods == {"DDPM [ancestral]", "DDPM [ddim]", "bridge (gaussian)", "bridge (line)", "bridge (learned)"}
     assert {(r["batch"], r["nfe"]) for r in result["latency"]} == {(1, 1), (1, 2)}
     assert all(r["plan_ms"] > r["prior_ms"] > 0 for r in result["latency"])
     (overhead,) = result["plan_overhead"]
@@ -36,18 +36,31 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
 
     budget = result["score_per_budget"]
     evals = budget["evaluations"]
-    # the tiny runs at both snapshots: DDPM with N=6 under both samplers, the bridge (N=6, NFE < N) at every K
-    assert sorted((e["method"], e["step"], e["sampler"], e["nfe"]) for e in evals if e["method"] == "ddpm") == [
-        ("ddpm", step, s, k) for step in (2, 3) for s in ("ancestral", "ddim") for k in (1, 2, 4)]
-    assert sorted((e["step"], e["nfe"]) for e in evals if e["method"] == "bridge (learned)") == [
-        (step, k) for step in (2, 3) for k in (1, 2, 4)]
+    # the tiny runs at both snapshots, on validation and test tasks: DDPM with N=6 under both samplers,
+    # the bridge (N=6, NFE < N) at every K
+    splits = ("test", "validation")
+    assert sorted((e["method"], e["step"], e["sampler"], e["nfe"], e["split"]) for e in evals
+                  if e["method"] == "DDPM") == [
+        ("DDPM", step, s, k, split) for step in (2, 3) for s in ("ancestral", "ddim") for k in (1, 2, 4)
+        for split in splits]
+    assert sorted((e["step"], e["nfe"], e["split"]) for e in evals if e["method"] == "bridge (learned)") == [
+        (step, k, split) for step in (2, 3) for k in (1, 2, 4) for split in splits]
     assert len(budget["best"]) == 2 * 2 * 3  # methods x training steps x budgets
+
+    def score(best, split):
+        (e,) = [e for e in evals if (e["method"], e["step"], e["sampler"], e["nfe"], e["split"]) ==
+                (best["method"], best["step"], best["sampler"], best["nfe"], split)]
+        return e["score_minari"]
+
     for best in budget["best"]:
         within = [e["score_minari"]["mean"] for e in evals if e["method"] == best["method"]
-                  and e["step"] == best["step"] and e["nfe"] <= best["budget"]]
-        assert best["score_minari"]["mean"] == max(within) and best["nfe"] <= best["budget"]
+                  and e["step"] == best["step"] and e["nfe"] <= best["budget"] and e["split"] == "validation"]
+        # chosen on validation tasks, reported on the test tasks
+        assert best["validation_score_minari"]["mean"] == max(within) and best["nfe"] <= best["budget"]
+        assert best["validation_score_minari"] == score(best, "validation")
+        assert best["score_minari"] == score(best, "test")
     assert "## Score per planning budget" in markdown
-    assert "| ddpm | 2 |" in markdown and "| ddpm | 3 |" in markdown
+    assert "| DDPM | 2 |" in markdown and "| DDPM | 3 |" in markdown
     assert "Unequal training budgets" not in markdown
 
 
@@ -84,4 +97,4 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     best = json.loads((tmp_path / "out" / "bench.json").read_text())["score_per_budget"]["best"]
     assert sorted(b["run"] for b in best) == sorted([str(tiny_runs["ddpm"]), str(twin)])
     markdown = (tmp_path / "out" / "bench.md").read_text()
-    assert "| ddpm (ddpm) | 3 |" in markdown and "| ddpm (ddpm-twin) | 3 |" in markdown
+    assert "| DDPM (ddpm) | 3 |" in markdown and "| DDPM (ddpm-twin) | 3 |" in markdown

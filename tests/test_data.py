@@ -13,7 +13,7 @@ from bridgeplan.data.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
 from bridgeplan.data.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
 from bridgeplan.data.generate import generate_stream, generate_streams
 from bridgeplan.data.info import summarize
-from bridgeplan.data.normalizer import Normalizer
+from bridgeplan.normalizer import Normalizer
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.data.windows import WindowDataset, window_starts
 from bridgeplan.errors import BridgeplanError

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from bridgeplan.data.normalizer import Normalizer
+from bridgeplan.normalizer import Normalizer
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.priors import (

@@ -3,56 +3,14 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from bridgeplan.errors import BridgeplanError
-
-CHECKPOINT_NAME = "checkpoint.pt"
-CONFIG_NAME = "config.json"
-
-
-def code_version() -> str:
-    """The git commit of the code (with ``+dirty`` for uncommitted changes), or the package version."""
-    from bridgeplan import __version__
-
-    here = Path(__file__).resolve().parent
-    try:
-        sha = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True,
-                             text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
-        return f"{__version__}+{sha}{'.dirty' if dirty else ''}"
-    except (OSError, subprocess.SubprocessError):
-        return __version__
-
-
-def atomic_write_bytes(path: Path, write) -> None:
-    """Call ``write(file)`` on a temporary file beside ``path``, then rename it onto ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    atomic_write_bytes(path, lambda f: f.write(text.encode()))
+from bridgeplan.files import atomic_write_bytes, atomic_write_text
+from bridgeplan.layout import checkpoint_path, config_path
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
@@ -63,7 +21,7 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
     """Load a checkpoint written by :func:`save_checkpoint`; a run directory finds its checkpoint."""
     path = Path(path)
     if path.is_dir():
-        path = path / CHECKPOINT_NAME
+        path = checkpoint_path(path)
     if not path.exists():
         raise BridgeplanError(f"no checkpoint at {path}")
     try:
@@ -76,4 +34,4 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
 
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
-    atomic_write_text(Path(run_dir) / CONFIG_NAME, json.dumps(config, indent=2) + "\n")
+    atomic_write_text(config_path(run_dir), json.dumps(config, indent=2) + "\n")

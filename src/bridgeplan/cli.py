@@ -147,8 +147,14 @@ def _common_train_flags(p) -> None:
     p.add_argument("--log-every", type=int, default=None)
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--device", default=None, help="auto (CUDA if present), cpu, cuda, ...")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    _threads_flag(p)
     p.add_argument("--no-progress", action="store_true")
+
+
+def _threads_flag(p) -> None:
+    p.add_argument("--threads", type=int, default=None,
+                   help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
+                        "processes share the cores; more only warns beyond the machine's cores)")
 
 
 def _overrides(args, names) -> dict:
@@ -165,13 +171,9 @@ def _cmd_train(args) -> int:
 
     base = cfg.preset_config(args.maze, args.preset)
     over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start"))
-    process = _overrides(args, ("beta_max",))
+    process = _process_params(args)
     if args.process is not None:
         process["name"] = args.process
-    if args.diffusion_steps is not None:
-        process["steps"] = args.diffusion_steps
-    if args.ot_ode:
-        process["ot_ode"] = True
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:
         model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
@@ -180,6 +182,16 @@ def _cmd_train(args) -> int:
     train(config, run_dir, resume=args.resume, progress=not args.no_progress)
     print(f"run: {run_dir}")
     return 0
+
+
+def _process_params(args) -> dict:
+    """The process fields given on the command line (checked by the process itself)."""
+    params = _overrides(args, ("beta_max",))
+    if args.diffusion_steps is not None:
+        params["steps"] = args.diffusion_steps
+    if args.ot_ode:
+        params["ot_ode"] = True
+    return params
 
 
 def _dataset_ref(dataset: str) -> str:
@@ -235,6 +247,7 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    _threads_flag(p)
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
@@ -245,22 +258,24 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--multi-task", action="store_true")
     p.add_argument("--out", default=None, help="PNG path (default RUN/render/...)")
     p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
-    p.add_argument("--video", action="store_true", help="also write an MP4/GIF of the first episode (MuJoCo)")
+    p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
     p.add_argument("--device", default="auto")
+    _threads_flag(p)
     p.set_defaults(func=_cmd_render)
 
 
 def _cmd_eval(args) -> int:
     from bridgeplan.evaluate import evaluate, format_table, write_result
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.runs import run_dir_of
 
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
-                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile)
-    run_dir = Path(args.run) if Path(args.run).is_dir() else Path(args.run).parent
+                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile).to_dict()
     name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
         "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
         "-compiled" if args.compile else "")
-    out = Path(args.out) if args.out else run_dir / "eval" / f"{name}.json"
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
     write_result(result, out)
     if args.json:
         print(json.dumps(result, indent=2))
@@ -295,6 +310,8 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--prior-steps", type=int, default=2000, help="optimizer steps of the learned prior")
     p.add_argument("--checkpoint-every", type=int, default=500, help="snapshot (evaluation) interval")
     p.add_argument("--diffusion-steps", type=int, default=16)
+    p.add_argument("--beta-max", type=float, default=None, help="bridge runs: largest beta of the schedule")
+    p.add_argument("--ot-ode", action="store_true", help="bridge runs: noise-free marginal and sampler")
     p.add_argument("--fixed-nfe", type=int, default=4, help="NFE of the `priors` experiment")
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--seeds", default="0", help="comma-separated training/evaluation seeds")
@@ -306,6 +323,7 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--dim-mults", default=None)
     p.add_argument("--batch-size", type=int, default=None)
     p.add_argument("--device", default=None)
+    _threads_flag(p)
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=_cmd_experiment)
 
@@ -319,15 +337,18 @@ def _add_experiment_commands(sub) -> None:
 def _cmd_experiment(args) -> int:
     from bridgeplan.experiments.grids import get_experiment
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
+    from bridgeplan.layout import store_path
+    from bridgeplan.processes import make_process
 
     for name in ("train_steps", "prior_steps", "checkpoint_every", "episodes", "dataset_steps"):
         if getattr(args, name) <= 0:
             raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     from bridgeplan.config import preset_config
 
-    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe)
-    preset_config(args.maze, args.preset)  # an unknown maze or preset fails before the store is touched
-    overrides = _overrides(args, ("horizon", "batch_size", "device"))
+    bridge = make_process("bridge", **_process_params(args))
+    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, bridge)
+    overrides = _overrides(args, ("horizon", "batch_size", "device", "threads"))
+    preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:
         model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
@@ -341,21 +362,22 @@ def _cmd_experiment(args) -> int:
                              results_dir=args.results, overrides=overrides)
     added = run_sweep([experiment], settings, backend=args.backend, workers=args.workers,
                       ray_address=args.ray_address, progress=not args.no_progress)
-    print(f"{args.name}: {added} new results in {Path(args.results) / 'results.sqlite'}")
+    print(f"{args.name}: {added} new results in {store_path(args.results)}")
     return 0
 
 
 def _cmd_report(args) -> int:
     from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.layout import store_path
     from bridgeplan.report import write_report
 
-    results = Path(args.results)
-    if not (results / "results.sqlite").exists():
-        raise BridgeplanError(f"no results store at {results / 'results.sqlite'}; run `bridgeplan experiment` first")
-    path = write_report(results, Path(args.out) if args.out else None)
+    store = store_path(args.results)
+    if not store.exists():
+        raise BridgeplanError(f"no results store at {store}; run `bridgeplan experiment` first")
+    path = write_report(Path(args.results), Path(args.out) if args.out else None)
     print(f"wrote {path}")
     if args.csv:
-        n = ResultsStore(results / "results.sqlite").export_csv(Path(args.csv))
+        n = ResultsStore(store).export_csv(Path(args.csv))
         print(f"wrote {args.csv} ({n} rows)")
     return 0
 
@@ -379,7 +401,9 @@ def _add_bench_command(sub) -> None:
                                           "snapshots there (default: their latest checkpoints)")
     p.add_argument("--budgets", help="comma-separated network-call budgets K")
     p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
+    p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
     p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
+    _threads_flag(p)
     p.set_defaults(func=_cmd_bench)
 
 
@@ -389,7 +413,7 @@ def _cmd_bench(args) -> int:
     given = {"presets": args.presets and tuple(args.presets.split(",")),
              "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
              "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
-             "budget_episodes": args.budget_episodes, "device": args.device,
+             "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
              "compile": False if args.no_compile else None}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
         text = getattr(args, name)
@@ -407,6 +431,7 @@ def _add_demo_command(sub) -> None:
     p.add_argument("--dataset-steps", type=int, default=200_000)
     p.add_argument("--train-steps", type=int, default=1500, help="optimizer steps per run")
     p.add_argument("--episodes", type=int, default=100)
+    _threads_flag(p)
     p.set_defaults(func=_cmd_demo)
 
 
@@ -415,16 +440,18 @@ def _cmd_demo(args) -> int:
     from bridgeplan.experiments.grids import Experiment, RunSpec, Series
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
     from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.processes import DDPM, Bridge
     from bridgeplan.report import write_report
 
     print(_reference_table({args.maze: load_reference_returns()[args.maze]}))
-    ddpm, bridge = RunSpec("ddpm", "gaussian", 16), RunSpec("bridge", "line", 16)
+    ddpm, bridge = RunSpec(DDPM(16)), RunSpec(Bridge(16), "line")
     demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
-                      (Series("DDPM", ddpm, 16), Series("DDPM", ddpm, 1),
-                       Series("bridge (line)", bridge, 15), Series("bridge (line)", bridge, 1)))
+                      tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
+                            for nfe in (spec.process.max_nfe, 1)))
     settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
                              train_steps=args.train_steps, checkpoint_every=max(1, args.train_steps // 3),
-                             episodes=args.episodes, results_dir=args.out)
+                             episodes=args.episodes, results_dir=args.out,
+                             overrides=_overrides(args, ("threads",)))
     added = run_sweep([demo], settings)
     report = write_report(Path(args.out))
     print(f"demo: {added} new results; report: {report}")
@@ -444,10 +471,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"warning: {message}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     warnings.filterwarnings("ignore", module="gymnasium_robotics")
+    warnings.formatwarning = _one_line_warning
     try:
+        from bridgeplan.device import configure_threads
+
+        configure_threads(getattr(args, "threads", None) or 0)
         return args.func(args)
     except BridgeplanError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -1,8 +1,10 @@
 """Typed configs for every run. Frozen dataclasses, saved with every run and checkpoint.
 
 The CLI maps its flags onto these; ``preset_config`` gives the defaults per maze and preset:
-``diffuser`` follows Diffuser's Maze2D settings (REFERENCE §2), ``cpu-small`` is a smaller network
-and schedule that trains on a 2-core CPU in minutes.
+``diffuser`` follows Diffuser's Maze2D settings (Janner et al. 2022, its ``config/maze2d.py``: horizon
+128/256/384 and 64/256/256 diffusion steps for umaze/medium/large), ``cpu-small`` is a smaller network
+and schedule that trains on a 2-core CPU in minutes. The process (``DDPM``, ``Bridge``) is itself the
+process config: one definition that training, evaluation, sweeps and reports ask.
 """
 
 from __future__ import annotations
@@ -12,28 +14,28 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
+from bridgeplan.priors import PRIORS
+from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
+
+# Diffuser's Maze2D settings per maze: horizon and diffusion steps.
+_DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
+PRESETS = ("diffuser", "cpu-small")
 
 
-@dataclass(frozen=True)
-class ProcessConfig:
-    """The generative process that maps a prior sample to a plan."""
+def maze_horizon(maze: str) -> int:
+    """The default planning horizon of ``maze`` (Diffuser's)."""
+    if maze not in _DIFFUSER_MAZE:
+        raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)}")
+    return _DIFFUSER_MAZE[maze][0]
 
-    name: str = "ddpm"
-    """``ddpm`` (Diffuser's baseline) or ``bridge`` (I2SB)."""
-    steps: int = 64
-    """Number of diffusion steps N the network is trained with."""
-    beta_max: float = 1.0
-    """Bridge only: the largest beta of I2SB's symmetric schedule (I2SB used 0.3 and 1.0). 1.0 is the
-    default because it scored far better on umaze (line prior, NFE 1: 88.8 vs 57.9; docs/results)."""
-    ot_ode: bool = False
-    """Bridge only: drop the noise of the training marginal and of the sampler (I2SB's OT-ODE)."""
 
-    def params(self) -> dict[str, Any]:
-        """Keyword arguments for ``processes.make_process``."""
-        if self.name == "bridge":
-            return {"steps": self.steps, "beta_max": self.beta_max, "ot_ode": self.ot_ode}
-        return {"steps": self.steps}
+def _check_horizon(maze: str, horizon: int) -> None:
+    episode = get_maze(maze).episode_steps
+    if not 2 <= horizon <= episode:
+        raise BridgeplanError(f"horizon {horizon} does not fit {maze}: a plan spans 2..{episode} steps "
+                              f"(the maze's episode length)")
 
 
 @dataclass(frozen=True)
@@ -49,9 +51,12 @@ class TrainConfig:
     preset: str = "diffuser"
     """Name of the preset the defaults came from (``diffuser`` or ``cpu-small``)."""
     model: UNetConfig = field(default_factory=UNetConfig)
-    process: ProcessConfig = field(default_factory=ProcessConfig)
+    process: Process = field(default_factory=DDPM)
+    """The generative process and its parameters (``DDPM(steps=64)``, ``Bridge(steps=16, beta_max=1.0)``);
+    saved as ``process.to_dict()``."""
     prior: str = "gaussian"
-    """Prior the bridge starts from: ``gaussian``, ``line`` or ``learned`` (DDPM always uses noise)."""
+    """What the process starts from: ``gaussian``, ``line`` or ``learned``; a process that does not take
+    a prior (DDPM) always starts from ``gaussian``."""
     prior_run: str = ""
     """Run directory of a trained learned prior (``bridgeplan train-prior``); needed for ``learned``."""
     steps: int = 2_000_000
@@ -74,15 +79,30 @@ class TrainConfig:
     device: str = "auto"
     """``auto`` (CUDA when present), ``cpu``, ``cuda``, ``cuda:1``, ..."""
     threads: int = 0
-    """CPU threads for torch (0: torch's default)."""
+    """CPU threads for torch (0: automatic, see ``device.configure_threads``: one on a CPU device)."""
+
+    def __post_init__(self):
+        maze_horizon(self.maze)
+        _check_horizon(self.maze, self.horizon)
+        check_prior(self.process, self.prior)
 
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
-        parts = [self.maze, self.process.name]
-        if self.process.name == "bridge":
-            parts.append(self.prior)
-        parts += [f"N{self.process.steps}", f"H{self.horizon}", self.preset, f"s{self.seed}"]
+        parts = [self.maze, *self.process.run_tag(self.prior), f"H{self.horizon}", self.preset, f"s{self.seed}"]
         return "-".join(parts)
+
+    def label(self) -> str:
+        """The method's name in tables and figures, e.g. ``bridge (line)``."""
+        return self.process.label(self.prior)
+
+
+def check_prior(process: Process, prior: str) -> None:
+    """The one rule tying processes to priors: a process without a prior starts from Gaussian noise."""
+    if prior not in PRIORS:
+        raise BridgeplanError(f"unknown prior {prior!r}: choose from {', '.join(PRIORS)}")
+    if not process.uses_prior and prior != "gaussian":
+        raise BridgeplanError(f"{process.display_name} starts from Gaussian noise; --prior {prior} needs a "
+                              f"process that takes a prior (bridge)")
 
 
 @dataclass(frozen=True)
@@ -91,7 +111,8 @@ class PriorTrainConfig:
 
     maze: str = "umaze"
     dataset: str = ""
-    horizon: int = 128
+    horizon: int = 0
+    """Horizon of the planner runs that will use the prior (0: the maze's default, as ``preset_config``)."""
     steps: int = 20_000
     minutes: float = 0.0
     batch_size: int = 64
@@ -102,28 +123,26 @@ class PriorTrainConfig:
     device: str = "auto"
     threads: int = 0
 
+    def __post_init__(self):
+        if self.horizon == 0:
+            object.__setattr__(self, "horizon", maze_horizon(self.maze))
+        _check_horizon(self.maze, self.horizon)
+
     def run_name(self) -> str:
         return f"{self.maze}-prior-learned-H{self.horizon}-s{self.seed}"
 
 
-# Diffuser's Maze2D settings per maze (REFERENCE §2): horizon and diffusion steps.
-_DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
-PRESETS = ("diffuser", "cpu-small")
-
-
 def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> TrainConfig:
     """Default training config for ``maze`` and ``preset``, with field ``overrides`` applied."""
-    if maze not in _DIFFUSER_MAZE:
-        raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)}")
-    horizon, n_steps = _DIFFUSER_MAZE[maze]
+    horizon = maze_horizon(maze)
+    n_steps = _DIFFUSER_MAZE[maze][1]
     if preset == "diffuser":
-        base = TrainConfig(maze=maze, preset=preset, horizon=horizon,
-                           process=ProcessConfig(steps=n_steps))
+        base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
     elif preset == "cpu-small":
         base = TrainConfig(
             maze=maze, preset=preset, horizon=horizon,
             model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),
-            process=ProcessConfig(steps=16),  # the thesis's 16 diffusion steps
+            process=DDPM(steps=16),  # the thesis's 16 diffusion steps
             steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
             # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
             ema_every=1, ema_start=200, checkpoint_every=1000, log_every=50,
@@ -134,17 +153,29 @@ def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> Trai
 
 
 def replace(config, **changes: Any):
-    """``dataclasses.replace`` that also accepts nested dataclass fields given as dicts."""
+    """``dataclasses.replace`` that also accepts nested dataclass fields given as dicts.
+
+    A process given as a dict may name another process (``{"name": "bridge"}``): it then starts from
+    that process's defaults with the current number of steps.
+    """
     for name, value in list(changes.items()):
         current = getattr(config, name)
-        if dataclasses.is_dataclass(current) and isinstance(value, dict):
+        if isinstance(current, Process) and isinstance(value, dict):
+            kind = value.get("name", current.name)
+            base = current.to_dict() if kind == current.name else {"steps": current.steps}
+            params = {k: v for k, v in (base | value).items() if k != "name"}
+            changes[name] = make_process(kind, **params)
+        elif dataclasses.is_dataclass(current) and isinstance(value, dict):
             changes[name] = dataclasses.replace(current, **value)
     return dataclasses.replace(config, **changes)
 
 
 def to_dict(config) -> dict[str, Any]:
-    """JSON-ready dict of a config (tuples become lists)."""
-    return dataclasses.asdict(config)
+    """JSON-ready dict of a config (tuples become lists, a process its ``to_dict()``)."""
+    out = dataclasses.asdict(config)
+    if isinstance(config, TrainConfig):
+        out["process"] = config.process.to_dict()
+    return out
 
 
 def from_dict(cls, d: dict[str, Any]):
@@ -154,9 +185,10 @@ def from_dict(cls, d: dict[str, Any]):
         if f.name not in d:
             continue
         value = d[f.name]
-        sub = {"model": UNetConfig, "process": ProcessConfig}.get(f.name) if cls is TrainConfig else None
-        if sub is not None:
-            value = from_dict(sub, value)
+        if cls is TrainConfig and f.name == "process":
+            value = process_from_dict(value)
+        elif cls is TrainConfig and f.name == "model":
+            value = from_dict(UNetConfig, value)
         elif isinstance(value, list):
             value = tuple(value)
         kwargs[f.name] = value

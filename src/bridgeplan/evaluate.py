@@ -1,30 +1,65 @@
 """Evaluation: plan once per episode, open loop, track the plan, score the returns.
 
-Every episode of a batch is planned at once and all episodes step in lockstep. The same episodes
-are also run with no model at all (the straight-line plan, tracked by the same controller: the
-floor), and for a bridge from an informative prior, with the prior sample alone.
+:func:`evaluate_planner` scores a loaded planner on given :class:`Tasks` and returns an
+:class:`EvalResult`; :func:`evaluate` loads a run and calls it. Every episode of a batch is planned
+at once and all episodes step in lockstep. The same episodes are also run with no model at all (the
+straight-line plan, tracked by the same controller: the floor), and for a prior that is neither
+noise nor the line, with the prior sample alone; sweeps compute these floors once per run.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import platform
 import time
 from collections import defaultdict
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from bridgeplan.checkpoint import atomic_write_text, code_version
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import get_maze
+from bridgeplan.files import atomic_write_text, code_version
+from bridgeplan.maze.layouts import Maze, get_maze
 from bridgeplan.maze.reference import CONVENTIONS, normalized_score
 from bridgeplan.maze.rollout import execute_plans
 from bridgeplan.maze.tasks import sample_tasks
+from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
-from bridgeplan.runs import load_planner
+from bridgeplan.runs import RunInfo, load_planner
+
+
+@dataclass(frozen=True)
+class Tasks:
+    """Seeded evaluation episodes: where each starts (at rest) and the goal it must reach."""
+
+    maze: Maze
+    starts_xy: np.ndarray
+    goals_xy: np.ndarray
+    seed: int
+    multi_task: bool
+
+    @property
+    def episodes(self) -> int:
+        return len(self.starts_xy)
+
+    @property
+    def start_states(self) -> np.ndarray:
+        """``[N, 4]`` (x, y, vx, vy) with zero velocity."""
+        return np.concatenate([self.starts_xy, np.zeros_like(self.starts_xy)], axis=1)
+
+    def generator(self, device: torch.device) -> torch.Generator:
+        """The planning generator of these tasks: the same plans for the same tasks, whatever ran before."""
+        return torch.Generator(device=device).manual_seed(self.seed)
+
+
+def make_tasks(maze: str, episodes: int, seed: int = 0, multi_task: bool = False) -> Tasks:
+    if episodes <= 0:
+        raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    m = get_maze(maze)
+    starts, goals = sample_tasks(m, episodes, seed=seed, multi_task=multi_task)
+    return Tasks(m, starts, goals, seed, multi_task)
 
 
 def _mean_se(values: np.ndarray) -> dict[str, float]:
@@ -42,89 +77,140 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
     return {"score": scores, "return": _mean_se(returns), "success_rate": _mean_se(success)}
 
 
-def prepare_episodes(run: Path, episodes: int, nfe: int | None, seed: int, multi_task: bool = False,
-                     snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
-                     eta: float = 0.0, compile: bool = False):
-    """The planner of a run, its maze, the checked NFE, seeded tasks and the planning generator.
+def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None) -> dict:
+    """The tasks executed from a prior's sample alone (no network): the planner's prior, or ``prior_name``."""
+    if prior_name is not None:
+        planner = planner.with_prior(make_prior(prior_name, planner.normalizer))
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
+    result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states)
+    return {"prior": planner.prior.name, **score_returns(tasks.maze.name, result.returns, result.success)}
 
-    Returns ``(planner, info, maze, nfe, (starts_xy, goals_xy, start_states), generator)``.
+
+def floors(planner: Planner, tasks: Tasks) -> dict[str, dict]:
+    """What the planner must beat on ``tasks``: the straight line tracked (``floor_line``) and, for a prior
+    that is neither noise nor the line, that prior's sample tracked (``prior_only_<name>``)."""
+    out = {"floor_line": prior_only(planner, tasks, "line")}
+    if planner.prior.name not in ("gaussian", "line"):
+        out[f"prior_only_{planner.prior.name}"] = prior_only(planner, tasks)
+    return out
+
+
+@dataclass
+class EvalResult:
+    """One evaluation: a planner at one NFE on one set of tasks."""
+
+    planner: Planner
+    tasks: Tasks
+    nfe: int
+    run: RunInfo | None
+    scores: dict
+    """``score`` (per convention), ``return``, ``success_rate``: each mean and standard error."""
+    per_start_cell: list[dict]
+    floors: dict[str, dict]
+    plan_ms_per_plan: float
+    prior_ms_per_plan: float
+    batch_size: int
+    compile_seconds: float | None = None
+    """Seconds spent compiling (untimed warm-up), None when the network was not compiled."""
+    environment: dict = field(default_factory=dict)
+
+    @property
+    def prior(self) -> str:
+        return self.planner.prior.name
+
+    def score(self, convention: str = "minari") -> dict:
+        return self.scores["score"][convention]
+
+    def to_dict(self) -> dict:
+        """The JSON that ``bridgeplan eval`` writes (fields: README, "Evaluation output")."""
+        process, run = self.planner.process, self.run
+        out = {
+            "run": str(run.path) if run else None, "step": run.step if run else None,
+            "train_seconds": run.elapsed_seconds if run else None, "maze": self.tasks.maze.name,
+            "method": process.label(self.prior), "process": process.name, "prior": self.prior,
+            "process_params": process.to_dict(), "diffusion_steps": process.steps, "nfe": self.nfe,
+            "episodes": self.tasks.episodes, "seed": self.tasks.seed, "multi_task": self.tasks.multi_task,
+            "horizon": self.planner.horizon, "episode_steps": self.tasks.maze.episode_steps,
+            **self.scores,
+            "plan_ms_per_plan": self.plan_ms_per_plan, "prior_ms_per_plan": self.prior_ms_per_plan,
+            "batch_size": self.batch_size, "compiled": self.compile_seconds is not None,
+            "compile_seconds": self.compile_seconds or 0.0,
+            "per_start_cell": self.per_start_cell, **self.floors, "environment": self.environment,
+        }
+        out["config"] = run.config_dict if run else None
+        return out
+
+    def to_row(self, experiment: str) -> dict:
+        """A results-store row (``experiments.store.COLUMNS``); needs the run the planner came from."""
+        if self.run is None:
+            raise BridgeplanError("a store row needs the run the planner was loaded from")
+        run = self.run
+        return {
+            "experiment": experiment, "run_name": run.config.run_name(), "maze": self.tasks.maze.name,
+            "process": self.planner.process.name, "prior": self.prior, "diffusion_steps": self.planner.process.steps,
+            "seed": run.config.seed, "step": run.step, "train_seconds": run.elapsed_seconds, "nfe": self.nfe,
+            "episodes": self.tasks.episodes, "eval_seed": self.tasks.seed,
+            "score_minari": self.score("minari")["mean"], "score_minari_se": self.score("minari")["se"],
+            "score_d4rl": self.score("d4rl")["mean"], "score_d4rl_se": self.score("d4rl")["se"],
+            "success_rate": self.scores["success_rate"]["mean"], "plan_ms": self.plan_ms_per_plan,
+            "prior_ms": self.prior_ms_per_plan, "floor_minari": self.floors["floor_line"]["score"]["minari"]["mean"],
+            "config": run.config_dict, "code_version": self.environment["code_version"],
+        }
+
+
+def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run: RunInfo | None = None,
+                     batch_size: int | None = None, compiled: bool = False,
+                     precomputed_floors: dict[str, dict] | None = None) -> EvalResult:
+    """Score ``planner`` on ``tasks`` with ``nfe`` network calls per plan (default: the process's most).
+
+    ``batch_size``: plans per network batch (default: all episodes at once). ``compiled``: the network is
+    ``torch.compile``'d; it is compiled in an untimed warm-up at every batch shape first, with a generator
+    of its own, so the plans and the planning time are those of the compiled network alone.
+    ``precomputed_floors``: :func:`floors` of the same planner's prior on the same tasks, to skip them.
     """
-    if episodes <= 0:
-        raise BridgeplanError(f"episodes must be positive, got {episodes}")
-    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
-    maze = get_maze(info["config"].maze)
-    starts_xy, goals_xy = sample_tasks(maze, episodes, seed=seed, multi_task=multi_task)
-    starts = np.concatenate([starts_xy, np.zeros_like(starts_xy)], axis=1)
-    gen = torch.Generator(device=planner.device).manual_seed(seed)
-    return planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen
+    if batch_size is not None and batch_size <= 0:
+        raise BridgeplanError(f"batch size must be positive, got {batch_size}")
+    n = tasks.episodes
+    batch = min(batch_size or n, n)
+    starts, goals = tasks.start_states, tasks.goals_xy
+    compile_s = None
+    if compiled:
+        t0 = time.perf_counter()
+        for size in {batch, n % batch} - {0}:  # every batch shape the loop below will use
+            planner.plan(starts[:size], goals[:size], nfe, torch.Generator(device=planner.device).manual_seed(0))
+        compile_s = time.perf_counter() - t0
+    gen = tasks.generator(planner.device)
+    plans, prior_s, sample_s = [], 0.0, 0.0
+    for lo in range(0, n, batch):
+        plan = planner.plan(starts[lo:lo + batch], goals[lo:lo + batch], nfe, gen)
+        plans.append(plan.states)
+        prior_s += plan.prior_seconds
+        sample_s += plan.sample_seconds
+    result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans))
+    environment = {"device": str(planner.device), "torch": torch.__version__, "machine": platform.machine(),
+                   "processor": platform.processor() or platform.machine(),
+                   "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
+    return EvalResult(
+        planner=planner, tasks=tasks, nfe=nfe, run=run,
+        scores=score_returns(tasks.maze.name, result.returns, result.success),
+        per_start_cell=_per_start_cell(tasks.maze, tasks.starts_xy, result.returns),
+        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks),
+        plan_ms_per_plan=1000.0 * (prior_s + sample_s) / n, prior_ms_per_plan=1000.0 * prior_s / n,
+        batch_size=batch, compile_seconds=compile_s, environment=environment)
 
 
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
              multi_task: bool = False, batch_size: int | None = None, snapshot: int | None = None,
-             device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False) -> dict:
-    """Evaluate a trained run; returns the result dict (its fields: README, "Evaluation output").
-
-    ``batch_size``: plans per network batch (default: all episodes at once). ``compile``: plan with
-    ``torch.compile``; compilation happens in an untimed warm-up call with a generator of its own, so the
-    plans and the reported planning time are those of the compiled network alone.
-    """
-    if batch_size is not None and batch_size <= 0:
-        raise BridgeplanError(f"batch size must be positive, got {batch_size}")
-    planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen = prepare_episodes(
-        run, episodes, nfe, seed, multi_task, snapshot, device, sampler, eta, compile)
-    config = info["config"]
-
-    batch = min(batch_size or episodes, episodes)
-    compile_s = 0.0
-    if compile:
-        t0 = time.perf_counter()
-        for size in {batch, episodes % batch} - {0}:  # every batch shape the loop below will use
-            planner.plan(starts[:size], goals_xy[:size], nfe, torch.Generator(device=planner.device).manual_seed(0))
-        compile_s = time.perf_counter() - t0
-    plans, prior_s, sample_s = [], 0.0, 0.0
-    for lo in range(0, episodes, batch):
-        plan = planner.plan(starts[lo:lo + batch], goals_xy[lo:lo + batch], nfe, gen)
-        plans.append(plan.states)
-        prior_s += plan.prior_seconds
-        sample_s += plan.sample_seconds
-    planned = np.concatenate(plans)
-    result = execute_plans(maze, starts_xy, goals_xy, planned)
-
-    out = {
-        "run": str(run), "step": info["step"], "train_seconds": info["elapsed_seconds"], "maze": maze.name,
-        "process": config.process.name,
-        "prior": config.prior if config.process.name == "bridge" else "gaussian",
-        "diffusion_steps": config.process.steps, "nfe": nfe,
-        "sampler": getattr(planner.process, "sampler", "i2sb"), "eta": getattr(planner.process, "eta", None),
-        "episodes": episodes, "seed": seed,
-        "multi_task": multi_task, "horizon": config.horizon, "episode_steps": maze.episode_steps,
-        **score_returns(maze.name, result.returns, result.success),
-        "plan_ms_per_plan": 1000.0 * (prior_s + sample_s) / episodes,
-        "prior_ms_per_plan": 1000.0 * prior_s / episodes,
-        "batch_size": batch,
-        "compiled": compile, "compile_seconds": compile_s,
-        "per_start_cell": _per_start_cell(maze, starts_xy, result.returns),
-        "floor_line": _prior_only(planner, "line", maze, starts, starts_xy, goals_xy, seed),
-    }
-    if out["prior"] not in ("gaussian", "line"):
-        out[f"prior_only_{out['prior']}"] = _prior_only(planner, None, maze, starts, starts_xy, goals_xy, seed)
-    out["environment"] = {"device": str(planner.device), "torch": torch.__version__,
-                          "machine": platform.machine(), "processor": platform.processor() or platform.machine(),
-                          "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
-    out["config"] = info["config_dict"]
-    return out
-
-
-def _prior_only(planner, prior_name: str | None, maze, starts, starts_xy, goals_xy, seed: int) -> dict:
-    """The same episodes executed from the prior's sample alone (no network)."""
-    prior = planner.prior if prior_name is None else make_prior(prior_name, planner.normalizer)
-    floor_planner = dataclasses.replace(planner, prior=prior)
-    gen = torch.Generator(device=planner.device).manual_seed(seed)
-    plan = floor_planner.plan(starts, goals_xy, 1, gen, prior_only=True)
-    result = execute_plans(maze, starts_xy, goals_xy, plan.states)
-    return {"prior": prior.name, **score_returns(maze.name, result.returns, result.success)}
+             device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False) -> EvalResult:
+    """Load a trained run (or one of its snapshots) and :func:`evaluate_planner` it on seeded tasks."""
+    if episodes <= 0:
+        raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
+    planner.process.validate_nfe(planner.process.max_nfe if nfe is None else nfe)
+    tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
+    return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile)
 
 
 def _per_start_cell(maze, starts_xy: np.ndarray, returns: np.ndarray) -> list[dict]:
@@ -144,11 +230,12 @@ def write_result(result: dict, path: Path) -> None:
 
 
 def format_table(result: dict) -> str:
-    """Human-readable summary of one evaluation."""
+    """Human-readable summary of one evaluation (:meth:`EvalResult.to_dict`)."""
     s = result["score"]
     lines = [
-        f"{result['maze']}  {result['process']}  prior={result['prior']}  NFE={result['nfe']}  "
-        f"step={result['step']}  episodes={result['episodes']}  seed={result['seed']}",
+        f"{result['maze']}  {result['method']}  NFE={result['nfe']}  "
+        f"step={result['step']}  episodes={result['episodes']}  seed={result['seed']}"
+        + ("  multi-task" if result["multi_task"] else ""),
         f"  normalized score (minari): {s['minari']['mean']:7.1f} ± {s['minari']['se']:.1f}",
         f"  normalized score (d4rl):   {s['d4rl']['mean']:7.1f} ± {s['d4rl']['se']:.1f}",
         f"  return:                    {result['return']['mean']:7.1f} ± {result['return']['se']:.1f}",

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from bridgeplan.data.normalizer import Normalizer
+from bridgeplan.normalizer import Normalizer
+from bridgeplan.priors import Prior
+from bridgeplan.processes import Process
 from bridgeplan.trajectory import ACT_DIM, Conditions
 
 
@@ -29,11 +32,18 @@ class Plan:
 @dataclass
 class Planner:
     model: torch.nn.Module
-    process: object
-    prior: object
+    process: Process
+    prior: Prior
     normalizer: Normalizer
     horizon: int
     device: torch.device
+
+    def with_sampler(self, sampler: str, eta: float = 0.0) -> Planner:
+        """The same network sampled another way (no reload): ``process.with_sampler``."""
+        return dataclasses.replace(self, process=self.process.with_sampler(sampler, eta))
+
+    def with_prior(self, prior: Prior) -> Planner:
+        return dataclasses.replace(self, prior=prior)
 
     def conditions(self, starts: np.ndarray, goals: np.ndarray) -> Conditions:
         """Normalized conditions: the start state at t=0, the goal with zero velocity at t=H-1."""

@@ -12,8 +12,8 @@ from typing import Callable, Protocol
 
 import torch
 
-from bridgeplan.data.normalizer import Normalizer
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.normalizer import Normalizer
 from bridgeplan.trajectory import ACT_DIM, TRANSITION_DIM, Conditions, apply_conditions
 
 SIM_DT = 0.01

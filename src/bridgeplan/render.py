@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.checkpoint import atomic_write_bytes
+from bridgeplan.files import atomic_write_bytes
 
 
 def _pyplot():
@@ -83,28 +83,33 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written."""
     import torch
 
-    from bridgeplan.evaluate import prepare_episodes
+    from bridgeplan.evaluate import make_tasks
+    from bridgeplan.layout import render_dir
     from bridgeplan.maze.rollout import execute_plans
-    from bridgeplan.runs import load_windows
+    from bridgeplan.runs import load_planner, load_windows
+    from bridgeplan.trajectory import window_conditions
 
     run = Path(run)
-    planner, info, maze, nfe, (starts_xy, goals_xy, starts), gen = prepare_episodes(
-        run, episodes, nfe, seed, multi_task, device=device)
-    config = info["config"]
-    plan = planner.plan(starts, goals_xy, nfe, gen)
-    result = execute_plans(maze, starts_xy, goals_xy, plan.states)
-    base = Path(out) if out else run / "render" / f"step{info['step']}-nfe{nfe}-seed{seed}.png"
-    title = f"{maze.name} {config.process.name} prior={config.prior} NFE={nfe} step={info['step']}"
+    planner, info = load_planner(run, device=device)
+    config = info.config
+    nfe = planner.process.max_nfe if nfe is None else nfe
+    planner.process.validate_nfe(nfe)
+    tasks = make_tasks(config.maze, episodes, seed, multi_task)
+    gen = tasks.generator(planner.device)
+    maze = tasks.maze
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen)
+    result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan.states)
+    base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}.png"
+    title = f"{maze.name} {config.label()} NFE={nfe} step={info.step}"
     plot_trajectory_grid(maze, [(plan.states, "winter", "plan"), (result.states, "autumn", "executed")],
-                         base, title, goals=goals_xy)
+                         base, title, goals=tasks.goals_xy)
     written = [base]
     if pairs:
         windows, _ = load_windows(config.dataset, config.maze, config.horizon)
         idx = torch.randint(len(windows), (episodes,), generator=torch.Generator().manual_seed(seed))
         x0 = windows.batch(idx).to(planner.device)
-        conditions = {0: x0[:, 0, 2:], config.horizon - 1: x0[:, -1, 2:]}
         with torch.inference_mode():
-            x1 = planner.prior.sample(conditions, config.horizon, episodes, generator=gen)
+            x1 = planner.prior.sample(window_conditions(x0), config.horizon, episodes, generator=gen)
         prior_states, _ = planner.unnormalize(x1)
         target_states, _ = planner.unnormalize(x0)
         path = base.with_name(base.stem + "-pairs.png")
@@ -113,7 +118,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
         written.append(path)
     if video:
         path = base.with_suffix(".gif")
-        write_rollout_gif(maze, result.states[0], goals_xy[0], path)
+        write_rollout_gif(maze, result.states[0], tasks.goals_xy[0], path)
         written.append(path)
     return written
 

@@ -2,22 +2,29 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.checkpoint import atomic_write_text
+from bridgeplan import layout
 from bridgeplan.experiments.grids import EXPERIMENTS
 from bridgeplan.experiments.store import ResultsStore
+from bridgeplan.files import atomic_write_text
+from bridgeplan.processes import process_from_dict
 from bridgeplan.render import _pyplot, save_figure
 
 
+def method_label(row: dict) -> str:
+    """The method of a store row, as its process names it (parameters included)."""
+    return process_from_dict(json.loads(row["config"])["process"]).label(row["prior"])
+
+
 def _series(rows: list[dict]) -> dict[str, list[dict]]:
-    """Rows grouped into the lines of a figure: one per (process, prior, diffusion steps, NFE)."""
+    """Rows grouped into the lines of a figure: one per (method, diffusion steps, NFE)."""
     groups: dict[str, list[dict]] = {}
     for r in sorted(rows, key=lambda r: (r["process"], r["prior"], r["diffusion_steps"], r["nfe"], r["step"])):
-        name = "DDPM" if r["process"] == "ddpm" else f"bridge ({r['prior']})"
-        groups.setdefault(f"{name} N={r['diffusion_steps']} NFE={r['nfe']}", []).append(r)
+        groups.setdefault(f"{method_label(r)} N={r['diffusion_steps']} NFE={r['nfe']}", []).append(r)
     return groups
 
 
@@ -63,8 +70,8 @@ def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
 def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
     """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path."""
     results_dir = Path(results_dir)
-    out_dir = Path(out_dir) if out_dir else results_dir / "report"
-    store = ResultsStore(results_dir / "results.sqlite")
+    out_dir = Path(out_dir) if out_dir else layout.report_dir(results_dir)
+    store = ResultsStore(layout.store_path(results_dir))
     lines = ["# bridgeplan results", "",
              "Normalized scores (Minari convention unless marked d4rl): mean ± standard error over the "
              "stated episodes, made by `bridgeplan report` from the results store.", ""]

@@ -1,35 +1,47 @@
-"""Building the pieces of a run from its config, and loading a trained run back as a planner."""
+"""Building the pieces of a run from its config, and loading a trained run back as a planner.
+
+This is the one composition root: training, evaluation, sweeps and the bench all build their
+windows, normalizer, network, prior and planner through these functions.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint
-from bridgeplan.data.normalizer import Normalizer
 from bridgeplan.device import resolve_device
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.nets.unet import TemporalUNet
+from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
-from bridgeplan.processes import make_process
 from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
 
 
+def windows_of(stream, horizon: int):
+    """Training windows of ``stream`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
+    from bridgeplan.data import WindowDataset
+
+    normalizer = Normalizer.fit(stream.transitions())
+    return WindowDataset(stream, horizon, normalizer), normalizer
+
+
 def load_windows(dataset: str, maze: str, horizon: int):
-    """Training windows of ``dataset`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
-    from bridgeplan.data import WindowDataset, load_stream
+    """:func:`windows_of` the dataset at ``dataset``, checked to be from ``maze``."""
+    from bridgeplan.data import load_stream
 
     if not dataset:
         raise BridgeplanError("no dataset given: pass --dataset (see `bridgeplan data generate`)")
     stream = load_stream(dataset)
     if stream.maze != maze:
         raise BridgeplanError(f"dataset {dataset} is from maze {stream.maze!r}, not {maze!r}")
-    normalizer = Normalizer.fit(stream.transitions())
-    return WindowDataset(stream, horizon, normalizer), normalizer
+    return windows_of(stream, horizon)
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
@@ -40,12 +52,11 @@ def build_prior_net(horizon: int) -> PriorMLP:
     return PriorMLP(OBS_DIM, horizon, TRANSITION_DIM)
 
 
-def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.device):
-    """The prior the process starts from: DDPM always starts from noise; the bridge from ``config.prior``."""
-    if config.process.name != "bridge":
-        return make_prior("gaussian", normalizer)
-    if config.prior != "learned":
-        return make_prior(config.prior, normalizer)
+def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.device,
+                prior_net: torch.nn.Module | None = None):
+    """The prior ``config.prior``; ``learned`` loads its net from ``config.prior_run`` unless given one."""
+    if config.prior != "learned" or prior_net is not None:
+        return make_prior(config.prior, normalizer, net=prior_net)
     if not config.prior_run:
         raise BridgeplanError("the learned prior needs --prior-run (a run of `bridgeplan train-prior`)")
     state = load_checkpoint(Path(config.prior_run))
@@ -63,26 +74,40 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
     return make_prior("learned", normalizer, net=net.to(device).eval())
 
 
-def snapshot_path(run: Path, step: int) -> Path:
-    """Where training saves the EMA snapshot of ``step`` in ``run``."""
-    return Path(run) / "snapshots" / f"step_{step:08d}.pt"
+def build_planner(config: cfg.TrainConfig, model: torch.nn.Module, normalizer: Normalizer,
+                  device: torch.device, prior_net: torch.nn.Module | None = None) -> Planner:
+    """The planner of ``config`` around a network (trained or not)."""
+    prior = build_prior(config, normalizer, device, prior_net)
+    return Planner(model, config.process, prior, normalizer, config.horizon, device)
 
 
-def snapshot_steps(run: Path) -> list[int]:
-    """The training steps of the EMA snapshots saved in ``run``, ascending."""
-    return sorted(int(p.stem.split("_")[1]) for p in (Path(run) / "snapshots").glob("step_*.pt"))
+@dataclass(frozen=True)
+class RunInfo:
+    """What a loaded checkpoint says about the run it came from."""
+
+    path: Path
+    """The run directory."""
+    config: cfg.TrainConfig
+    config_dict: dict
+    """The config as saved (what the run was trained with)."""
+    step: int
+    elapsed_seconds: float
+
+    @property
+    def name(self) -> str:
+        return self.path.name
 
 
 def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
-                 eta: float = 0.0, compile: bool = False) -> tuple[Planner, dict]:
+                 eta: float = 0.0, compile: bool = False) -> tuple[Planner, RunInfo]:
     """A planner from a run directory (EMA weights of the latest checkpoint, or of snapshot ``step``).
 
-    ``sampler``/``eta`` choose DDPM's sampler (``ancestral`` or ``ddim``); the bridge has one.
-    ``compile`` wraps the network in ``torch.compile`` (off by default: see the benchmark in docs/results).
+    ``sampler``/``eta`` choose how the process is sampled (DDPM: ``ancestral`` or ``ddim``), as
+    ``planner.with_sampler`` does. ``compile`` wraps the network in ``torch.compile`` (off by default:
+    see the benchmark in docs/results).
     """
     run = Path(run)
-    path = run if run.is_file() else (
-        snapshot_path(run, snapshot) if snapshot is not None else run / "checkpoint.pt")
+    path = run if run.is_file() else (snapshot_path(run, snapshot) if snapshot is not None else checkpoint_path(run))
     if snapshot is not None and not path.exists():
         raise BridgeplanError(f"no snapshot at step {snapshot} in {run} (have: {snapshot_steps(run) or 'none'})")
     state = load_checkpoint(path)
@@ -96,13 +121,15 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     model.to(dev).eval()
     if compile:
         model = torch.compile(model)
-    params = config.process.params()
+    planner = build_planner(config, model, normalizer, dev)
     if sampler is not None:
-        if config.process.name != "ddpm":
-            raise BridgeplanError(f"--sampler applies to ddpm runs; {path} is a {config.process.name} run")
-        params |= {"sampler": sampler, "eta": eta}
-    process = make_process(config.process.name, **params)
-    prior = build_prior(config, normalizer, dev)
-    planner = Planner(model, process, prior, normalizer, config.horizon, dev)
-    return planner, {"config": config, "config_dict": state["config"], "step": state["step"],
-                     "elapsed_seconds": state["elapsed_seconds"]}
+        planner = planner.with_sampler(sampler, eta)
+    return planner, RunInfo(run_dir_of(run), config, state["config"], state["step"], state["elapsed_seconds"])
+
+
+def run_dir_of(path: Path) -> Path:
+    """The run directory of a run, its checkpoint or one of its snapshots."""
+    path = Path(path)
+    if path.is_dir():
+        return path
+    return path.parent.parent if path.parent.name == "snapshots" else path.parent

@@ -20,19 +20,14 @@ import torch
 from tqdm import tqdm
 
 from bridgeplan import config as cfg
-from bridgeplan.checkpoint import (
-    CHECKPOINT_NAME,
-    code_version,
-    load_checkpoint,
-    save_checkpoint,
-    write_config,
-)
-from bridgeplan.device import resolve_device
+from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
+from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import code_version
+from bridgeplan.layout import checkpoint_path, snapshot_path
 from bridgeplan.priors import train_prior_loss
-from bridgeplan.processes import make_process
-from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows, snapshot_path
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
+from bridgeplan.trajectory import window_conditions
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
 _RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every"}
@@ -75,9 +70,13 @@ class TrainJob:
                 torch._foreach_lerp_(list(ema.parameters()), list(self.model.parameters()), 1.0 - decay)
 
 
-def conditions_of(x0: torch.Tensor) -> dict[int, torch.Tensor]:
-    """Start and goal conditions of a training window: its first and last states (Diffuser)."""
-    return {0: x0[:, 0, ACT_DIM:], x0.shape[1] - 1: x0[:, -1, ACT_DIM:]}
+def make_optimizer(model: torch.nn.Module, lr: float) -> torch.optim.Optimizer:
+    return torch.optim.Adam(model.parameters(), lr=lr)
+
+
+def make_ema(model: torch.nn.Module) -> torch.nn.Module:
+    """The EMA copy of ``model`` (a frozen deep copy; ``TrainJob.apply_gradients`` updates it)."""
+    return copy.deepcopy(model).requires_grad_(False)
 
 
 def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
@@ -90,11 +89,11 @@ def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress
 def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> TrainJob:
     """The planner's network (fresh, on ``device``), its loss and EMA settings."""
     model = build_model(config).to(device)
-    process = make_process(config.process.name, **config.process.params())
+    process = config.process
     prior = build_prior(config, normalizer, device)
 
     def loss(x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-        conditions = conditions_of(x0)
+        conditions = window_conditions(x0)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
         return process.training_loss(model, x0, x1, conditions, generator=gen)
 
@@ -118,13 +117,14 @@ def _setup(config) -> torch.device:
             raise BridgeplanError(f"{name} must be positive, got {getattr(config, name)}")
     if config.minutes < 0:
         raise BridgeplanError(f"minutes must be >= 0, got {config.minutes}")
-    if config.threads > 0:
-        torch.set_num_threads(config.threads)
+    device = resolve_device(config.device)
+    configure_threads(config.threads, device)
     torch.manual_seed(config.seed)  # the network's initial weights
-    return resolve_device(config.device)
+    return device
 
 
-def _check_resumable(saved: dict, current: dict, path: Path) -> None:
+def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> None:
+    saved = cfg.to_dict(cfg.from_dict(config_type, saved))  # a run saved by an older bridgeplan, in today's form
     diff = sorted(k for k in set(saved) | set(current)
                   if k not in _RESUMABLE_FIELDS and saved.get(k) != current.get(k))
     if diff:
@@ -135,11 +135,11 @@ def _check_resumable(saved: dict, current: dict, path: Path) -> None:
 def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
     config = job.config
     run_dir = Path(run_dir)
-    ckpt_path = run_dir / CHECKPOINT_NAME
+    ckpt_path = checkpoint_path(run_dir)
     config_dict = cfg.to_dict(config)
     model = job.model
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
-    ema = copy.deepcopy(model).requires_grad_(False) if job.ema else None
+    optimizer = make_optimizer(model, config.lr)
+    ema = make_ema(model) if job.ema else None
     gen = torch.Generator(device=device).manual_seed(config.seed)
     step, elapsed = 0, 0.0
 
@@ -149,7 +149,7 @@ def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.devi
         state = load_checkpoint(ckpt_path)
         if state["kind"] != job.kind:
             raise BridgeplanError(f"{ckpt_path} is a {state['kind']} checkpoint, not a {job.kind} one")
-        _check_resumable(state["config"], config_dict, ckpt_path)
+        _check_resumable(state["config"], config_dict, ckpt_path, type(config))
         if state["normalizer"] != job.normalizer_dict:
             raise BridgeplanError(f"{ckpt_path} was trained on a different dataset (normalizer differs)")
         model.load_state_dict(state["model"])

@@ -26,3 +26,8 @@ def apply_conditions(x: torch.Tensor, conditions: Conditions, act_dim: int = ACT
     for t, state in conditions.items():
         x[:, t, act_dim:] = state.to(x.dtype)
     return x
+
+
+def window_conditions(x0: torch.Tensor) -> Conditions:
+    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser)."""
+    return {0: x0[:, 0, ACT_DIM:], x0.shape[1] - 1: x0[:, -1, ACT_DIM:]}

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from bridgeplan.data.normalizer import Normalizer
 from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.normalizer import Normalizer
 
 
 def window_starts(stream: Stream, horizon: int) -> np.ndarray:

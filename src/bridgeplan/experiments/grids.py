@@ -1,32 +1,32 @@
-"""The thesis's experiments as declared grids (REFERENCE §4).
+"""The thesis's experiments as declared grids (thesis, chapter "Experiments"; its five figures).
 
-An experiment is a set of series, each one line in its figure: a trained run (process, prior,
-diffusion steps) sampled at one NFE, scored at every training-step snapshot. Two experiments
-that name the same run share its training.
+An experiment is a set of series, each one line in its figure: a trained run (a process with its
+parameters, and a prior) sampled at one NFE, scored at every training-step snapshot. Two
+experiments that name the same run share its training.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
+from bridgeplan.config import check_prior
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes import DDPM, Bridge, Process
 
 
 @dataclass(frozen=True)
 class RunSpec:
-    """What distinguishes one trained run inside a sweep."""
+    """What distinguishes one trained run inside a sweep: the process (with its parameters) and the prior."""
 
-    process: str
+    process: Process
     prior: str = "gaussian"
-    diffusion_steps: int = 16
 
-    @property
-    def max_nfe(self) -> int:
-        # the bridge walks N-1 jumps from the prior to step 0; DDPM has one call per step
-        return self.diffusion_steps - 1 if self.process == "bridge" else self.diffusion_steps
+    def __post_init__(self):
+        check_prior(self.process, self.prior)
 
     def label(self) -> str:
-        return "DDPM" if self.process == "ddpm" else f"bridge ({self.prior})"
+        return self.process.label(self.prior)
 
 
 @dataclass(frozen=True)
@@ -47,36 +47,40 @@ class Experiment:
 
     def validate(self) -> None:
         for s in self.series:
-            if not 1 <= s.nfe <= s.run.max_nfe:
+            if not 1 <= s.nfe <= s.run.process.max_nfe:
                 raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks NFE {s.nfe}, but "
-                                      f"{s.run.label()} with {s.run.diffusion_steps} steps allows 1..{s.run.max_nfe}")
+                                      f"{s.run.label()} with {s.run.process.steps} steps allows "
+                                      f"1..{s.run.process.max_nfe}")
 
 
-def build_experiments(steps: int = 16, fixed_nfe: int = 4) -> dict[str, Experiment]:
-    ddpm = RunSpec("ddpm", "gaussian", steps)
-    bridges = {p: RunSpec("bridge", p, steps) for p in ("gaussian", "line", "learned")}
-    same_nfe = steps - 1
+def build_experiments(steps: int = 16, fixed_nfe: int = 4, bridge: Bridge | None = None) -> dict[str, Experiment]:
+    """The five experiments for runs of ``steps`` diffusion steps; ``bridge`` gives the bridge's other
+    parameters (beta_max, ot_ode, ...; default: the ``Bridge`` defaults)."""
+    ddpm = RunSpec(DDPM(steps))
+    bridge = dataclasses.replace(bridge or Bridge(), steps=steps)
+    bridges = {p: RunSpec(bridge, p) for p in ("gaussian", "line", "learned")}
+    noise, same_nfe = bridges["gaussian"], bridge.max_nfe
     return {e.name: e for e in [
         Experiment("bridge-vs-ddpm", f"Bridge vs DDPM from Gaussian noise, N={steps}, NFE={same_nfe}",
-                   (Series("DDPM", ddpm, same_nfe), Series("bridge (gaussian)", bridges["gaussian"], same_nfe))),
+                   (Series("DDPM", ddpm, same_nfe), Series(noise.label(), noise, same_nfe))),
         Experiment("ddpm-steps", "DDPM trained with 1, 4, 7, 10 diffusion steps (NFE = steps)",
-                   tuple(Series(f"DDPM N={n}", RunSpec("ddpm", "gaussian", n), n) for n in (1, 4, 7, 10))),
+                   tuple(Series(f"DDPM N={n}", RunSpec(DDPM(n)), n) for n in (1, 4, 7, 10))),
         Experiment("bridge-nfe", f"Bridge (gaussian prior), N={steps}, across NFE",
-                   tuple(Series(f"NFE {k}", bridges["gaussian"], k) for k in (1, 4, 7, 10, same_nfe))),
+                   tuple(Series(f"NFE {k}", noise, k) for k in (1, 4, 7, 10, same_nfe))),
         Experiment("priors", f"Bridge from each prior, N={steps}, NFE={fixed_nfe}",
-                   tuple(Series(f"bridge ({p})", r, fixed_nfe) for p, r in bridges.items())),
+                   tuple(Series(r.label(), r, fixed_nfe) for r in bridges.values())),
         Experiment("nfe1", f"Bridge from each prior vs DDPM at NFE=1, N={steps}",
-                   (Series("DDPM", ddpm, 1), *(Series(f"bridge ({p})", r, 1) for p, r in bridges.items()))),
+                   (Series("DDPM", ddpm, 1), *(Series(r.label(), r, 1) for r in bridges.values()))),
     ]}
 
 
 EXPERIMENTS = build_experiments()
 
 
-def get_experiment(name: str, steps: int = 16, fixed_nfe: int = 4) -> Experiment:
+def get_experiment(name: str, steps: int = 16, fixed_nfe: int = 4, bridge: Bridge | None = None) -> Experiment:
     """The experiment ``name`` for runs trained with ``steps`` diffusion steps."""
     if name not in EXPERIMENTS:
         raise BridgeplanError(f"unknown experiment {name!r}: choose from {', '.join(EXPERIMENTS)}")
-    experiment = build_experiments(steps, fixed_nfe)[name]
+    experiment = build_experiments(steps, fixed_nfe, bridge)[name]
     experiment.validate()
     return experiment

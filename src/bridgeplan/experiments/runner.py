@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridgeplan import config as cfg
+from bridgeplan import layout
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
-from bridgeplan.experiments.store import ResultsStore, row_from_result
+from bridgeplan.experiments.store import ResultsStore
 
 
 @dataclass(frozen=True)
@@ -45,10 +46,8 @@ class SweepSettings:
 def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
     return cfg.preset_config(
         s.maze, s.preset, **s.overrides, dataset=s.dataset, steps=s.train_steps, seed=seed,
-        checkpoint_every=s.checkpoint_every,
-        process={"name": spec.process, "steps": spec.diffusion_steps},
-        prior=spec.prior if spec.process == "bridge" else "gaussian",
-        prior_run=prior_run if spec.prior == "learned" and spec.process == "bridge" else "")
+        checkpoint_every=s.checkpoint_every, process=spec.process, prior=spec.prior,
+        prior_run=prior_run if spec.prior == "learned" else "")
 
 
 def _prior_config(s: SweepSettings, seed: int, horizon: int) -> cfg.PriorTrainConfig:
@@ -59,43 +58,45 @@ def _prior_config(s: SweepSettings, seed: int, horizon: int) -> cfg.PriorTrainCo
 
 def _trained_step(run_dir: Path) -> int:
     """Optimizer steps a run has done (-1: not started)."""
-    ckpt = run_dir / "checkpoint.pt"
+    ckpt = layout.checkpoint_path(run_dir)
     return load_checkpoint(ckpt)["step"] if ckpt.exists() else -1
 
 
 def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
             prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
-    """Train (or finish) one run and evaluate every (snapshot, NFE) its series need; returns new rows."""
-    import torch
+    """Train (or finish) one run and evaluate every (snapshot, NFE) its series need; returns new rows.
 
-    from bridgeplan.evaluate import evaluate
-    from bridgeplan.runs import snapshot_steps
+    Each snapshot is loaded once and evaluated at every NFE missing from the store; the floors are
+    computed once for the job (same prior, same tasks at every snapshot).
+    """
+    from bridgeplan.device import configure_threads
+    from bridgeplan.evaluate import evaluate_planner, floors, make_tasks
+    from bridgeplan.runs import load_planner
     from bridgeplan.train import train
 
-    if threads:
-        torch.set_num_threads(threads)
     config = _train_config(settings, spec, seed, prior_run)
-    run_dir = Path(settings.results_dir) / "runs" / config.run_name()
+    configure_threads(threads or config.threads)
+    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
     done = _trained_step(run_dir)
     if done < config.steps:
         train(config, run_dir, resume=done >= 0, progress=progress)
-    store = ResultsStore(Path(settings.results_dir) / "results.sqlite")
-    snapshots = [s for s in snapshot_steps(run_dir) if s <= config.steps]
+    store = ResultsStore(layout.store_path(settings.results_dir))
+    wanted = [(exp.name, series.nfe) for exp in experiments for series in exp.series if series.run == spec]
+    tasks = make_tasks(settings.maze, settings.episodes, seed)
+    job_floors = None
     rows = []
-    for exp in experiments:
-        for series in exp.series:
-            if series.run != spec:
-                continue
-            for step in snapshots:
-                key = dict(experiment=exp.name, run_name=config.run_name(), step=step, nfe=series.nfe,
-                           episodes=settings.episodes, eval_seed=seed)
-                if store.has(**key):
-                    continue
-                result = evaluate(run_dir, episodes=settings.episodes, nfe=series.nfe, seed=seed,
-                                  snapshot=step, device=config.device)
-                row = row_from_result(exp.name, config.run_name(), result)
-                store.add(row)
-                rows.append(row)
+    for step in (s for s in layout.snapshot_steps(run_dir) if s <= config.steps):
+        missing = [(name, nfe) for name, nfe in wanted
+                   if not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=nfe,
+                                    episodes=settings.episodes, eval_seed=seed)]
+        if not missing:
+            continue
+        planner, info = load_planner(run_dir, snapshot=step, device=config.device)
+        job_floors = job_floors or floors(planner, tasks)
+        for name, nfe in missing:
+            row = evaluate_planner(planner, tasks, nfe, run=info, precomputed_floors=job_floors).to_row(name)
+            store.add(row)
+            rows.append(row)
     return rows
 
 
@@ -107,7 +108,7 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
         return settings
     from bridgeplan.data import generate_dataset
 
-    path = (Path(settings.results_dir) / "data" / f"{settings.maze}-{settings.dataset_steps}").resolve()
+    path = (layout.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
     if not path.exists():
         generate_dataset(settings.maze, settings.dataset_steps, seed=123, out=path)
     return dataclasses.replace(settings, dataset=str(path))
@@ -118,7 +119,7 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
     """Run every job the experiments need; returns the number of new result rows."""
     for exp in experiments:
         exp.validate()
-    ResultsStore(Path(settings.results_dir) / "results.sqlite")  # refuse a newer schema before any work
+    ResultsStore(layout.store_path(settings.results_dir))  # refuse a newer schema before any work
     if backend not in ("local", "ray"):
         raise BridgeplanError(f"unknown backend {backend!r}: choose from local, ray")
     if workers < 1:
@@ -134,7 +135,7 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
         horizon = cfg.preset_config(settings.maze, settings.preset, **settings.overrides).horizon
         prior_runs = {}
         for seed in settings.seeds:
-            if any(r.prior == "learned" and r.process == "bridge" for r in specs):
+            if any(r.prior == "learned" for r in specs):
                 prior_runs[seed] = _ensure_prior(settings, seed, horizon, progress)
         jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
         if ray is not None:
@@ -171,7 +172,7 @@ def _ensure_prior(settings: SweepSettings, seed: int, horizon: int, progress: bo
     from bridgeplan.train import train_prior
 
     config = _prior_config(settings, seed, horizon)
-    run_dir = Path(settings.results_dir) / "runs" / config.run_name()
+    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
     done = _trained_step(run_dir)
     if done < config.steps:
         train_prior(config, run_dir, resume=done >= 0, progress=progress)

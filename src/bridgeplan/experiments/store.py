@@ -14,8 +14,8 @@ import sqlite3
 import time
 from pathlib import Path
 
-from bridgeplan.checkpoint import atomic_write_text
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import atomic_write_text
 
 SCHEMA_VERSION = 1
 
@@ -48,7 +48,7 @@ KEY = ("experiment", "run_name", "step", "nfe", "episodes", "eval_seed")
 
 
 class ResultsStore:
-    """``results.sqlite`` under a results directory."""
+    """The store file (``layout.store_path(results_dir)``); rows come from ``EvalResult.to_row``."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
@@ -108,19 +108,3 @@ class ResultsStore:
         writer.writerows(rows)
         atomic_write_text(Path(path), buf.getvalue())
         return len(rows)
-
-
-def row_from_result(experiment: str, run_name: str, result: dict) -> dict:
-    """A store row from an evaluation result (``bridgeplan.evaluate.evaluate``'s dict)."""
-    cfg = result["config"]
-    return {
-        "experiment": experiment, "run_name": run_name, "maze": result["maze"], "process": result["process"],
-        "prior": result["prior"], "diffusion_steps": result["diffusion_steps"], "seed": cfg["seed"],
-        "step": result["step"], "train_seconds": result["train_seconds"], "nfe": result["nfe"],
-        "episodes": result["episodes"], "eval_seed": result["seed"],
-        "score_minari": result["score"]["minari"]["mean"], "score_minari_se": result["score"]["minari"]["se"],
-        "score_d4rl": result["score"]["d4rl"]["mean"], "score_d4rl_se": result["score"]["d4rl"]["se"],
-        "success_rate": result["success_rate"]["mean"], "plan_ms": result["plan_ms_per_plan"],
-        "prior_ms": result["prior_ms_per_plan"], "floor_minari": result["floor_line"]["score"]["minari"]["mean"],
-        "config": cfg, "code_version": result["environment"]["code_version"],
-    }

@@ -1,6 +1,8 @@
-"""Generative processes behind one interface (see ``ddpm.py`` and ``bridge.py``).
+"""Generative processes behind one interface (see ``base.py``, ``ddpm.py`` and ``bridge.py``).
 
-Every process is a frozen dataclass (``to_dict``, inverted by ``process_from_dict``) with
+A process is the one definition of a method: training, sweeps, evaluation, reports and the bench
+all ask it. Every process is a frozen dataclass derived from :class:`Process` (``to_dict``,
+inverted by ``process_from_dict``; ``label``, ``run_tag``, ``uses_prior``, ``with_sampler``) with
 
 - ``training_loss(model, x0, x1, conditions, generator=None) -> scalar`` (``x0`` the clean normalized
   window ``[B, H, D]``, ``x1`` the prior sample for it, ignored by DDPM),
@@ -9,19 +11,22 @@ Every process is a frozen dataclass (``to_dict``, inverted by ``process_from_dic
 - ``sample(model, x_start, conditions, nfe, generator=None) -> x0`` (``x_start`` the prior sample:
   noise for DDPM), built on the pure samplers of ``samplers.py`` over the schedules of ``schedules.py``.
 
-A new process is one dataclass with these methods and an entry in ``PROCESSES``.
+A new process is one such dataclass in its own file and an entry in ``PROCESSES``.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes.base import Process
 from bridgeplan.processes.bridge import Bridge
 from bridgeplan.processes.ddpm import DDPM
 
-PROCESSES = {"ddpm": DDPM, "bridge": Bridge}
+PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge}
 
 
-def make_process(name: str, **params):
+def make_process(name: str, **params) -> Process:
     """A process by name with its parameters, e.g. ``make_process("bridge", steps=16, beta_max=0.3)``."""
     if name not in PROCESSES:
         raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
@@ -31,10 +36,18 @@ def make_process(name: str, **params):
         raise BridgeplanError(f"bad parameters for process {name!r}: {e}") from None
 
 
-def process_from_dict(d: dict):
-    """Inverse of ``process.to_dict()``."""
+def process_from_dict(d: dict) -> Process:
+    """Inverse of ``process.to_dict()``.
+
+    Runs saved before the process was the config (bridgeplan 0.1) stored the bridge's fields for
+    DDPM runs too, at their defaults; fields the process does not have are dropped for that reason.
+    """
     d = dict(d)
-    return make_process(d.pop("name"), **d)
+    name = d.pop("name", None)
+    if name not in PROCESSES:
+        raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
+    known = {f.name for f in dataclasses.fields(PROCESSES[name])}
+    return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "PROCESSES", "make_process", "process_from_dict"]
+__all__ = ["DDPM", "Bridge", "Process", "PROCESSES", "make_process", "process_from_dict"]

@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import cached_property
 
 import torch
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes.base import Process
 from bridgeplan.processes.samplers import bridge_sample
 from bridgeplan.processes.schedules import bridge_stds, gaussian_product, i2sb_betas, spaced_steps
 from bridgeplan.trajectory import Conditions, apply_conditions
 
 
 @dataclass(frozen=True)
-class Bridge:
+class Bridge(Process):
     """I2SB over ``steps`` (N) discrete steps with the symmetric schedule up to ``beta_max``.
 
     The network follows I2SB's parametrization: it predicts ``(x_n - x0) / std_fwd[n]``, so
@@ -25,6 +26,7 @@ class Bridge:
     beta_max: float = 1.0
     ot_ode: bool = False
     name = "bridge"
+    display_name = "bridge"
 
     def __post_init__(self):
         if self.steps < 2:
@@ -52,10 +54,6 @@ class Bridge:
         if not 1 <= nfe <= self.max_nfe:
             raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for the bridge with {self.steps} steps "
                                   f"(NFE < N), got {nfe}")
-
-    def to_dict(self) -> dict:
-        """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
-        return {"name": self.name, **asdict(self)}
 
     def marginal(self, x0: torch.Tensor, x1: torch.Tensor, n: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import dataclasses
+from dataclasses import dataclass
 from functools import cached_property
 
 import torch
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes.base import Process
 from bridgeplan.processes.samplers import ddim, ddpm_ancestral
 from bridgeplan.processes.schedules import cosine_betas
 from bridgeplan.trajectory import Conditions, apply_conditions
@@ -16,7 +18,7 @@ SAMPLERS = ("ancestral", "ddim")
 
 
 @dataclass(frozen=True)
-class DDPM:
+class DDPM(Process):
     """Diffusion over ``steps`` noise levels; sampled by ``sampler`` in any NFE from 1 to ``steps``.
 
     The network predicts x0 from ``(x_t, t)``, ``t`` the step index 0..steps-1 as a float (Diffuser).
@@ -30,6 +32,10 @@ class DDPM:
     sampler: str = "ancestral"
     eta: float = 0.0
     name = "ddpm"
+    display_name = "DDPM"
+    uses_prior = False
+    sampling_fields = ("sampler", "eta")
+    samplers = SAMPLERS
 
     def __post_init__(self):
         if self.steps < 1:
@@ -52,9 +58,8 @@ class DDPM:
             raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for ddpm with {self.steps} steps, "
                                   f"got {nfe}")
 
-    def to_dict(self) -> dict:
-        """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
-        return {"name": self.name, **asdict(self)}
+    def with_sampler(self, sampler: str, eta: float = 0.0) -> DDPM:
+        return dataclasses.replace(self, sampler=sampler, eta=eta)
 
     def predict_x0(self, model, x_t: torch.Tensor, t: int) -> torch.Tensor:
         tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)

@@ -1,0 +1,97 @@
+"""The bench's Markdown: one table per figure of ``bench.json``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bridgeplan.bench.suites import DIFFUSION_STEPS
+
+
+def table(header: list[str], rows: list[list]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
+        "| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+
+
+def format_bench(result: dict) -> str:
+    m = result["machine"]
+    where = m.get("gpu", f"{m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch threads")
+    lines = ["# bridgeplan bench", "",
+             f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
+             f"with N = {DIFFUSION_STEPS} for the timings; medians over {result['bench']['repeats']} repeats after "
+             f"2 warm-up calls, ratios over {result['bench']['overhead_repeats']} interleaved rounds.", "",
+             "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
+             "of it and shown separately.", ""]
+    lines += table(["preset", "method", "batch", "NFE", "plan ms", "of which prior ms"],
+                    [[r["preset"], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}", f"{r['prior_ms']:.2f}"]
+                     for r in result["latency"]])
+    lines += ["", "## Overheads", "", "Plan at NFE 1 over one bare forward pass of the same network and input "
+              "shape (target <= 1.2):", ""]
+    methods = list(result["plan_overhead"][0]["plan_nfe1_over_forward"]) if result["plan_overhead"] else []
+    lines += table(["preset", "batch", "forward ms", *methods],
+                    [[o["preset"], o["batch"], f"{o['forward_ms']:.2f}",
+                      *(f"{o['plan_nfe1_over_forward'][k]:.2f}" for k in methods)] for o in result["plan_overhead"]])
+    lines += ["", "Training step of `train.py` over a bare step on prepared batches: as many forward+backward "
+              "passes as the loop accumulates, then one Adam step (target <= 1.15):", ""]
+    lines += table(["preset", "batch x accumulated", "train step ms", "bare step ms", "train / bare"],
+                    [[o["preset"], f"{o['batch']} x {o['grad_accum']}", f"{o['train_step_ms']:.1f}",
+                      f"{o['bare_train_step_ms']:.1f}", f"{o['train_step_over_bare']:.2f}"]
+                     for o in result["train_overhead"]])
+    if result.get("busy_core"):
+        lines += ["", "## Threads on a busy machine", "",
+                  "Training steps per second with the machine quiet and with one core kept busy by another process "
+                  "(a spinning Python), at one torch thread (bridgeplan's default on a CPU) and at one per core "
+                  "(torch's own default). Target: busy / quiet >= 0.8 at the default.", ""]
+        for b in result["busy_core"]:
+            cores = b["cores"]
+            rates = b["steps_per_s"]
+            lines += table(["preset", "steps", "quiet, 1 thread", f"quiet, {cores} threads", "busy, 1 thread",
+                             f"busy, {cores} threads", "busy/quiet (1 thread)", f"busy {cores} threads/quiet 1"],
+                            [[b["preset"], b["steps"], *(f"{rates[k]:.1f}" for k in
+                              ("quiet_1thread", f"quiet_{cores}thread", "busy_1thread", f"busy_{cores}thread")),
+                              f"{b['busy_over_quiet_1thread']:.2f}",
+                              f"{b[f'busy_{cores}thread_over_quiet_1thread']:.2f}"]])
+    if result["compile"]:
+        lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode), "
+                  f"medians over {result['bench']['overhead_repeats']} interleaved rounds. The first call at each "
+                  "shape compiles: cold (empty inductor cache) and again from the cache the cold compile wrote.", ""]
+        lines += table(["preset", "batch", "eager ms", "compiled ms", "speedup", "compile cold s", "compile cached s"],
+                        [[c["preset"], c["batch"], f"{c['eager_ms']:.2f}", f"{c['compiled_ms']:.2f}",
+                          f"{c['speedup']:.2f}", f"{c['compile_cold_s']:.1f}", f"{c['compile_cached_s']:.1f}"]
+                         for c in result["compile"]])
+    if "eval_throughput" in result:
+        e = result["eval_throughput"]
+        lines += ["", "## Evaluation throughput", "",
+                  f"{e['episodes']} umaze episodes at NFE {e['nfe']} in {e['seconds']:.1f} s, planning, rollouts "
+                  f"and the straight-line floor included ({e['plan_ms_per_plan']:.2f} ms per plan; run {e['run']}, "
+                  f"score {e['score_minari']['mean']:.1f} ± {e['score_minari']['se']:.1f})."]
+    if "score_per_budget" in result:
+        lines += format_budget(result["score_per_budget"])
+    return "\n".join(lines) + "\n"
+
+
+def format_budget(s: dict) -> list[str]:
+    budgets = sorted({b["budget"] for b in s["best"]})
+    rows = sorted(dict.fromkeys((b["run"], b["step"]) for b in s["best"]), key=lambda r: r[1])
+    method = {b["run"]: b["method"] for b in s["best"]}
+    shared = {m for m in method.values() if list(method.values()).count(m) > 1}
+    label = {run: f"{m} ({Path(run).name})" if m in shared else m for run, m in method.items()}
+    lines = ["", "## Score per planning budget", "",
+             f"Normalized score (Minari convention, mean ± standard error over {s['episodes']} test episodes, "
+             f"task seed {s['test_seed']}) of the best setting within K network calls per plan: NFE <= K and, "
+             "for DDPM, both samplers (ancestral strided and DDIM eta 0), chosen on other, validation episodes "
+             f"(task seed {s['selection_seed']}); in brackets the chosen NFE and sampler.", ""]
+    body = []
+    for run, step in rows:  # one block per training budget, runs in their given order
+        by_k = {b["budget"]: b for b in s["best"] if (b["run"], b["step"]) == (run, step)}
+        body.append([label[run], step, f"{by_k[budgets[0]]['train_minutes']:.1f}",
+                      *(f"{by_k[k]['score_minari']['mean']:.1f} ± {by_k[k]['score_minari']['se']:.1f} "
+                        f"({by_k[k]['nfe']}, {by_k[k]['sampler']})" for k in budgets)])
+    lines += table(["method", "train steps", "train min", *(f"K = {k}" for k in budgets)], body)
+    floor = next(e for e in s["evaluations"] if e["split"] == "test")["floor_line_minari"]
+    lines += ["", f"No network (the straight line tracked by the controller, same episodes): "
+                  f"{floor['mean']:.1f} ± {floor['se']:.1f}."]
+    steps_per_run = {label[r]: {st for rr, st in rows if rr == r} for r in method}
+    if len({frozenset(v) for v in steps_per_run.values()}) > 1:
+        steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_run.items())
+        lines += ["", f"**Unequal training budgets** (steps): {steps}; compare with care."]
+    return lines

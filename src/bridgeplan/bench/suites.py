@@ -1,0 +1,258 @@
+"""What the bench measures, one function per figure. Networks, priors, planners, windows, optimizers
+and evaluations are built through the same functions as training and evaluation (``runs``,
+``train``, ``evaluate``), so the bench times what users run."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bridgeplan.bench.harness import (
+    busy_cores,
+    empty_inductor_cache,
+    interleaved_ratios,
+    median_seconds,
+    timed,
+)
+from bridgeplan.config import TrainConfig, preset_config
+from bridgeplan.planner import Planner
+from bridgeplan.processes import DDPM, Bridge
+from bridgeplan.runs import build_model, build_planner, build_prior_net, windows_of
+from bridgeplan.trajectory import TRANSITION_DIM
+
+DIFFUSION_STEPS = 16
+"""N of the untrained networks timed here (the ``cpu-small`` default); timings depend on NFE, not on N."""
+
+
+def small_windows(horizon: int):
+    """Windows of a small freshly generated umaze stream, and their normalizer (as training fits it)."""
+    from bridgeplan.data.datasets import stream_from_generated
+    from bridgeplan.data.generate import generate_stream
+    from bridgeplan.maze.layouts import get_maze
+
+    stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), 20 * horizon, seed=0)])
+    return windows_of(stream, horizon)
+
+
+def method_configs(preset: str) -> dict[str, TrainConfig]:
+    """One config per method timed: DDPM with each sampler, the bridge from each prior."""
+    base = preset_config("umaze", preset)
+    out = {}
+    for sampler in DDPM.samplers:
+        out[f"DDPM [{sampler}]"] = dataclasses.replace(base, process=DDPM(DIFFUSION_STEPS, sampler=sampler))
+    for prior in ("gaussian", "line", "learned"):
+        config = dataclasses.replace(base, process=Bridge(DIFFUSION_STEPS), prior=prior)
+        out[config.label()] = config
+    return out
+
+
+def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device) -> dict[str, Planner]:
+    """Every method's planner around one (untrained) network; the learned prior's net is untrained too."""
+    configs = method_configs(preset)
+    prior_net = build_prior_net(next(iter(configs.values())).horizon).to(device).eval()
+    return {name: build_planner(c, model, normalizer, device, prior_net=prior_net) for name, c in configs.items()}
+
+
+def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.repeat([[0.9, -0.9, 0.0, 0.0]], batch, 0), np.repeat([[-1.0, 1.0]], batch, 0)
+
+
+def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device) -> list[dict]:
+    """Milliseconds per plan call (whole batch) vs NFE, per method; prior sampling time shown separately."""
+    config = preset_config("umaze", preset)
+    model = build_model(config).to(dev).eval()
+    _, normalizer = small_windows(config.horizon)
+    rows = []
+    for name, planner in planners(preset, model, normalizer, dev).items():
+        for batch in batch_sizes:
+            starts, goals = _tasks(batch)
+            cond = planner.conditions(starts, goals)
+            gen = torch.Generator(device=dev).manual_seed(0)
+            with torch.inference_mode():
+                prior_s = median_seconds(lambda: planner.prior.sample(cond, config.horizon, batch, gen), repeats, dev)
+            for nfe in (n for n in nfes if n <= planner.process.max_nfe):
+                plan_s = median_seconds(lambda: planner.plan(starts, goals, nfe, gen), repeats, dev)
+                rows.append({"preset": preset, "method": name, "batch": batch, "nfe": nfe,
+                             "plan_ms": 1000 * plan_s, "prior_ms": 1000 * prior_s})
+    return rows
+
+
+def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device) -> dict:
+    """Plan at NFE 1 over one bare forward pass of the same network on an input of the same shape."""
+    config = preset_config("umaze", preset)
+    model = build_model(config).to(dev).eval()
+    _, normalizer = small_windows(config.horizon)
+    x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+    t = torch.zeros(batch, device=dev)
+    starts, goals = _tasks(batch)
+    gen = torch.Generator(device=dev).manual_seed(0)
+
+    def forward():
+        with torch.inference_mode():
+            model(x, t)
+
+    fns = {"forward": forward} | {name: (lambda p=p: p.plan(starts, goals, 1, gen))
+                                  for name, p in planners(preset, model, normalizer, dev).items()}
+    ratios = interleaved_ratios(fns, "forward", rounds, dev)
+    return {"preset": preset, "batch": batch, "forward_ms": ratios.pop("forward_ms"), "plan_nfe1_over_forward": ratios}
+
+
+def _train_step(config: TrainConfig, dev: torch.device):
+    """``(step, bare_step)``: one optimizer step of the training loop (``TrainJob``'s own: window sampling,
+    prior sample, process loss, EMA update) and a bare step with as many forward+backward passes (an MSE
+    of the same network on a batch already on the device) before its one Adam step."""
+    from bridgeplan.train import make_ema, make_optimizer, planner_job
+
+    windows, normalizer = small_windows(config.horizon)
+    job = planner_job(config, normalizer, dev)
+    model = job.model.train()
+    opt = make_optimizer(model, config.lr)
+    ema = make_ema(model)
+    gen = torch.Generator(device=dev).manual_seed(0)
+    step = config.ema_start  # past the EMA's warm-up copy: the steady state of a long run
+    x = windows.batch(torch.arange(config.batch_size)).to(dev)
+    t = torch.zeros(config.batch_size, device=dev)
+
+    def bare_step():
+        for _ in range(config.grad_accum):
+            ((model(x, t) - x) ** 2).mean().backward()
+        opt.step()
+        opt.zero_grad(set_to_none=True)
+
+    def train_step():
+        nonlocal step
+        job.accumulate_gradients(windows, gen, dev)
+        step += 1
+        job.apply_gradients(opt, ema, step)
+
+    return train_step, bare_step
+
+
+def train_overhead(preset: str, rounds: int, dev: torch.device) -> dict:
+    """The training loop's optimizer step over a bare step (see ``_train_step``)."""
+    config = preset_config("umaze", preset)
+    train_step, bare_step = _train_step(config, dev)
+    ratios = interleaved_ratios({"bare": bare_step, "train": train_step}, "bare", rounds, dev)
+    return {"preset": preset, "batch": config.batch_size, "grad_accum": config.grad_accum,
+            "bare_train_step_ms": ratios["bare_ms"], "train_step_ms": ratios["bare_ms"] * ratios["train"],
+            "train_step_over_bare": ratios["train"]}
+
+
+def busy_core_training(preset: str, steps: int, dev: torch.device) -> dict:
+    """Training steps per second, quiet and with one core kept busy by another process, at one thread
+    (the default, ``device.configure_threads``) and at one thread per core (torch's own default).
+
+    ``busy_over_quiet_1thread`` is the figure the thread default is chosen by: the rate with one core
+    busy and the default threads over the quiet single-thread rate.
+    """
+    config = preset_config("umaze", preset)
+    train_step, _ = _train_step(config, dev)
+    cores = os.cpu_count() or 1
+    before = torch.get_num_threads()
+    rates = {}
+    try:
+        for busy in (0, 1):
+            with busy_cores(busy):
+                for threads in sorted({1, cores}):
+                    torch.set_num_threads(threads)
+                    train_step()  # warm-up at this thread count
+                    t0 = time.perf_counter()
+                    for _ in range(steps):
+                        train_step()
+                    rates[f"{'busy' if busy else 'quiet'}_{threads}thread"] = steps / (time.perf_counter() - t0)
+    finally:
+        torch.set_num_threads(before)
+    return {"preset": preset, "cores": cores, "steps": steps, "steps_per_s": rates,
+            "busy_over_quiet_1thread": rates["busy_1thread"] / rates["quiet_1thread"],
+            f"busy_{cores}thread_over_quiet_1thread": rates[f"busy_{cores}thread"] / rates["quiet_1thread"]}
+
+
+def compile_speedup(preset: str, batch_sizes, rounds: int, dev: torch.device) -> list[dict]:
+    """Forward pass of ``torch.compile(model)`` against the eager model, and what compiling costs.
+
+    Each shape is compiled twice against an inductor cache that starts empty: cold, then again after
+    ``torch._dynamo.reset()`` from what the first compile cached (what a later ``eval --compile`` on the
+    same machine pays). The steady-state times are interleaved rounds, like the overhead ratios.
+    """
+    config = preset_config("umaze", preset)
+    model = build_model(config).to(dev).eval()
+    rows = []
+    with empty_inductor_cache(), torch.inference_mode():
+        for batch in batch_sizes:
+            x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+            t = torch.zeros(batch, device=dev)
+            first_call_s = {}
+            for cache in ("cold", "cached"):
+                torch._dynamo.reset()
+                compiled = torch.compile(model)
+                first_call_s[cache] = timed(lambda: compiled(x, t), dev)  # the first call compiles
+            max_diff = float((compiled(x, t) - model(x, t)).abs().max())
+            ratios = interleaved_ratios({"compiled": lambda: compiled(x, t), "eager": lambda: model(x, t)},
+                                        "compiled", rounds, dev)
+            rows.append({"preset": preset, "batch": batch, "eager_ms": ratios["compiled_ms"] * ratios["eager"],
+                         "compiled_ms": ratios["compiled_ms"], "speedup": ratios["eager"],
+                         "compile_cold_s": first_call_s["cold"], "compile_cached_s": first_call_s["cached"],
+                         "max_abs_diff": max_diff})
+    torch._dynamo.reset()
+    return rows
+
+
+def eval_throughput(run: str, device: str) -> dict:
+    """Wall time of ``bridgeplan eval RUN --episodes 200 --nfe 1``, loading, planning, rollouts and floors."""
+    from bridgeplan.evaluate import evaluate
+
+    t0 = time.perf_counter()
+    result = evaluate(Path(run), episodes=200, nfe=1, device=device)
+    return {"run": run, "episodes": 200, "nfe": 1, "seconds": time.perf_counter() - t0,
+            "plan_ms_per_plan": result.plan_ms_per_plan, "score_minari": result.score("minari")}
+
+
+def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection_seed: int = 1,
+                     test_seed: int = 0) -> dict:
+    """Each run (at each of ``steps``, its EMA snapshots, or its latest checkpoint) at every budget K.
+
+    The NFE and sampler are chosen on validation tasks (``selection_seed``): per run, step and K, the
+    setting with the best mean Minari score among NFE <= K (every sampler the process has). The chosen
+    setting is then scored on other, test tasks (``test_seed``): ``best`` reports that test score,
+    never the selection's own. Each snapshot is loaded once; the floors are computed once per run.
+    """
+    from bridgeplan.evaluate import evaluate_planner, floors, make_tasks
+    from bridgeplan.runs import load_planner
+
+    evals, best = [], []
+    for run in runs:
+        for snapshot in steps or (None,):
+            planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
+            tasks = {split: make_tasks(info.config.maze, episodes, seed)
+                     for split, seed in (("validation", selection_seed), ("test", test_seed))}
+            run_floors = {split: floors(planner, t) for split, t in tasks.items()}
+            method = planner.process.label(planner.prior.name)
+            scored = {}
+            for sampler in planner.process.samplers or (None,):
+                sampled = planner.with_sampler(sampler) if sampler else planner
+                for nfe in (k for k in budgets if k <= planner.process.max_nfe):
+                    for split in tasks:
+                        r = evaluate_planner(sampled, tasks[split], nfe, run=info,
+                                             precomputed_floors=run_floors[split])
+                        scored[(sampler, nfe, split)] = r
+                        evals.append({"method": method, "run": run, "step": info.step, "split": split,
+                                      "train_minutes": info.elapsed_seconds / 60, "nfe": nfe,
+                                      "sampler": sampler or "-", "score_minari": r.score("minari"),
+                                      "score_d4rl": r.score("d4rl"), "success_rate": r.scores["success_rate"]["mean"],
+                                      "plan_ms_per_plan": r.plan_ms_per_plan,
+                                      "floor_line_minari": r.floors["floor_line"]["score"]["minari"]})
+            for k in budgets:
+                within = [key for key in scored if key[2] == "validation" and key[1] <= k]
+                sampler, nfe, _ = max(within, key=lambda key: scored[key].score("minari")["mean"])
+                test = scored[(sampler, nfe, "test")]
+                best.append({"method": method, "run": run, "budget": k, "nfe": nfe, "sampler": sampler or "-",
+                             "step": info.step, "train_minutes": info.elapsed_seconds / 60,
+                             "validation_score_minari": scored[(sampler, nfe, "validation")].score("minari"),
+                             "score_minari": test.score("minari")})
+    return {"episodes": episodes, "selection_seed": selection_seed, "test_seed": test_seed,
+            "evaluations": evals, "best": best}

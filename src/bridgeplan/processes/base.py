@@ -1,0 +1,47 @@
+"""What every process shares: serialization, its name in tables and run names, and which of its
+fields only change how it is sampled (not what is trained)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+from bridgeplan.errors import BridgeplanError
+
+
+class Process:
+    """Base of the frozen process dataclasses (``DDPM``, ``Bridge``, ...)."""
+
+    name: ClassVar[str]
+    """Registry key and the ``--process`` value."""
+    display_name: ClassVar[str]
+    """How tables and figures call the method."""
+    uses_prior: ClassVar[bool] = True
+    """False: the process always starts from N(0, I) (DDPM); True: from the run's prior."""
+    sampling_fields: ClassVar[tuple[str, ...]] = ()
+    """Fields that choose how a trained model is sampled; changing them needs no retraining."""
+    samplers: ClassVar[tuple[str, ...]] = ()
+    """Samplers ``with_sampler`` accepts (empty: the process has one way to sample)."""
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
+        return {"name": self.name, **dataclasses.asdict(self)}
+
+    def variant(self) -> dict:
+        """Training fields that differ from their defaults, ``steps`` aside (it is always named)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name != "steps" and f.name not in self.sampling_fields and getattr(self, f.name) != f.default}
+
+    def label(self, prior: str) -> str:
+        """The method's name in tables: ``DDPM``, ``bridge (line)``, ``bridge (line; beta_max=0.3)``."""
+        inside = ([prior] if self.uses_prior else []) + [f"{k}={v}" for k, v in self.variant().items()]
+        return f"{self.display_name} ({'; '.join(inside)})" if inside else self.display_name
+
+    def run_tag(self, prior: str) -> list[str]:
+        """The parts of a run's name that say what was trained: ``[bridge, line, N16, beta_max0.3]``."""
+        tag = [self.name] + ([prior] if self.uses_prior else []) + [f"N{self.steps}"]
+        return tag + [k if v is True else f"{k}{v}" for k, v in self.variant().items()]
+
+    def with_sampler(self, sampler: str, eta: float = 0.0) -> Process:
+        """The same trained process sampled another way; only processes with samplers to choose have it."""
+        raise BridgeplanError(f"--sampler applies to ddpm runs, not to {self.name}")
