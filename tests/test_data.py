@@ -13,13 +13,13 @@ from bridgeplan.data.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
 from bridgeplan.data.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
 from bridgeplan.data.generate import generate_stream, generate_streams
 from bridgeplan.data.info import summarize
-from bridgeplan.normalizer import Normalizer
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.data.windows import WindowDataset, window_starts
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.expert import WaypointExpert
 from bridgeplan.maze.layouts import GOAL_RADIUS, get_maze
 from bridgeplan.maze.rollout import rollout
+from bridgeplan.normalizer import Normalizer
 
 UMAZE = get_maze("umaze")
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from bridgeplan.normalizer import Normalizer
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
+from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import (
     MAX_SPEED,
     PRIORS,
