@@ -9,6 +9,8 @@ import pytest
 
 from bridgeplan.cli import main
 from bridgeplan.data.datasets import CACHE_NAME
+from bridgeplan.data.generate import DATA_VERSION
+from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
 
 
 def _error(capsys, argv) -> str:
@@ -30,6 +32,7 @@ def test_generate_info_force(tmp_path, capsys):
     assert main(["data", "info", str(out), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["maze"] == "umaze" and info["transitions"] == 1500 and info["segments"] == 1
+    assert info["data_version"] == DATA_VERSION and 0.2 < info["actions_at_bounds"] < 0.5
     before = sorted(p.name for p in out.rglob("*"))
     line = _error(capsys, ["data", "generate", "--maze", "umaze", "--steps", "10", "--out", str(out),
                            "--no-progress"])
@@ -93,3 +96,23 @@ def test_reference_commands(capsys):
     line = _error(capsys, ["reference", "measure", "--episodes", "0"])
     assert line == "error: --episodes must be positive, got 0"
     assert "unknown maze" in _error(capsys, ["reference", "measure", "--maze", "x"])
+
+
+def test_info_on_an_old_dataset(tiny_dataset, tmp_path, capsys):
+    """A dataset of the generator before data versions: info works, with one warning line on stderr."""
+    old = tmp_path / "old"
+    shutil.copytree(tiny_dataset, old)
+    (old / CACHE_NAME).unlink()
+    meta = json.loads((old / METADATA_FILE).read_text())
+    del meta[VERSION_KEY]
+    (old / METADATA_FILE).write_text(json.dumps(meta))
+    capsys.readouterr()
+    assert main(["data", "info", str(old), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["data_version"] == 1
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"warning: {old} was made by an older bridgeplan data")
+    assert main(["data", "info", str(old)]) == 0
+    captured = capsys.readouterr()
+    assert "data_version: 1" in captured.out and "actions_at_bounds:" in captured.out
+    assert len(captured.err.strip().splitlines()) == 1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import h5py
@@ -11,12 +12,13 @@ import torch
 
 from bridgeplan.data.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
 from bridgeplan.data.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
-from bridgeplan.data.generate import generate_stream, generate_streams
+from bridgeplan.data.generate import DATA_VERSION, _plan, generate_stream, generate_streams
 from bridgeplan.data.info import summarize
+from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.data.windows import WindowDataset, window_starts
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import WaypointExpert
+from bridgeplan.maze.expert import D_GAIN, P_GAIN, WAYPOINT_RADIUS, WaypointExpert, noisy_action, pd_action, waypoints
 from bridgeplan.maze.layouts import GOAL_RADIUS, get_maze
 from bridgeplan.maze.rollout import rollout
 from bridgeplan.normalizer import Normalizer
@@ -35,7 +37,7 @@ def test_generated_stream_follows_the_recipe(umaze_stream):
     np.testing.assert_array_equal(s.observations, again.observations)
     assert not np.array_equal(s.actions, generate_stream(UMAZE, 4000, seed=12).actions)
     assert s.observations.shape == (4001, 4) and s.actions.shape == (4000, 2)
-    assert np.abs(s.actions).max() <= 1.0 and np.abs(s.actions).max() == 1.0  # noise then clip
+    assert np.abs(s.actions).max() <= 1.0 and np.abs(s.actions).max() == 1.0  # clipped
     assert not continuity_breaks(s.observations).any()  # one physically continuous stretch
     assert UMAZE.is_free_xy(s.observations[:, :2]).all()
     # a new episode (goal) starts exactly when the goal was reached
@@ -60,6 +62,79 @@ def test_generator_runs_the_expert_and_the_sim():
     result = rollout(UMAZE, lambda t, obs: expert(obs), s.observations[:1, :2], s.goals[:1], steps=steps)
     np.testing.assert_allclose(result.states[0], s.observations[:steps + 1], atol=1e-12)
     np.testing.assert_allclose(result.actions[0], s.actions[:steps], atol=1e-12)
+
+
+def test_noisy_action_law():
+    """Minari's order: clip the PD output, add the noise, clip again."""
+    assert noisy_action(5.0, -0.3) == pytest.approx(0.7)  # noise first would give clip(4.7) = 1
+    assert noisy_action(-3.0, 0.5) == pytest.approx(-0.5)
+    assert noisy_action(0.2, 0.1) == pytest.approx(0.3)
+    assert noisy_action(0.9, 0.5) == 1.0 and noisy_action(-0.9, -0.5) == -1.0
+    # the batched expert draws the same law: a PD output of 10 (one cell from its waypoint, at rest)
+    # moves inward by E max(0, -n) = 0.5 * 0.5 * sqrt(2 / pi) = 0.1995 on average
+    n = 20_000
+    start, goal = UMAZE.cell_to_xy(np.array([3, 1])), UMAZE.eval_goal_xy
+    expert = WaypointExpert(UMAZE, action_noise=0.5, rng=0)
+    expert.plan(np.repeat(start[None], n, axis=0), np.repeat(goal[None], n, axis=0))
+    obs = np.repeat(np.concatenate([start, [0.0, 0.0]])[None], n, axis=0)
+    raw = pd_action(expert.current, obs)
+    assert np.allclose(raw[:, 0], 10.0) and np.allclose(raw[:, 1], 0.0)
+    actions = expert(obs)
+    assert abs(np.mean(1.0 - actions[:, 0]) - 0.1995) < 0.02
+    assert abs(np.mean(actions[:, 0] == 1.0) - 0.5) < 0.03
+
+
+def test_first_waypoint_is_not_jittered():
+    """Minari's controller heads for the exact centre of the next cell after planning; only the
+    waypoints it moves on to are shifted by -U(0, 0.2), and the goal is the goal."""
+    start, goal = UMAZE.cell_to_xy(np.array([3, 1])), UMAZE.eval_goal_xy + 0.1
+    centres = UMAZE.cell_to_xy(np.array([(3, 2), (3, 3), (2, 3), (1, 3), (1, 2)], dtype=np.float64))
+    points = np.stack([waypoints(UMAZE, start, goal, 0.2, np.random.default_rng(k)) for k in range(200)])
+    assert points.shape == (200, 6, 2)
+    np.testing.assert_array_equal(points[:, 0], np.broadcast_to(centres[0], (200, 2)))
+    shift = centres[None, 1:] - points[:, 1:-1]
+    assert shift.min() >= 0.0 and shift.max() <= 0.2 and abs(shift.mean() - 0.1) < 0.01
+    np.testing.assert_array_equal(points[:, -1], np.broadcast_to(goal, (200, 2)))
+
+
+def _first_waypoint_steps(s):
+    """``(PD output, applied action)`` components of every step before an episode's first waypoint
+    switch: there the waypoint is known exactly (the unjittered first one), so the PD output is too."""
+    raws, acts = [], []
+    ends = [*s.episode_starts[1:].tolist(), len(s)]
+    for lo, hi, goal in zip(s.episode_starts.tolist(), ends, s.goals):
+        path = _plan(UMAZE, *s.observations[lo, :2], tuple(goal), 0.0, None)
+        w = np.asarray(path[0])
+        obs = s.observations[lo:hi]
+        if len(path) > 1:  # the generator moves on at the first step within WAYPOINT_RADIUS
+            near = np.flatnonzero(np.linalg.norm(obs[:, :2] - w, axis=1) <= WAYPOINT_RADIUS)
+            obs = obs[:near[0]] if len(near) else obs
+        raws.append(P_GAIN * (w - obs[:, :2]) + D_GAIN * obs[:, 2:])
+        acts.append(s.actions[lo:lo + len(obs)])
+    return np.concatenate(raws).ravel(), np.concatenate(acts).ravel()
+
+
+def test_generated_actions_follow_minari_order():
+    """The generator's applied actions against Minari's procedure (clip, + N(0, 0.5^2), clip) simulated
+    directly on the same PD outputs. Noise added to the raw output and clipped once (the old order)
+    puts 57 % of the components at the bounds (Minari: 34 %) and moves a saturated one (PD output
+    >= 2 in size) by 0.004 on average (Minari: 0.1995)."""
+    s = generate_stream(UMAZE, 20_000, seed=3)
+    # whatever the states: P(|a| = 1 | PD output) <= P(n >= 0) + P(n <= -2) = 0.50003
+    assert np.mean(np.abs(s.actions) == 1.0) < 0.5
+    raw, applied = _first_waypoint_steps(s)
+    clipped = np.clip(raw, -1.0, 1.0)
+    minari = np.clip(clipped + np.random.default_rng(0).normal(0.0, 0.5, raw.shape), -1.0, 1.0)
+    saturated = np.abs(raw) >= 2.0
+    assert raw.size > 15_000 and saturated.sum() > 5_000
+    assert abs(np.mean(np.abs(applied) == 1.0) - np.mean(np.abs(minari) == 1.0)) < 0.03
+    moved = np.abs(applied - clipped)[saturated]
+    assert abs(moved.mean() - 0.1995) < 0.02
+    assert abs(moved.mean() - np.abs(minari - clipped)[saturated].mean()) < 0.02
+    # the noise seen where neither bound is touched: centred, sd 0.5 (truncated), as Minari's
+    inside, minari_inside = np.abs(applied) < 1.0, np.abs(minari) < 1.0
+    assert abs(np.mean((applied - clipped)[inside]) - np.mean((minari - clipped)[minari_inside])) < 0.02
+    assert abs(np.std((applied - clipped)[inside]) - np.std((minari - clipped)[minari_inside])) < 0.02
 
 
 def test_parallel_workers_give_independent_continuous_streams():
@@ -97,6 +172,8 @@ def test_minari_round_trip_and_cache(tmp_path, monkeypatch):
         np.testing.assert_array_equal(s.actions, expected.actions)
         assert s.segment_starts.tolist() == [0]  # goal changes do not split the stream
         assert (s.episodes, s.goals_reached) == (expected.episodes, expected.goals_reached)
+        assert s.data_version == expected.data_version == DATA_VERSION
+    assert json.loads((out / METADATA_FILE).read_text())[VERSION_KEY] == DATA_VERSION
     # the dataset is a real Minari dataset with its environments
     import minari
 
@@ -136,6 +213,11 @@ def test_summary(tiny_dataset):
     assert info["episodes"] == info["goals_reached"] + 1 or info["episodes"] == info["goals_reached"]
     assert info["free_cells_visited"] == 1.0  # a fraction of the free cells
     assert all(-1.0 <= v <= 1.0 for v in info["action_min"] + info["action_max"])
+    assert info["data_version"] == DATA_VERSION
+    stream = _two_segment_stream()
+    stream.actions[:5] = [[1.0, 0.0], [-1.0, -1.0], [0.3, 1.0], [0.999, -0.2], [1.0, 1.0]]
+    assert summarize(stream)["actions_at_bounds"] == 0.06  # 6 of the 100 components (the rest uniform)
+    assert summarize(stream)["data_version"] is None
 
 
 def _two_segment_stream() -> Stream:
@@ -198,6 +280,7 @@ def test_d4rl_reader(tmp_path, umaze_stream):
     _write_d4rl(path, s, UMAZE, stale_after=goal_steps)
     stream = read_d4rl(path)
     assert stream.maze == "umaze" and len(stream) == len(s)
+    assert stream.data_version is None  # not ours
     assert stream.goals_reached == 3
     # the rows come back in gymnasium-robotics coordinates (float32 precision)
     keep = np.ones(len(stream), dtype=bool)
@@ -301,3 +384,47 @@ def test_legacy_d4rl_hand_made_file(tmp_path):
     truncated.write_bytes(path.read_bytes()[:200])
     with pytest.raises(BridgeplanError, match="truncated"):
         load_stream(truncated)
+
+
+def _stderr_lines(capsys) -> list[str]:
+    return capsys.readouterr().err.strip().splitlines()
+
+
+def test_old_datasets_warn_once_per_load(tiny_dataset, tmp_path, capsys):
+    """Our datasets from before data versions (or of an older one) load with one warning line naming them;
+    current ones and official Minari ones load silently."""
+    old = tmp_path / "old"
+    shutil.copytree(tiny_dataset, old)
+    capsys.readouterr()
+    assert load_stream(old).data_version == DATA_VERSION and _stderr_lines(capsys) == []
+    # as the previous version left it: no version in the metadata, a version-1 cache without one
+    meta = json.loads((old / METADATA_FILE).read_text())
+    del meta[VERSION_KEY]
+    (old / METADATA_FILE).write_text(json.dumps(meta))
+    stream = load_stream(old, use_cache=False)
+    stat = (old / "data" / "main_data.hdf5").stat()
+    np.savez(old / CACHE_NAME, stamp=np.array([1, stat.st_size, stat.st_mtime_ns]), maze="umaze",
+             states=stream.states, actions=stream.actions, segment_starts=stream.segment_starts,
+             episodes=stream.episodes, goals_reached=stream.goals_reached, source=str(old))
+    capsys.readouterr()
+    for _ in range(2):  # from the hdf5 (the old cache is rebuilt), then from the new cache
+        assert load_stream(old).data_version == 1
+        lines = _stderr_lines(capsys)
+        assert len(lines) == 1 and lines[0].startswith(f"warning: {old} was made by an older bridgeplan data "
+                                                       f"generator (data version 1;")
+        assert "regenerate it with `bridgeplan data generate`" in lines[0]
+    with np.load(old / CACHE_NAME) as z:
+        assert int(z["stamp"][0]) == 2 and int(z["data_version"]) == 1
+    # an older recorded version
+    meta[VERSION_KEY] = DATA_VERSION - 1
+    (old / METADATA_FILE).write_text(json.dumps(meta))
+    assert load_stream(old, use_cache=False).data_version == DATA_VERSION - 1
+    assert len(_stderr_lines(capsys)) == 1
+    # someone else's Minari dataset (an official D4RL/pointmaze one) has no bridgeplan version: no warning
+    del meta[VERSION_KEY]
+    meta["author"] = ["Rodrigo de Lazcano"]
+    (old / METADATA_FILE).write_text(json.dumps(meta))
+    (old / CACHE_NAME).unlink()
+    for _ in range(2):
+        assert load_stream(old).data_version is None
+    assert _stderr_lines(capsys) == []

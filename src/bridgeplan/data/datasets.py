@@ -3,20 +3,23 @@
 ``load_stream(path_or_id)`` is the one entry point for training. It accepts our dataset directories,
 official Minari ``D4RL/pointmaze/*`` datasets (by directory or id) and legacy D4RL ``maze2d-*.hdf5``
 files, and goes through a flat ``.npz`` cache next to the source (states, actions, segment starts,
-maze, source), valid while the source file keeps its size and modification time.
+maze, source, data version), valid while the source file keeps its size and modification time. A
+dataset of ours made by an older generator (:data:`~bridgeplan.data.generate.DATA_VERSION`) loads with
+a one-line warning on stderr.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from bridgeplan.data.d4rl_io import read_d4rl
-from bridgeplan.data.generate import generate_streams
+from bridgeplan.data.generate import DATA_VERSION, generate_streams
 from bridgeplan.data.minari_io import (
     DATA_FILE,
     read_minari,
@@ -28,7 +31,8 @@ from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import get_maze
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
+"""2: the cache records the data version (a version-1 cache is rebuilt from its source)."""
 CACHE_NAME = "bridgeplan-cache.npz"
 DATASETS_ENV = "BRIDGEPLAN_DATASETS"
 """Environment variable: the default root of generated datasets (default ``datasets`` in the cwd)."""
@@ -45,7 +49,7 @@ def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
     return Stream(maze_name, np.concatenate([s.observations[:-1] for s in streams]),
                   np.concatenate([s.actions for s in streams]), starts,
                   episodes=sum(len(s.episode_starts) for s in streams),
-                  goals_reached=sum(s.goals_reached for s in streams), source=source)
+                  goals_reached=sum(s.goals_reached for s in streams), source=source, data_version=DATA_VERSION)
 
 
 def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Path | None = None,
@@ -108,7 +112,8 @@ def write_cache(source: Path, cache: Path, stream: Stream) -> bool:
         with open(tmp, "wb") as f:
             np.savez(f, stamp=_stamp(source), maze=stream.maze, states=stream.states, actions=stream.actions,
                      segment_starts=stream.segment_starts, episodes=stream.episodes,
-                     goals_reached=stream.goals_reached, source=stream.source)
+                     goals_reached=stream.goals_reached, source=stream.source,
+                     data_version=-1 if stream.data_version is None else stream.data_version)  # npz: no None
         os.replace(tmp, cache)
         return True
     except OSError:
@@ -124,8 +129,9 @@ def read_cache(source: Path, cache: Path) -> Stream | None:
         with np.load(cache, allow_pickle=False) as z:
             if not np.array_equal(z["stamp"], _stamp(source)):
                 return None
+            version = int(z["data_version"])
             return Stream(str(z["maze"]), z["states"], z["actions"], z["segment_starts"], int(z["episodes"]),
-                          int(z["goals_reached"]), str(z["source"]))
+                          int(z["goals_reached"]), str(z["source"]), None if version < 0 else version)
     except (OSError, ValueError, KeyError, EOFError):
         return None  # a broken cache is rebuilt
 
@@ -135,13 +141,15 @@ def load_stream(path_or_id: str | Path, maze: str | None = None, use_cache: bool
     the flat-array cache. ``maze`` overrides the maze named by the dataset (needed for a D4RL file
     whose name and data do not tell it)."""
     kind, source, cache = _source(str(path_or_id))
-    if use_cache:
-        stream = read_cache(source, cache)
-        if stream is not None and (maze is None or get_maze(maze).name == stream.maze):
-            return stream
-    if not source.exists():
-        raise BridgeplanError(f"{source} is missing: the dataset is incomplete")
-    stream = read_minari(source.parent.parent, maze) if kind == "minari" else read_d4rl(source, maze)
-    if use_cache:
-        write_cache(source, cache, stream)
+    stream = read_cache(source, cache) if use_cache else None
+    if stream is None or (maze is not None and get_maze(maze).name != stream.maze):
+        if not source.exists():
+            raise BridgeplanError(f"{source} is missing: the dataset is incomplete")
+        stream = read_minari(source.parent.parent, maze) if kind == "minari" else read_d4rl(source, maze)
+        if use_cache:
+            write_cache(source, cache, stream)
+    if stream.data_version is not None and stream.data_version < DATA_VERSION:
+        print(f"warning: {path_or_id} was made by an older bridgeplan data generator (data version "
+              f"{stream.data_version}; version {DATA_VERSION} follows Minari's recipe): regenerate it with "
+              f"`bridgeplan data generate`", file=sys.stderr)
     return stream

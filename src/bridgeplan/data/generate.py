@@ -4,7 +4,8 @@ Continuing task: a goal is drawn (a random free cell plus U(-0.25, 0.25) noise);
 mass comes within 0.45 of it, a new goal is drawn the same way (again if it lies within 0.45 of the
 point mass), a new episode starts there and the simulator goes on. The waypoint controller of
 :mod:`bridgeplan.maze.expert` replans from the current cell at every goal change, with waypoint
-jitter -U(0, 0.2) and N(0, 0.5^2) action noise added to the PD output before clipping.
+jitter -U(0, 0.2) (all waypoints but the first and the last) and N(0, 0.5^2) action noise added to
+the clipped PD output, clipped again (:func:`bridgeplan.maze.expert.noisy_action`).
 
 The per-step loop runs on a single ``MjData`` with plain Python floats (no per-step arrays):
 about 70 k steps/s on one core. ``workers > 1`` generates independently seeded streams in parallel
@@ -24,12 +25,26 @@ import mujoco
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import ACTION_NOISE, D_GAIN, P_GAIN, WAYPOINT_JITTER, WAYPOINT_RADIUS, waypoints
+from bridgeplan.maze.expert import (
+    ACTION_NOISE,
+    D_GAIN,
+    P_GAIN,
+    WAYPOINT_JITTER,
+    WAYPOINT_RADIUS,
+    noisy_action,
+    waypoints,
+)
 from bridgeplan.maze.layouts import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
 from bridgeplan.maze.sim import MAX_SPEED, point_maze_model
 
 CHUNK = 4096
 """Action noise is drawn (and progress reported) in chunks of this many steps."""
+DATA_VERSION = 2
+"""Version of the generator's recipe, recorded in every dataset it writes. 2: Minari's action law
+(clip the PD output, add the noise, clip again) and an unjittered first waypoint after each replan.
+Datasets written before versions were recorded count as 1: the generator before commit 9d75660 already
+clipped twice, the one from 9d75660 added the noise to the raw PD output and clipped once; both jittered
+the first waypoint."""
 
 
 @dataclass
@@ -115,7 +130,7 @@ def generate_stream(maze: Maze, steps: int, seed: int | np.random.SeedSequence, 
     qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
     vx = vy = 0.0
     obs[0] = (x, y, vx, vy)
-    step, hypot = mujoco.mj_step, math.hypot
+    step, hypot, noisy = mujoco.mj_step, math.hypot, noisy_action
     for chunk in range(0, steps, CHUNK):
         n = min(CHUNK, steps - chunk)
         noise = rng.normal(0.0, action_noise, size=(n, 2)).tolist() if action_noise > 0 else [(0.0, 0.0)] * n
@@ -123,10 +138,8 @@ def generate_stream(maze: Maze, steps: int, seed: int | np.random.SeedSequence, 
             if idx < last and hypot(wx - x, wy - y) <= WAYPOINT_RADIUS:
                 idx += 1
                 wx, wy = path[idx]
-            ax = P_GAIN * (wx - x) + D_GAIN * vx + nx
-            ay = P_GAIN * (wy - y) + D_GAIN * vy + ny
-            ax = 1.0 if ax > 1.0 else (-1.0 if ax < -1.0 else ax)
-            ay = 1.0 if ay > 1.0 else (-1.0 if ay < -1.0 else ay)
+            ax = noisy(P_GAIN * (wx - x) + D_GAIN * vx, nx)
+            ay = noisy(P_GAIN * (wy - y) + D_GAIN * vy, ny)
             acts[t] = (ax, ay)
             # PointEnv: clip the velocity to [-5, 5], then one mj_step
             qvel[0] = MAX_SPEED if vx > MAX_SPEED else (-MAX_SPEED if vx < -MAX_SPEED else vx)

@@ -3,7 +3,8 @@
 Writer: ``minari.create_dataset_from_buffers`` with the PointMaze env spec (so that
 ``MinariDataset(path).recover_environment()`` works, and ``eval_env=True`` gives the single-task
 evaluation env), one Minari episode per goal, observations as PointMaze's dict
-(``observation``, ``achieved_goal``, ``desired_goal``), truncation at the end of every episode.
+(``observation``, ``achieved_goal``, ``desired_goal``), truncation at the end of every episode, and the
+generator's data version in the metadata (:data:`VERSION_KEY`).
 
 Reader: h5py on Minari's layout (``data/main_data.hdf5`` with ``episode_<k>`` groups,
 ``data/metadata.json``) so that it reads an official ``D4RL/pointmaze/*`` dataset a user downloaded
@@ -22,13 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.data.generate import GeneratedStream
+from bridgeplan.data.generate import DATA_VERSION, GeneratedStream
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import MAZE_NAMES, Maze, get_maze
 
 DATA_FILE = Path("data") / "main_data.hdf5"
 METADATA_FILE = Path("data") / "metadata.json"
+AUTHOR = "bridgeplan"
+VERSION_KEY = "bridgeplan_data_version"
+"""Metadata key of the generator's :data:`~bridgeplan.data.generate.DATA_VERSION`."""
 
 
 def dataset_id_for(maze: Maze) -> str:
@@ -76,10 +80,10 @@ def write_minari_into(directory: Path, streams: list[GeneratedStream], maze: Maz
             minari.create_dataset_from_buffers(
                 dataset_id, list(_episode_buffers(streams, seed)), env=env, eval_env=eval_env,
                 algorithm_name="noisy shortest-path waypoint expert (Minari D4RL/pointmaze recipe)",
-                author="bridgeplan", data_format="hdf5",
+                author=AUTHOR, data_format="hdf5",
                 description=(f"bridgeplan: {total} steps of a noisy waypoint expert in {maze.gym_id}, "
                              f"continuing task with a new random goal when reached (one episode per goal), "
-                             f"{len(streams)} continuous stream(s), seed {seed}"))
+                             f"{len(streams)} continuous stream(s), seed {seed}, data version {DATA_VERSION}"))
     finally:
         if previous is None:
             os.environ.pop("MINARI_DATASETS_PATH", None)
@@ -87,7 +91,11 @@ def write_minari_into(directory: Path, streams: list[GeneratedStream], maze: Maz
             os.environ["MINARI_DATASETS_PATH"] = previous
         env.close()
         eval_env.close()
-    return Path(directory).resolve().joinpath(*dataset_id.split("/"))
+    built = Path(directory).resolve().joinpath(*dataset_id.split("/"))
+    meta = json.loads((built / METADATA_FILE).read_text())
+    meta[VERSION_KEY] = DATA_VERSION  # minari has no argument for extra metadata; it keeps unknown keys
+    (built / METADATA_FILE).write_text(json.dumps(meta))
+    return built
 
 
 def _one_line(e: Exception) -> str:
@@ -114,6 +122,16 @@ def maze_from_metadata(meta: dict, path: Path) -> str:
         if [list(r) for r in get_maze(name).grid] == walls:
             return name
     raise BridgeplanError(f"{path}: its maze layout is none of {', '.join(MAZE_NAMES)}")
+
+
+def data_version_from_metadata(meta: dict) -> int | None:
+    """The generator version of one of our datasets (1 if it predates recorded versions); None for a
+    dataset bridgeplan did not write (an official Minari one)."""
+    if VERSION_KEY in meta:
+        return int(meta[VERSION_KEY])
+    author = meta.get("author")
+    authors = [author] if isinstance(author, str) else list(author or [])
+    return 1 if AUTHOR in authors else None  # ours, written before versions were recorded
 
 
 def read_minari(path: Path, maze_name: str | None = None) -> Stream:
@@ -154,7 +172,7 @@ def read_minari(path: Path, maze_name: str | None = None) -> Stream:
     if len(states) == 0:
         raise BridgeplanError(f"{path} holds no transitions")
     return Stream(maze, states, acts, starts, episodes=len(observations), goals_reached=reached,
-                  source=str(path))
+                  source=str(path), data_version=data_version_from_metadata(meta))
 
 
 def resolve_minari_path(path_or_id: str) -> Path | None:

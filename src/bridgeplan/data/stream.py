@@ -32,6 +32,9 @@ class Stream:
     """How many times the goal was reached (and a new one drawn)."""
     source: str = ""
     """Where the data came from (a path, or a description)."""
+    data_version: int | None = None
+    """Version of bridgeplan's generator that made the data
+    (:data:`bridgeplan.data.generate.DATA_VERSION`); None for data bridgeplan did not generate."""
 
     def __post_init__(self):
         self.segment_starts = np.asarray(self.segment_starts, dtype=np.int64)

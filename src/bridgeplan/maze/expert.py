@@ -4,11 +4,12 @@ Noise-free it is the reference expert of the normalized score; with waypoint jit
 (:data:`WAYPOINT_JITTER`, :data:`ACTION_NOISE`) it follows Minari's ``D4RL/pointmaze`` data recipe
 (``bridgeplan.data.generate`` runs the same law in a scalar loop for speed).
 
-Control law: ``a = clip(10 (w - p) - 1 * v [+ N(0, 0.5^2)], -1, 1)`` with ``w`` the current
-waypoint: the centres of the cells along the shortest path after the current cell, the last one
-replaced by the goal position itself. A waypoint counts as reached within 0.1; the controller then
-moves on to the next (never past the last). The noise is added to the raw PD output and the sum is
-clipped once, as in Minari's generation script.
+Control law: ``a = clip(10 (w - p) - 1 * v, -1, 1)`` with ``w`` the current waypoint: the centres of
+the cells along the shortest path after the current cell, the last one replaced by the goal position
+itself. A waypoint counts as reached within 0.1; the controller then moves on to the next (never past
+the last). The data recipe (Minari's generation script) adds N(0, 0.5^2) noise to that clipped
+action and clips again: ``clip(clip(10 (w - p) - v, -1, 1) + N(0, 0.5^2), -1, 1)``
+(:func:`noisy_action`), so a saturated action still gets noise on its inner side.
 """
 
 from __future__ import annotations
@@ -26,9 +27,9 @@ D_GAIN = -1.0
 WAYPOINT_RADIUS = 0.1
 """A waypoint counts as reached within this distance; the controller moves on to the next."""
 WAYPOINT_JITTER = 0.2
-"""Data recipe: every waypoint but the last is shifted by -U(0, 0.2) per coordinate."""
+"""Data recipe: every waypoint but the first and the last is shifted by -U(0, 0.2) per coordinate."""
 ACTION_NOISE = 0.5
-"""Data recipe: N(0, 0.5^2) noise on each action component, then clipped to [-1, 1]."""
+"""Data recipe: N(0, 0.5^2) noise on each (clipped) action component, then clipped to [-1, 1] again."""
 
 Cell = tuple[int, int]
 
@@ -75,19 +76,28 @@ def shortest_path(maze: Maze, start_cell, goal_cell) -> list[Cell]:
 def waypoints(maze: Maze, position, goal, jitter: float = 0.0,
               rng: np.random.Generator | None = None) -> np.ndarray:
     """Waypoints ``[K, 2]`` from ``position`` to ``goal``: centres of the path's cells after the current
-    cell, the last replaced by ``goal``. ``jitter > 0`` shifts every waypoint but the last by
-    ``-U(0, jitter)`` per coordinate (drawn from ``rng``)."""
+    cell, the last replaced by ``goal``. ``jitter > 0`` shifts every waypoint but the first and the last
+    by ``-U(0, jitter)`` per coordinate (drawn from ``rng``): Minari's controller heads for the exact
+    centre of the next cell right after planning and jitters only the waypoints it moves on to."""
     goal = np.asarray(goal, dtype=np.float64)
     cells = shortest_path(maze, maze.xy_to_cell(position), maze.xy_to_cell(goal))[1:]
     points = np.empty((max(len(cells), 1), 2))
     if len(cells) > 1:
         points[:-1] = maze.cell_to_xy(np.asarray(cells[:-1], dtype=np.float64))
-        if jitter > 0:
+        if jitter > 0 and len(cells) > 2:
             if rng is None:
                 raise ValueError("waypoint jitter needs an rng")
-            points[:-1] -= rng.uniform(0.0, jitter, size=(len(cells) - 1, 2))
+            points[1:-1] -= rng.uniform(0.0, jitter, size=(len(cells) - 2, 2))
     points[-1] = goal
     return points
+
+
+def noisy_action(raw: float, noise: float) -> float:
+    """One component of the data recipe's action: the PD output ``raw`` clipped to [-1, 1], plus the
+    ``noise`` sample, clipped again (Minari's order: a saturated action keeps noise on its inner side).
+    Plain floats: the generator calls it twice per step."""
+    a = (1.0 if raw > 1.0 else (-1.0 if raw < -1.0 else raw)) + noise
+    return 1.0 if a > 1.0 else (-1.0 if a < -1.0 else a)
 
 
 def pd_action(waypoint: np.ndarray, state: np.ndarray) -> np.ndarray:
@@ -138,7 +148,7 @@ class WaypointExpert:
         for k in np.flatnonzero((dist <= WAYPOINT_RADIUS) & (self.index < lengths - 1)):
             self.index[k] += 1
             self.current[k] = self.paths[k][self.index[k]]
-        actions = pd_action(self.current, obs)
-        if self.action_noise > 0:
-            actions += self.rng.normal(0.0, self.action_noise, size=actions.shape)
-        return np.clip(actions, -1.0, 1.0)
+        actions = np.clip(pd_action(self.current, obs), -1.0, 1.0)
+        if self.action_noise > 0:  # the law of noisy_action, batched
+            actions = np.clip(actions + self.rng.normal(0.0, self.action_noise, size=actions.shape), -1.0, 1.0)
+        return actions
