@@ -37,6 +37,19 @@ def gaussian_product(s1: torch.Tensor, s2: torch.Tensor) -> tuple[torch.Tensor, 
     return s2 ** 2 / denom, s1 ** 2 / denom, s1 ** 2 * s2 ** 2 / denom
 
 
+def chain_marginal(std_fwd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(mu0, mu1, var)`` of x_n given (x0, x1) implied by the sampling chain (a consistent bridge).
+
+    The chain starts from x1 as the state at the last step (std ``std_fwd[-1]``) and steps down with
+    the posteriors of ``samplers.bridge_posterior``, which are those of a Brownian motion from x0 with
+    variance ``std_fwd[n]^2`` at step n. Pinned at x1 at the last step, that is the Brownian bridge:
+    weight ``std_fwd[n]^2 / std_fwd[-1]^2`` on x1, i.e. the product of (``std_fwd[n]``, the std still
+    to go ``sqrt(std_fwd[-1]^2 - std_fwd[n]^2)``). At the last step it is x1 itself (var 0).
+    """
+    to_go = (std_fwd[-1] ** 2 - std_fwd ** 2).sqrt()
+    return gaussian_product(std_fwd, to_go)
+
+
 def spaced_steps(n: int, nfe: int) -> list[int]:
     """``nfe + 1`` evenly spaced steps from ``n - 1`` down to 0 (I2SB: ``round(i (n-1) / nfe)``)."""
     steps = sorted({round(i * (n - 1) / nfe) for i in range(nfe + 1)}, reverse=True)
