@@ -186,7 +186,10 @@ def test_i2sb_marginal_is_off_the_chain_at_n16():
     bridge = Bridge(steps=16, beta_max=1.0)
     mu0, mu1, var = (c.tolist() for c in bridge.marginal_coefs)
     chain = chain_moments(bridge, 15)
-    assert abs(mu1[7] - 0.4298) < 1e-4 and close(chain[7][1], 0.5)
+    # step 7 closes the first half: std_fwd^2 = T / 2 and std_bwd^2 = T / 2 + beta_7, T the total
+    total = float(bridge.std_fwd[-1] ** 2)
+    assert close(mu1[7], 0.5 / (1 + float(bridge.betas[7]) / total)) and abs(mu1[7] - 0.4298) < 1e-4
+    assert close(chain[7][1], 0.5)
     assert max(abs(mu1[n] - chain[n][1]) for n in chain) > 0.09
     assert max(var[n] / chain[n][2] for n in range(1, 15)) > 7  # at step 14: 7.7x
 

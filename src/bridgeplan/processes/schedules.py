@@ -31,8 +31,11 @@ def bridge_stds(betas: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return betas.cumsum(0).sqrt(), betas.flip(0).cumsum(0).flip(0).sqrt()
 
 
-def gaussian_product(s1: torch.Tensor, s2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Coefficients of the product of N(x0, s1^2) and N(x1, s2^2): ``(mu0, mu1, var)``."""
+def gaussian_product(s1: torch.Tensor | float, s2: torch.Tensor | float) -> tuple:
+    """Coefficients of the product of N(x0, s1^2) and N(x1, s2^2): ``(mu0, mu1, var)``.
+
+    Elementwise, so ``s1``, ``s2`` are tensors of stds per step or plain floats (one posterior step).
+    """
     denom = s1 ** 2 + s2 ** 2
     return s2 ** 2 / denom, s1 ** 2 / denom, s1 ** 2 * s2 ** 2 / denom
 
