@@ -47,8 +47,11 @@ def test_cosine_schedule_matches_closed_form():
     f = [math.cos((t / n + s) / (1 + s) * math.pi / 2) ** 2 for t in range(n + 1)]
     expected = [min(1 - f[t + 1] / f[t], 0.999) for t in range(n)]
     assert torch.allclose(betas, torch.tensor(expected, dtype=torch.float64), atol=1e-12)
-    assert torch.allclose(torch.cumprod(1 - betas, 0)[-1], torch.tensor(f[n] / f[0], dtype=torch.float64),
-                          atol=1e-9) or betas[-1] == 0.999
+    # alpha_bar telescopes to f(t) / f(0) up to the last step, where f(n) = cos^2(pi / 2) = 0 makes
+    # beta 1 and the clip takes over
+    alpha_bar = torch.cumprod(1 - betas, 0)
+    assert torch.allclose(alpha_bar[:-1], torch.tensor(f[1:n], dtype=torch.float64) / f[0], rtol=1e-12, atol=0)
+    assert betas[-1] == 0.999 and math.isclose(alpha_bar[-1], f[n - 1] / f[0] * 0.001, rel_tol=1e-12)
 
 
 @pytest.mark.parametrize("n", [10, 11, 1000])
@@ -223,14 +226,20 @@ def test_nfe_and_process_errors():
     Bridge(steps=16).validate_nfe(1)
 
 
-@pytest.mark.parametrize("process", [DDPM(steps=10, sampler="ddim", eta=0.5), Bridge(steps=12, beta_max=1.0,
-                                                                                     ot_ode=True)])
+@pytest.mark.parametrize("process", [DDPM(steps=10, sampler="ddim", eta=0.5),
+                                     Bridge(steps=12, beta_max=1.0, ot_ode=True),
+                                     Bridge(steps=12, consistent=True)])
 def test_processes_round_trip_through_dicts(process):
     import json
 
     d = json.loads(json.dumps(process.to_dict()))
     assert process_from_dict(d) == process
     assert make_process(d["name"], **{k: v for k, v in d.items() if k != "name"}) == process
+
+
+def test_bridge_dict_without_consistent_is_i2sb():
+    """Runs saved before the ``consistent`` field read back as I2SB's bridge."""
+    assert process_from_dict({"name": "bridge", "steps": 16, "beta_max": 1.0, "ot_ode": False}).consistent is False
 
 
 @pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10)])

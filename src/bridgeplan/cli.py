@@ -119,6 +119,9 @@ def _add_train_commands(sub) -> None:
     p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
     p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
     p.add_argument("--ot-ode", action="store_true", help="bridge: noise-free marginal and sampler")
+    p.add_argument("--consistent", action="store_true",
+                   help="bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
+                        "differ at small N)")
     p.add_argument("--dim", type=int, default=None, help="U-Net base width")
     p.add_argument("--dim-mults", default=None, help="U-Net channel multipliers, e.g. 1,4,8")
     p.add_argument("--grad-accum", type=int, default=None)
@@ -189,8 +192,9 @@ def _process_params(args) -> dict:
     params = _overrides(args, ("beta_max",))
     if args.diffusion_steps is not None:
         params["steps"] = args.diffusion_steps
-    if args.ot_ode:
-        params["ot_ode"] = True
+    for flag in ("ot_ode", "consistent"):
+        if getattr(args, flag):
+            params[flag] = True
     return params
 
 
@@ -312,6 +316,8 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--diffusion-steps", type=int, default=16)
     p.add_argument("--beta-max", type=float, default=None, help="bridge runs: largest beta of the schedule")
     p.add_argument("--ot-ode", action="store_true", help="bridge runs: noise-free marginal and sampler")
+    p.add_argument("--consistent", action="store_true",
+                   help="bridge runs: train on the marginals the sampling chain implies")
     p.add_argument("--fixed-nfe", type=int, default=4, help="NFE of the `priors` experiment")
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--seeds", default="0", help="comma-separated training/evaluation seeds")

@@ -10,7 +10,7 @@ import torch
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes.base import Process
 from bridgeplan.processes.samplers import bridge_sample
-from bridgeplan.processes.schedules import bridge_stds, gaussian_product, i2sb_betas, spaced_steps
+from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
 from bridgeplan.trajectory import Conditions, apply_conditions
 
 
@@ -20,11 +20,17 @@ class Bridge(Process):
 
     The network follows I2SB's parametrization: it predicts ``(x_n - x0) / std_fwd[n]``, so
     ``x0_hat = x_n - std_fwd[n] * out``. Sampling takes any NFE from 1 to N - 1.
+
+    ``consistent`` trains on the marginal the sampling chain itself implies (``schedules.chain_marginal``)
+    instead of I2SB's product of ``(std_fwd[n], std_bwd[n])``, whose variances count ``beta_n`` twice
+    (harmless at N = 1000, not at N = 16), and only at the steps 1..N-1 where the chain calls the
+    network; x_{N-1} is then x1 itself, where the chain starts. Sampling is the same either way.
     """
 
     steps: int = 16
     beta_max: float = 1.0
     ot_ode: bool = False
+    consistent: bool = False
     name = "bridge"
     display_name = "bridge"
 
@@ -55,11 +61,17 @@ class Bridge(Process):
             raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for the bridge with {self.steps} steps "
                                   f"(NFE < N), got {nfe}")
 
+    @cached_property
+    def marginal_coefs(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(mu0, mu1, var)`` per step of the training marginal of x_n given (x0, x1)."""
+        if self.consistent:
+            return chain_marginal(self.std_fwd)
+        return gaussian_product(self.std_fwd, self.std_bwd)
+
     def marginal(self, x0: torch.Tensor, x1: torch.Tensor, n: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:
         """Sample x_n given (x0, x1): ``mu0 x0 + mu1 x1 + sqrt(var) eps`` (no noise with ``ot_ode``)."""
-        mu0, mu1, var = (c.to(x0.device, x0.dtype)[n][:, None, None]
-                         for c in gaussian_product(self.std_fwd, self.std_bwd))
+        mu0, mu1, var = (c.to(x0.device, x0.dtype)[n][:, None, None] for c in self.marginal_coefs)
         x_n = mu0 * x0 + mu1 * x1
         if not self.ot_ode:
             eps = torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
@@ -70,12 +82,22 @@ class Bridge(Process):
         nn_ = torch.full((x_n.shape[0],), float(n), device=x_n.device)
         return (x_n - float(self.std_fwd[n]) * model(x_n, nn_)).clamp(-1, 1)
 
+    def training_target(self, x0: torch.Tensor, x_n: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        """I2SB's label ``(x_n - x0) / std_fwd[n]``, the inverse of ``predict_x0``."""
+        return (x_n - x0) / self.std_fwd.to(x0.device, x0.dtype)[n][:, None, None]
+
+    def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(x_n, n, target)`` at a uniform random step n in [0, N-1] ([1, N-1] with ``consistent``)."""
+        low = 1 if self.consistent else 0
+        n = torch.randint(low, self.steps, (x0.shape[0],), generator=generator, device=x0.device)
+        x_n = apply_conditions(self.marginal(x0, x1, n, generator), conditions)
+        return x_n, n, self.training_target(x0, x_n, n)
+
     def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> torch.Tensor:
-        """L2 on I2SB's target ``(x_n - x0) / std_fwd[n]`` at a uniform random step n in [0, N-1]."""
-        n = torch.randint(0, self.steps, (x0.shape[0],), generator=generator, device=x0.device)
-        x_n = apply_conditions(self.marginal(x0, x1, n, generator), conditions)
-        target = (x_n - x0) / self.std_fwd.to(x0.device, x0.dtype)[n][:, None, None]
+        """L2 between the network's output and the label of :meth:`training_pair`."""
+        x_n, n, target = self.training_pair(x0, x1, conditions, generator)
         return torch.mean((model(x_n, n.float()) - target) ** 2)
 
     def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,

@@ -65,15 +65,24 @@ class DDPM(Process):
         tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)
         return model(x_t, tt).clamp(-1, 1)
 
-    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
-                      generator: torch.Generator | None = None) -> torch.Tensor:
-        """L2 between x0 and the network's x0 prediction at a uniform random step (``x1`` unused)."""
-        b = x0.shape[0]
-        t = torch.randint(0, self.steps, (b,), generator=generator, device=x0.device)
+    def training_target(self, x0: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        """The network predicts x0 itself (Diffuser), the inverse of ``predict_x0``."""
+        return x0
+
+    def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(x_t, t, target)`` with x_t from q(x_t | x0) at a uniform random step t (``x1`` unused)."""
+        t = torch.randint(0, self.steps, (x0.shape[0],), generator=generator, device=x0.device)
         ab = self.alpha_bar.to(x0.device, x0.dtype)[t][:, None, None]
         noise = torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
         x_t = apply_conditions(ab.sqrt() * x0 + (1 - ab).sqrt() * noise, conditions)
-        return torch.mean((model(x_t, t.float()) - x0) ** 2)
+        return x_t, t, self.training_target(x0, x_t, t)
+
+    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> torch.Tensor:
+        """L2 between the network's x0 prediction and the label of :meth:`training_pair`."""
+        x_t, t, target = self.training_pair(x0, x1, conditions, generator)
+        return torch.mean((model(x_t, t.float()) - target) ** 2)
 
     def sample_steps(self, nfe: int) -> list[int]:
         """``nfe`` evenly spaced steps from ``steps - 1`` down to 0."""

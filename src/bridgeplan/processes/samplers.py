@@ -23,6 +23,18 @@ def _noise(x: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
     return torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
 
 
+def ddpm_posterior(alpha_bar_t: float, alpha_bar_s: float) -> tuple[float, float, float]:
+    """DDPM's posterior q(x_s | x_t, x0) for ``s < t``: ``(coef_x0, coef_xt, var)``.
+
+    ``beta`` is the noise added between the two steps, ``1 - alpha_bar_t / alpha_bar_s``, so this is
+    also the strided (respaced) posterior when ``s < t - 1``.
+    """
+    beta = 1.0 - alpha_bar_t / alpha_bar_s
+    coef_x0 = alpha_bar_s ** 0.5 * beta / (1 - alpha_bar_t)
+    coef_xt = (1 - beta) ** 0.5 * (1 - alpha_bar_s) / (1 - alpha_bar_t)
+    return coef_x0, coef_xt, (1 - alpha_bar_s) / (1 - alpha_bar_t) * beta
+
+
 def ddpm_ancestral(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditions, steps: list[int],
                    alpha_bar: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
     """Ancestral sampling with the posterior q(x_s | x_t, x0_hat) between consecutive ``steps``.
@@ -35,12 +47,8 @@ def ddpm_ancestral(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditi
         x0 = predict_x0(x, t)
         if k == len(steps) - 1:
             return apply_conditions(x0, conditions)
-        s = steps[k + 1]
-        ab_t, ab_s = float(alpha_bar[t]), float(alpha_bar[s])
-        beta = 1.0 - ab_t / ab_s
-        mean = (ab_s ** 0.5 * beta / (1 - ab_t)) * x0 + ((1 - beta) ** 0.5 * (1 - ab_s) / (1 - ab_t)) * x
-        var = (1 - ab_s) / (1 - ab_t) * beta
-        x = apply_conditions(mean + var ** 0.5 * _noise(x, generator), conditions)
+        coef_x0, coef_xt, var = ddpm_posterior(float(alpha_bar[t]), float(alpha_bar[steps[k + 1]]))
+        x = apply_conditions(coef_x0 * x0 + coef_xt * x + var ** 0.5 * _noise(x, generator), conditions)
     return x
 
 
@@ -63,13 +71,21 @@ def ddim(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditions, steps
     return x
 
 
+def bridge_posterior(std_n: float, std_m: float) -> tuple[float, float, float]:
+    """I2SB's posterior p(x_m | x_n, x0) for ``m < n``: ``(a, b, v)`` of ``a x0 + b x_n + sqrt(v) eps``.
+
+    x_m sits at std ``std_m`` from x0 and x_n at ``d = sqrt(std_n^2 - std_m^2)`` further on; the
+    posterior is the product of N(x0, std_m^2) and N(x_n, d^2).
+    """
+    return gaussian_product(std_m, (std_n ** 2 - std_m ** 2) ** 0.5)
+
+
 def bridge_posterior_step(x0: torch.Tensor, x_n: torch.Tensor, std_n: float, std_m: float,
                           noise: torch.Tensor | None) -> torch.Tensor:
-    """I2SB's posterior p(x_m | x_n, x0) for ``m < n``: ``a x0 + b x_n + sqrt(v) eps``."""
-    d = (std_n ** 2 - std_m ** 2) ** 0.5
-    a, b, v = gaussian_product(torch.tensor(std_m, dtype=torch.float64), torch.tensor(d, dtype=torch.float64))
-    out = float(a) * x0 + float(b) * x_n
-    return out if noise is None else out + float(v) ** 0.5 * noise
+    """One draw of :func:`bridge_posterior` (its mean when ``noise`` is None)."""
+    a, b, v = bridge_posterior(std_n, std_m)
+    out = a * x0 + b * x_n
+    return out if noise is None else out + v ** 0.5 * noise
 
 
 def bridge_sample(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditions, steps: list[int],

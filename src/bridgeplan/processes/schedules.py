@@ -31,10 +31,26 @@ def bridge_stds(betas: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return betas.cumsum(0).sqrt(), betas.flip(0).cumsum(0).flip(0).sqrt()
 
 
-def gaussian_product(s1: torch.Tensor, s2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Coefficients of the product of N(x0, s1^2) and N(x1, s2^2): ``(mu0, mu1, var)``."""
+def gaussian_product(s1: torch.Tensor | float, s2: torch.Tensor | float) -> tuple:
+    """Coefficients of the product of N(x0, s1^2) and N(x1, s2^2): ``(mu0, mu1, var)``.
+
+    Elementwise, so ``s1``, ``s2`` are tensors of stds per step or plain floats (one posterior step).
+    """
     denom = s1 ** 2 + s2 ** 2
     return s2 ** 2 / denom, s1 ** 2 / denom, s1 ** 2 * s2 ** 2 / denom
+
+
+def chain_marginal(std_fwd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(mu0, mu1, var)`` of x_n given (x0, x1) implied by the sampling chain (a consistent bridge).
+
+    The chain starts from x1 as the state at the last step (std ``std_fwd[-1]``) and steps down with
+    the posteriors of ``samplers.bridge_posterior``, which are those of a Brownian motion from x0 with
+    variance ``std_fwd[n]^2`` at step n. Pinned at x1 at the last step, that is the Brownian bridge:
+    weight ``std_fwd[n]^2 / std_fwd[-1]^2`` on x1, i.e. the product of (``std_fwd[n]``, the std still
+    to go ``sqrt(std_fwd[-1]^2 - std_fwd[n]^2)``). At the last step it is x1 itself (var 0).
+    """
+    to_go = (std_fwd[-1] ** 2 - std_fwd ** 2).sqrt()
+    return gaussian_product(std_fwd, to_go)
 
 
 def spaced_steps(n: int, nfe: int) -> list[int]:
