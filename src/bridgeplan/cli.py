@@ -114,6 +114,7 @@ def _add_train_commands(sub) -> None:
     _common_train_flags(p)
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
     p.add_argument("--process", default=None, help="ddpm or bridge (default ddpm)")
+    _process_param_flag(p)
     p.add_argument("--prior", default=None, help="bridge prior: gaussian, line or learned (default gaussian)")
     p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
     p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
@@ -154,6 +155,11 @@ def _common_train_flags(p) -> None:
     p.add_argument("--no-progress", action="store_true")
 
 
+def _process_param_flag(p) -> None:
+    p.add_argument("--process-param", action="append", metavar="FIELD=VALUE",
+                   help="any field of the process's dataclass, e.g. beta_max=0.3 (repeatable)")
+
+
 def _threads_flag(p) -> None:
     p.add_argument("--threads", type=int, default=None,
                    help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
@@ -174,7 +180,7 @@ def _cmd_train(args) -> int:
 
     base = cfg.preset_config(args.maze, args.preset)
     over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start"))
-    process = _process_params(args)
+    process = _process_params(args, args.process or base.process.name)
     if args.process is not None:
         process["name"] = args.process
     model = {"dim": args.dim} if args.dim is not None else {}
@@ -187,9 +193,13 @@ def _cmd_train(args) -> int:
     return 0
 
 
-def _process_params(args) -> dict:
-    """The process fields given on the command line (checked by the process itself)."""
-    params = _overrides(args, ("beta_max",))
+def _process_params(args, name: str) -> dict:
+    """The process fields given on the command line (checked by the process itself): ``--process-param``
+    for any field, and shortcuts for the common ones."""
+    from bridgeplan.processes import parse_process_params
+
+    params = parse_process_params(name, args.process_param or [])
+    params |= _overrides(args, ("beta_max",))
     if args.diffusion_steps is not None:
         params["steps"] = args.diffusion_steps
     for flag in ("ot_ode", "consistent"):
@@ -314,6 +324,9 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--prior-steps", type=int, default=2000, help="optimizer steps of the learned prior")
     p.add_argument("--checkpoint-every", type=int, default=500, help="snapshot (evaluation) interval")
     p.add_argument("--diffusion-steps", type=int, default=16)
+    p.add_argument("--process", default="bridge",
+                   help="the process compared with DDPM from each prior (default bridge)")
+    _process_param_flag(p)
     p.add_argument("--beta-max", type=float, default=None, help="bridge runs: largest beta of the schedule")
     p.add_argument("--ot-ode", action="store_true", help="bridge runs: noise-free marginal and sampler")
     p.add_argument("--consistent", action="store_true",
@@ -351,8 +364,8 @@ def _cmd_experiment(args) -> int:
             raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     from bridgeplan.config import preset_config
 
-    bridge = make_process("bridge", **_process_params(args))
-    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, bridge)
+    informed = make_process(args.process, **_process_params(args, args.process), steps=args.diffusion_steps)
+    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, informed)
     overrides = _overrides(args, ("horizon", "batch_size", "device", "threads"))
     preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
     model = {"dim": args.dim} if args.dim is not None else {}

@@ -53,34 +53,39 @@ class Experiment:
                                       f"1..{s.run.process.max_nfe}")
 
 
-def build_experiments(steps: int = 16, fixed_nfe: int = 4, bridge: Bridge | None = None) -> dict[str, Experiment]:
-    """The five experiments for runs of ``steps`` diffusion steps; ``bridge`` gives the bridge's other
-    parameters (beta_max, ot_ode, ...; default: the ``Bridge`` defaults)."""
+def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | None = None) -> dict[str, Experiment]:
+    """The five experiments for runs of ``steps`` diffusion steps. ``informed`` is the process run from
+    each prior against DDPM, with its parameters (default: the thesis's bridge, ``Bridge()``); the
+    experiments keep the thesis's names."""
+    informed = dataclasses.replace(informed or Bridge(), steps=steps)
+    if not informed.uses_prior:
+        raise BridgeplanError(f"the experiments compare DDPM with a process that starts from a prior; "
+                              f"{informed.name} does not")
+    name = informed.display_name
     ddpm = RunSpec(DDPM(steps))
-    bridge = dataclasses.replace(bridge or Bridge(), steps=steps)
-    bridges = {p: RunSpec(bridge, p) for p in ("gaussian", "line", "learned")}
-    noise, same_nfe = bridges["gaussian"], bridge.max_nfe
+    runs = {p: RunSpec(informed, p) for p in ("gaussian", "line", "learned")}
+    noise, same_nfe = runs["gaussian"], informed.max_nfe
     return {e.name: e for e in [
-        Experiment("bridge-vs-ddpm", f"Bridge vs DDPM from Gaussian noise, N={steps}, NFE={same_nfe}",
+        Experiment("bridge-vs-ddpm", f"{name} vs DDPM from Gaussian noise, N={steps}, NFE={same_nfe}",
                    (Series("DDPM", ddpm, same_nfe), Series(noise.label(), noise, same_nfe))),
         Experiment("ddpm-steps", "DDPM trained with 1, 4, 7, 10 diffusion steps (NFE = steps)",
                    tuple(Series(f"DDPM N={n}", RunSpec(DDPM(n)), n) for n in (1, 4, 7, 10))),
-        Experiment("bridge-nfe", f"Bridge (gaussian prior), N={steps}, across NFE",
-                   tuple(Series(f"NFE {k}", noise, k) for k in (1, 4, 7, 10, same_nfe))),
-        Experiment("priors", f"Bridge from each prior, N={steps}, NFE={fixed_nfe}",
-                   tuple(Series(r.label(), r, fixed_nfe) for r in bridges.values())),
-        Experiment("nfe1", f"Bridge from each prior vs DDPM at NFE=1, N={steps}",
-                   (Series("DDPM", ddpm, 1), *(Series(r.label(), r, 1) for r in bridges.values()))),
+        Experiment("bridge-nfe", f"{name} (gaussian prior), N={steps}, across NFE",
+                   tuple(Series(f"NFE {k}", noise, k) for k in sorted({1, 4, 7, 10, same_nfe}) if k <= same_nfe)),
+        Experiment("priors", f"{name} from each prior, N={steps}, NFE={fixed_nfe}",
+                   tuple(Series(r.label(), r, fixed_nfe) for r in runs.values())),
+        Experiment("nfe1", f"{name} from each prior vs DDPM at NFE=1, N={steps}",
+                   (Series("DDPM", ddpm, 1), *(Series(r.label(), r, 1) for r in runs.values()))),
     ]}
 
 
 EXPERIMENTS = build_experiments()
 
 
-def get_experiment(name: str, steps: int = 16, fixed_nfe: int = 4, bridge: Bridge | None = None) -> Experiment:
-    """The experiment ``name`` for runs trained with ``steps`` diffusion steps."""
+def get_experiment(name: str, steps: int = 16, fixed_nfe: int = 4, informed: Process | None = None) -> Experiment:
+    """The experiment ``name`` for runs trained with ``steps`` diffusion steps (see :func:`build_experiments`)."""
     if name not in EXPERIMENTS:
         raise BridgeplanError(f"unknown experiment {name!r}: choose from {', '.join(EXPERIMENTS)}")
-    experiment = build_experiments(steps, fixed_nfe, bridge)[name]
+    experiment = build_experiments(steps, fixed_nfe, informed)[name]
     experiment.validate()
     return experiment

@@ -36,6 +36,32 @@ def make_process(name: str, **params) -> Process:
         raise BridgeplanError(f"bad parameters for process {name!r}: {e}") from None
 
 
+def parse_process_params(name: str, assignments: list[str]) -> dict:
+    """``["beta_max=0.3", "ot_ode=true"]`` -> typed keyword arguments for process ``name`` (each value takes
+    the type of the field's default), so a new process's parameters reach the CLI with no new flags."""
+    if name not in PROCESSES:
+        raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
+    defaults = {f.name: f.default for f in dataclasses.fields(PROCESSES[name])}
+    params = {}
+    for text in assignments:
+        key, sep, value = text.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or key not in defaults:
+            raise BridgeplanError(f"--process-param takes FIELD=VALUE with a field of {name} "
+                                  f"({', '.join(defaults)}), got {text!r}")
+        kind = type(defaults[key])
+        try:
+            if kind is bool:
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                params[key] = value.lower() in ("true", "1")
+            else:
+                params[key] = kind(value)
+        except ValueError:
+            raise BridgeplanError(f"--process-param {key} takes a {kind.__name__}, got {value!r}") from None
+    return params
+
+
 def process_from_dict(d: dict) -> Process:
     """Inverse of ``process.to_dict()``.
 
@@ -50,4 +76,4 @@ def process_from_dict(d: dict) -> Process:
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "Process", "PROCESSES", "make_process", "process_from_dict"]
+__all__ = ["DDPM", "Bridge", "Process", "PROCESSES", "make_process", "parse_process_params", "process_from_dict"]
