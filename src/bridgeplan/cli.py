@@ -364,7 +364,7 @@ def _cmd_experiment(args) -> int:
             raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
     from bridgeplan.config import preset_config
 
-    informed = make_process(args.process, **_process_params(args, args.process), steps=args.diffusion_steps)
+    informed = make_process(args.process, **_process_params(args, args.process))
     experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, informed)
     overrides = _overrides(args, ("horizon", "batch_size", "device", "threads"))
     preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
