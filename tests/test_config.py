@@ -127,9 +127,10 @@ def test_cli_warns_in_one_line_for_more_threads_than_cores(tiny_runs, tmp_path):
     import sys
 
     cores = os.cpu_count() or 1
-    out = subprocess.run([sys.executable, "-m", "bridgeplan.cli", "eval", str(tiny_runs["ddpm"]), "--episodes", "2",
-                          "--nfe", "1", "--device", "cpu", "--threads", str(cores + 1), "--out", str(tmp_path / "r.json")],
-                         capture_output=True, text=True, timeout=120)
+    command = ["eval", str(tiny_runs["ddpm"]), "--episodes", "2", "--nfe", "1", "--device", "cpu",
+               "--threads", str(cores + 1), "--out", str(tmp_path / "r.json")]
+    out = subprocess.run([sys.executable, "-m", "bridgeplan.cli", *command], capture_output=True, text=True,
+                         timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stderr.splitlines() == [f"warning: --threads {cores + 1} is more than this machine's {cores} cores: "
                                        "expect slower runs"]
