@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -126,7 +127,7 @@ def read_cache(source: Path, cache: Path) -> Stream | None:
                 return None
             return Stream(str(z["maze"]), z["states"], z["actions"], z["segment_starts"], int(z["episodes"]),
                           int(z["goals_reached"]), str(z["source"]))
-    except (OSError, ValueError, KeyError, EOFError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # truncated, bad CRC, foreign
         return None  # a broken cache is rebuilt
 
 

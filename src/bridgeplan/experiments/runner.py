@@ -17,6 +17,7 @@ from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import ResultsStore, row_from_result
+from bridgeplan.locks import run_lock
 
 
 @dataclass(frozen=True)
@@ -76,9 +77,10 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         torch.set_num_threads(threads)
     config = _train_config(settings, spec, seed, prior_run)
     run_dir = Path(settings.results_dir) / "runs" / config.run_name()
-    done = _trained_step(run_dir)
-    if done < config.steps:
-        train(config, run_dir, resume=done >= 0, progress=progress)
+    with run_lock(run_dir):  # another sweep training this run: wait for it, then see what is left
+        done = _trained_step(run_dir)
+        if done < config.steps:
+            train(config, run_dir, resume=done >= 0, progress=progress)
     store = ResultsStore(Path(settings.results_dir) / "results.sqlite")
     snapshots = [s for s in snapshot_steps(run_dir) if s <= config.steps]
     rows = []
@@ -172,7 +174,8 @@ def _ensure_prior(settings: SweepSettings, seed: int, horizon: int, progress: bo
 
     config = _prior_config(settings, seed, horizon)
     run_dir = Path(settings.results_dir) / "runs" / config.run_name()
-    done = _trained_step(run_dir)
-    if done < config.steps:
-        train_prior(config, run_dir, resume=done >= 0, progress=progress)
+    with run_lock(run_dir):  # as in run_job
+        done = _trained_step(run_dir)
+        if done < config.steps:
+            train_prior(config, run_dir, resume=done >= 0, progress=progress)
     return str(run_dir)
