@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -25,12 +26,24 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
     if not path.exists():
         raise BridgeplanError(f"no checkpoint at {path}")
     try:
+        _verify_crcs(path)
         state = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as e:  # torch raises many types for a truncated or foreign file
-        raise BridgeplanError(f"cannot read checkpoint {path}: {type(e).__name__}: {e}") from None
+        first_line = (str(e).strip().splitlines() or [""])[0]  # torch adds lines of advice
+        raise BridgeplanError(f"cannot read checkpoint {path} (truncated or corrupted?): "
+                              f"{type(e).__name__}: {first_line}") from None
     if not isinstance(state, dict) or "config" not in state or "kind" not in state:
         raise BridgeplanError(f"{path} is not a bridgeplan checkpoint")
     return state
+
+
+def _verify_crcs(path: Path) -> None:
+    """Check every record of the checkpoint (a zip) against its CRC-32: ``torch.load`` does not, and
+    would load a flipped bit in the weights silently."""
+    with zipfile.ZipFile(path) as z:
+        bad = z.testzip()
+    if bad is not None:
+        raise zipfile.BadZipFile(f"bad CRC-32 for {bad}")
 
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:

@@ -10,6 +10,7 @@ across training steps.
 from __future__ import annotations
 
 import copy
+import json
 import math
 import time
 from dataclasses import dataclass
@@ -24,7 +25,8 @@ from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import code_version
-from bridgeplan.layout import checkpoint_path, snapshot_path
+from bridgeplan.layout import checkpoint_path, config_path, snapshot_path
+from bridgeplan.locks import LOCK_NAME, run_lock
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
 from bridgeplan.trajectory import window_conditions
@@ -124,7 +126,10 @@ def _setup(config) -> torch.device:
 
 
 def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> None:
-    saved = cfg.to_dict(cfg.from_dict(config_type, saved))  # a run saved by an older bridgeplan, in today's form
+    def canonical(d: dict) -> dict:  # today's form (a run saved by an older bridgeplan too), as JSON has it
+        return json.loads(json.dumps(cfg.to_dict(cfg.from_dict(config_type, d))))
+
+    saved, current = canonical(saved), canonical(current)
     diff = sorted(k for k in set(saved) | set(current)
                   if k not in _RESUMABLE_FIELDS and saved.get(k) != current.get(k))
     if diff:
@@ -133,8 +138,47 @@ def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> Non
 
 
 def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
-    config = job.config
     run_dir = Path(run_dir)
+    # refuse a mistake before the lock creates run_dir, so it leaves nothing behind
+    _check_run_dir(run_dir, resume, job)
+    with run_lock(run_dir):  # one trainer per run directory; a second one waits here
+        _check_run_dir(run_dir, resume, job)  # again: another process may have trained it meanwhile
+        # whoever wrote these was killed mid-write (a live writer would hold the lock)
+        for tmp in [*run_dir.glob(".*.tmp"), *(run_dir / "snapshots").glob(".*.tmp")]:
+            tmp.unlink()
+        return _fit_locked(job, windows, run_dir, resume, device, progress)
+
+
+def _check_run_dir(run_dir: Path, resume: bool, job: TrainJob) -> None:
+    """--resume needs a checkpoint; a fresh start needs an empty directory, or the same run killed
+    before its first checkpoint (nothing to continue; what it left is rewritten identically)."""
+    ckpt_path = checkpoint_path(run_dir)
+    if ckpt_path.exists():
+        if not resume:
+            raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
+        return
+    killed_early = _same_run(config_path(run_dir), job)
+    if resume:
+        raise BridgeplanError(f"--resume given but {ckpt_path} does not exist" + (
+            " (killed before its first checkpoint: start it again without --resume)" if killed_early else ""))
+    if run_dir.exists() and not killed_early and any(p.name != LOCK_NAME for p in run_dir.iterdir()):
+        raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
+
+
+def _same_run(config_json: Path, job: TrainJob) -> bool:
+    """Whether ``config_json`` describes this training (the fields a resume may change aside)."""
+    current = json.loads(json.dumps(cfg.to_dict(job.config)))  # tuples as JSON has them: lists
+    try:
+        saved = json.loads(config_json.read_text())
+        _check_resumable(saved["config"], current, config_json, type(job.config))
+        return saved["kind"] == job.kind
+    except (OSError, ValueError, LookupError, TypeError, AttributeError, BridgeplanError):  # not this run
+        return False
+
+
+def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device,
+                progress: bool) -> Path:
+    config = job.config
     ckpt_path = checkpoint_path(run_dir)
     config_dict = cfg.to_dict(config)
     model = job.model
@@ -144,8 +188,6 @@ def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.devi
     step, elapsed = 0, 0.0
 
     if resume:
-        if not ckpt_path.exists():
-            raise BridgeplanError(f"--resume given but {ckpt_path} does not exist")
         state = load_checkpoint(ckpt_path)
         if state["kind"] != job.kind:
             raise BridgeplanError(f"{ckpt_path} is a {state['kind']} checkpoint, not a {job.kind} one")
@@ -159,23 +201,28 @@ def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.devi
         gen.set_state(state["generator"].to(gen.get_state().device))
         torch.set_rng_state(state["torch_rng"])
         step, elapsed = state["step"], state["elapsed_seconds"]
-    elif run_dir.exists() and any(run_dir.iterdir()):
-        raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
-    run_dir.mkdir(parents=True, exist_ok=True)
     write_config(run_dir, {"kind": job.kind, "config": config_dict, "code_version": code_version()})
 
     def snapshot_state() -> dict:
         return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict,
                 "step": step, "elapsed_seconds": elapsed, "code_version": code_version()}
 
-    def save() -> None:
-        state = snapshot_state() | {
-            "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-            "ema": ema.state_dict() if ema is not None else None,
-            "generator": gen.get_state(), "torch_rng": torch.get_rng_state()}
-        save_checkpoint(ckpt_path, state)
+    def save_snapshot() -> None:
         weights = (ema if ema is not None else model).state_dict()
         save_checkpoint(snapshot_path(run_dir, step), snapshot_state() | {"ema": weights})
+
+    def save() -> None:
+        # The snapshot first: killed between the two writes, the run resumes from the previous
+        # checkpoint and writes this snapshot again (the same weights: resume is exact). In the
+        # other order, resume would start after this step and its snapshot would be lost for good.
+        save_snapshot()
+        save_checkpoint(ckpt_path, snapshot_state() | {
+            "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "ema": ema.state_dict() if ema is not None else None,
+            "generator": gen.get_state(), "torch_rng": torch.get_rng_state()})
+
+    if resume and not snapshot_path(run_dir, step).exists():
+        save_snapshot()  # a run written before that order was fixed may lack its checkpoint's snapshot
 
     writer = _tensorboard(run_dir)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf

@@ -14,6 +14,7 @@ import os
 import shutil
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -132,7 +133,7 @@ def read_cache(source: Path, cache: Path) -> Stream | None:
             version = int(z["data_version"])
             return Stream(str(z["maze"]), z["states"], z["actions"], z["segment_starts"], int(z["episodes"]),
                           int(z["goals_reached"]), str(z["source"]), None if version < 0 else version)
-    except (OSError, ValueError, KeyError, EOFError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # truncated, bad CRC, foreign
         return None  # a broken cache is rebuilt
 
 

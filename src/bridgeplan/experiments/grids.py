@@ -76,6 +76,9 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
                    tuple(Series(r.label(), r, fixed_nfe) for r in runs.values())),
         Experiment("nfe1", f"{name} from each prior vs DDPM at NFE=1, N={steps}",
                    (Series("DDPM", ddpm, 1), *(Series(r.label(), r, 1) for r in runs.values()))),
+        Experiment("nfe-curves", f"DDPM and {name} from the line prior at NFE 1, 2, 4 and full, N={steps}",
+                   tuple(Series(f"{r.label()} NFE {k}", r, k) for r in (ddpm, runs["line"])
+                         for k in sorted({1, 2, 4, r.process.max_nfe}) if k <= r.process.max_nfe)),
     ]}
 
 

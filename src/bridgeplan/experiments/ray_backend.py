@@ -28,11 +28,9 @@ def connect(address: str | None):
     return ray
 
 
-def run_ray(ray, jobs, experiments, settings, prior_runs: dict, cpus_per_job: int = 1,
+def run_ray(ray, run_job, jobs, experiments, settings, prior_runs: dict, cpus_per_job: int = 1,
             gpus_per_job: float = 0.0) -> int:
-    """Submit one task per (run, seed) job; returns the number of new result rows."""
-    from bridgeplan.experiments.runner import run_job
-
+    """Submit ``run_job`` once per (run, seed) job as a Ray task; returns the number of new result rows."""
     task = ray.remote(num_cpus=cpus_per_job, num_gpus=gpus_per_job)(run_job)
     futures = [task.remote(settings, experiments, spec, seed, prior_runs.get(seed, ""), cpus_per_job, False)
                for spec, seed in jobs]

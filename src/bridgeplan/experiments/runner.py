@@ -18,6 +18,7 @@ from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import ResultsStore
+from bridgeplan.locks import run_lock
 
 
 @dataclass(frozen=True)
@@ -77,9 +78,10 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     config = _train_config(settings, spec, seed, prior_run)
     configure_threads(threads or config.threads)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
-    done = _trained_step(run_dir)
-    if done < config.steps:
-        train(config, run_dir, resume=done >= 0, progress=progress)
+    with run_lock(run_dir):  # another sweep training this run: wait for it, then see what is left
+        done = _trained_step(run_dir)
+        if done < config.steps:
+            train(config, run_dir, resume=done >= 0, progress=progress)
     store = ResultsStore(layout.store_path(settings.results_dir))
     wanted = [(exp.name, series.nfe) for exp in experiments for series in exp.series if series.run == spec]
     tasks = make_tasks(settings.maze, settings.episodes, seed)
@@ -142,7 +144,7 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
             from bridgeplan.experiments.ray_backend import run_ray
 
             gpus = 1.0 if settings.overrides.get("device", "auto") != "cpu" and _has_cuda() else 0.0
-            return run_ray(ray, jobs, experiments, settings, prior_runs, gpus_per_job=gpus)
+            return run_ray(ray, run_job, jobs, experiments, settings, prior_runs, gpus_per_job=gpus)
         return _run_local(jobs, experiments, settings, prior_runs, workers, progress)
     finally:
         if ray is not None:
@@ -173,7 +175,8 @@ def _ensure_prior(settings: SweepSettings, seed: int, horizon: int, progress: bo
 
     config = _prior_config(settings, seed, horizon)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
-    done = _trained_step(run_dir)
-    if done < config.steps:
-        train_prior(config, run_dir, resume=done >= 0, progress=progress)
+    with run_lock(run_dir):  # as in run_job
+        done = _trained_step(run_dir)
+        if done < config.steps:
+            train_prior(config, run_dir, resume=done >= 0, progress=progress)
     return str(run_dir)

@@ -12,7 +12,9 @@ import io
 import json
 import sqlite3
 import time
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
@@ -62,15 +64,28 @@ class ResultsStore:
                        f"UNIQUE ({', '.join(KEY)}))")
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
 
-    def _connect(self) -> sqlite3.Connection:
-        return sqlite3.connect(self.path, timeout=60.0)
+    @contextmanager
+    def _connect(self, read_only: bool = False) -> Iterator[sqlite3.Connection]:
+        """A connection for one transaction (committed, then closed); SQLite's errors (a damaged
+        file, a lock held too long) become one-line errors that name the file."""
+        try:
+            db = (sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=60.0) if read_only
+                  else sqlite3.connect(self.path, timeout=60.0))
+            try:
+                with db:
+                    yield db
+            finally:
+                db.close()
+        except sqlite3.DatabaseError as e:
+            raise BridgeplanError(f"cannot use results store {self.path}: {e}") from None
 
     def _check_version(self) -> None:
-        try:
-            with sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=60.0) as db:
-                version = db.execute("PRAGMA user_version").fetchone()[0]
-        except sqlite3.DatabaseError as e:
-            raise BridgeplanError(f"{self.path} is not a results database: {e}") from None
+        with self._connect(read_only=True) as db:
+            # before anything is written to it: a damaged page would otherwise show up mid-sweep
+            problems = [" ".join(r[0].split()) for r in db.execute("PRAGMA quick_check")]
+            version = db.execute("PRAGMA user_version").fetchone()[0]
+        if problems != ["ok"]:
+            raise BridgeplanError(f"results store {self.path} is corrupted ({problems[0]}); left as it is")
         if version > SCHEMA_VERSION:
             raise BridgeplanError(f"{self.path} has schema version {version}, newer than this bridgeplan "
                                   f"understands ({SCHEMA_VERSION}); upgrade bridgeplan")
