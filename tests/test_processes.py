@@ -216,7 +216,7 @@ def test_nfe_and_process_errors():
     with pytest.raises(BridgeplanError, match="nfe"):
         DDPM(steps=16).validate_nfe(0)
     with pytest.raises(BridgeplanError, match="unknown process"):
-        make_process("flow")
+        make_process("magic")
     with pytest.raises(BridgeplanError, match="unknown sampler"):
         DDPM(sampler="euler")
     with pytest.raises(BridgeplanError, match="bad parameters"):

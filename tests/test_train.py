@@ -69,7 +69,7 @@ def test_resume_with_other_config_is_refused(tiny_dataset, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("bad, message", [
-    (["--process", "flow"], "unknown process"),
+    (["--process", "magic"], "unknown process"),
     (["--preset", "huge"], "unknown preset"),
     (["--horizon", "31"], "divisible"),
     (["--steps", "0"], "steps must be positive"),

@@ -113,7 +113,7 @@ def _add_train_commands(sub) -> None:
                        description="Train a planner. Defaults come from --preset per maze; flags override them.")
     _common_train_flags(p)
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
-    p.add_argument("--process", default=None, help="ddpm or bridge (default ddpm)")
+    p.add_argument("--process", default=None, help="ddpm, bridge or flow (default ddpm)")
     _process_param_flag(p)
     p.add_argument("--prior", default=None, help="bridge prior: gaussian, line or learned (default gaussian)")
     p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
@@ -254,8 +254,10 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
     p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
     p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
-    p.add_argument("--sampler", default=None, help="ddpm runs: ancestral (default; strided below N) or ddim")
-    p.add_argument("--eta", type=float, default=0.0, help="DDIM's eta (0: deterministic)")
+    p.add_argument("--sampler", default=None,
+                   help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
+                        "flow euler (default) or stochastic")
+    p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
     p.add_argument("--compile", action="store_true",
                    help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
     p.add_argument("--device", default="auto")

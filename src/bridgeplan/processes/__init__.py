@@ -1,4 +1,4 @@
-"""Generative processes behind one interface (see ``base.py``, ``ddpm.py`` and ``bridge.py``).
+"""Generative processes behind one interface (see ``base.py``, ``ddpm.py``, ``bridge.py`` and ``flow.py``).
 
 A process is the one definition of a method: training, sweeps, evaluation, reports and the bench
 all ask it. Every process is a frozen dataclass derived from :class:`Process` (``to_dict``,
@@ -22,8 +22,9 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes.base import Process
 from bridgeplan.processes.bridge import Bridge
 from bridgeplan.processes.ddpm import DDPM
+from bridgeplan.processes.flow import Flow
 
-PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge}
+PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge, "flow": Flow}
 
 
 def make_process(name: str, **params) -> Process:
@@ -76,4 +77,5 @@ def process_from_dict(d: dict) -> Process:
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "Process", "PROCESSES", "make_process", "parse_process_params", "process_from_dict"]
+__all__ = ["DDPM", "Bridge", "Flow", "Process", "PROCESSES", "make_process", "parse_process_params",
+           "process_from_dict"]
