@@ -194,8 +194,8 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
     ``execution``: replanning, candidates, arrival rule (default: open loop, one plan per episode). Closed loop,
     ``batch_size`` caps the plans per network batch (candidates included), the floors stay open loop, and the
     decisions are timed twice: every batched decision of the evaluation (``decision_ms_per_batch``, with
-    ``mean_batch`` episodes per decision) and, at batch 1, every decision of the first episode run again
-    alone after one untimed warm-up decision (``decision_ms_batch1``).
+    ``mean_batch`` plans per decision: due episodes x candidates) and, at batch 1, every decision of the first
+    episode run again alone after one untimed warm-up decision (``decision_ms_batch1``).
     """
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
