@@ -263,6 +263,7 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    _execution_flags(p)
     _threads_flag(p)
     p.set_defaults(func=_cmd_eval)
 
@@ -276,8 +277,40 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
     p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
     p.add_argument("--device", default="auto")
+    _execution_flags(p)
     _threads_flag(p)
     p.set_defaults(func=_cmd_render)
+
+
+def _execution_flags(p) -> None:
+    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode, as always)")
+    g.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help="plan again from the current state every K environment steps (1..episode length)")
+    g.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
+                   help="also plan again, for the episodes concerned only, when the position is more than D from "
+                        "where the plan put it (default: off)")
+    g.add_argument("--candidates", type=int, default=1, metavar="M",
+                   help="plans sampled per decision, in one batch; --select picks one (default 1)")
+    g.add_argument("--select", default="arrival",
+                   help="arrival (earliest within 0.45 of the goal; default), agreement (the candidate closest to "
+                        "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
+    g.add_argument("--prior", default=None,
+                   help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
+                        "replanning; the first plan uses the run's own prior)")
+    g.add_argument("--arrival", default=None,
+                   help="end (the plan as sampled, arriving at t=H-1) or truncate (cut at its first state within "
+                        "0.45 of the goal, then hold the goal); default truncate when replanning or with "
+                        "candidates, else end")
+
+
+def _execution(args):
+    from bridgeplan.replan import Execution
+
+    if args.prior is not None and args.prior != "warm":
+        raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
+                              f"the run's own prior), got {args.prior!r}")
+    return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
+                     select=args.select, warm=args.prior == "warm", arrival=args.arrival)
 
 
 def _cmd_eval(args) -> int:
@@ -285,12 +318,14 @@ def _cmd_eval(args) -> int:
     from bridgeplan.layout import eval_dir
     from bridgeplan.runs import run_dir_of
 
+    execution = _execution(args)
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
-                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile).to_dict()
+                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile,
+                      execution=execution).to_dict()
     name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
         "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
-        "-compiled" if args.compile else "")
+        "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "")
     out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
     write_result(result, out)
     if args.json:
@@ -306,7 +341,7 @@ def _cmd_render(args) -> int:
 
     for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                            multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
-                           device=args.device):
+                           device=args.device, execution=_execution(args)):
         print(f"wrote {path}")
     return 0
 

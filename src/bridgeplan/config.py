@@ -16,7 +16,7 @@ from typing import Any
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
-from bridgeplan.priors import PRIORS
+from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
 
 # Diffuser's Maze2D settings per maze: horizon and diffusion steps.
@@ -100,6 +100,9 @@ def check_prior(process: Process, prior: str) -> None:
     """The one rule tying processes to priors: a process without a prior starts from Gaussian noise."""
     if prior not in PRIORS:
         raise BridgeplanError(f"unknown prior {prior!r}: choose from {', '.join(PRIORS)}")
+    if prior in REPLAN_ONLY:
+        raise BridgeplanError(f"the {prior} prior is only valid on replans (eval --replan-every K --prior {prior}), "
+                              f"not for training")
     if not process.uses_prior and prior != "gaussian":
         raise BridgeplanError(f"{process.display_name} starts from Gaussian noise; --prior {prior} needs a "
                               f"process that takes a prior (bridge)")

@@ -1,8 +1,10 @@
-"""Evaluation: plan once per episode, open loop, track the plan, score the returns.
+"""Evaluation: plan once per episode, open loop, track the plan, score the returns (or, with an
+:class:`~bridgeplan.replan.Execution`, plan again closed loop, with candidates and arrival rules).
 
 :func:`evaluate_planner` scores a loaded planner on given :class:`Tasks` and returns an
 :class:`EvalResult`; :func:`evaluate` loads a run and calls it. Every episode of a batch is planned
-at once and all episodes step in lockstep. The same episodes are also run with no model at all (the
+at once and all episodes step in lockstep; closed loop, all the episodes due to replan at a step are
+planned in one batch. The same episodes are also run with no model at all (the
 straight-line plan, tracked by the same controller: the floor), and for a prior that is neither
 noise nor the line, with the prior sample alone; sweeps compute these floors once per run.
 """
@@ -23,10 +25,11 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, code_version
 from bridgeplan.maze.layouts import Maze, get_maze
 from bridgeplan.maze.reference import CONVENTIONS, normalized_score
-from bridgeplan.maze.rollout import execute_plans
+from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
 from bridgeplan.maze.tasks import sample_tasks
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
+from bridgeplan.replan import Execution, PlanSource, percentiles_ms
 from bridgeplan.runs import RunInfo, load_planner
 
 
@@ -113,6 +116,11 @@ class EvalResult:
     compile_seconds: float | None = None
     """Seconds spent compiling (untimed warm-up), None when the network was not compiled."""
     environment: dict = field(default_factory=dict)
+    execution: Execution = field(default_factory=Execution)
+    plans_made: np.ndarray | None = None
+    """``[episodes]`` plans (decisions) made per episode; None: one each (open loop)."""
+    decisions: dict = field(default_factory=dict)
+    """Closed-loop / candidate runs: decision latency at batch 1 and per batch (``decision_ms_*``)."""
 
     @property
     def prior(self) -> str:
@@ -136,9 +144,24 @@ class EvalResult:
             "batch_size": self.batch_size, "compiled": self.compile_seconds is not None,
             "compile_seconds": self.compile_seconds or 0.0,
             "per_start_cell": self.per_start_cell, **self.floors, "environment": self.environment,
+            **self.execution_fields(),
         }
         out["config"] = run.config_dict if run else None
         return out
+
+    def execution_fields(self) -> dict:
+        """How the plans were executed and what it cost per episode: ``execution`` (the settings),
+        ``plans_per_episode`` (decisions: mean, min, max), ``calls_per_episode`` (NFE x plans made: the
+        network calls one episode needs, candidates of a decision sharing a batch), ``candidate_plans_per_episode``
+        (plans sampled: decisions x candidates) and, except for plain open loop, the decision latency
+        ``decision_ms_batch1`` and ``decision_ms_per_batch`` (p50/p95/mean ms; see :func:`evaluate_planner`)."""
+        made = (np.ones(self.tasks.episodes, dtype=np.int64) if self.plans_made is None
+                else np.asarray(self.plans_made))
+        return {"execution": self.execution.to_dict(self.prior),
+                "plans_per_episode": {"mean": float(made.mean()), "min": int(made.min()), "max": int(made.max())},
+                "calls_per_episode": float(self.nfe * made.mean()),
+                "candidate_plans_per_episode": float(made.mean() * self.execution.candidates),
+                **self.decisions}
 
     def to_row(self, experiment: str) -> dict:
         """A results-store row (``experiments.store.COLUMNS``); needs the run the planner came from."""
@@ -160,18 +183,28 @@ class EvalResult:
 
 def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run: RunInfo | None = None,
                      batch_size: int | None = None, compiled: bool = False,
-                     precomputed_floors: dict[str, dict] | None = None) -> EvalResult:
+                     precomputed_floors: dict[str, dict] | None = None,
+                     execution: Execution | None = None) -> EvalResult:
     """Score ``planner`` on ``tasks`` with ``nfe`` network calls per plan (default: the process's most).
 
     ``batch_size``: plans per network batch (default: all episodes at once). ``compiled``: the network is
     ``torch.compile``'d; it is compiled in an untimed warm-up at every batch shape first, with a generator
     of its own, so the plans and the planning time are those of the compiled network alone.
     ``precomputed_floors``: :func:`floors` of the same planner's prior on the same tasks, to skip them.
+    ``execution``: replanning, candidates, arrival rule (default: open loop, one plan per episode). Closed loop,
+    ``batch_size`` caps the plans per network batch (candidates included), the floors stay open loop, and the
+    decisions are timed twice: every batched decision of the evaluation (``decision_ms_per_batch``, with
+    ``mean_batch`` plans per decision: due episodes x candidates) and, at batch 1, every decision of the first
+    episode run again alone after one untimed warm-up decision (``decision_ms_batch1``).
     """
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
     if batch_size is not None and batch_size <= 0:
         raise BridgeplanError(f"batch size must be positive, got {batch_size}")
+    execution = execution or Execution()
+    execution.validate(planner.process, tasks.maze.episode_steps)
+    if not execution.is_open_loop_default:
+        return _evaluate_closed_loop(planner, tasks, nfe, run, batch_size, compiled, precomputed_floors, execution)
     n = tasks.episodes
     batch = min(batch_size or n, n)
     starts, goals = tasks.start_states, tasks.goals_xy
@@ -189,9 +222,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds
     result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans))
-    environment = {"device": str(planner.device), "torch": torch.__version__, "machine": platform.machine(),
-                   "processor": platform.processor() or platform.machine(),
-                   "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
+    environment = _environment(planner)
     return EvalResult(
         planner=planner, tasks=tasks, nfe=nfe, run=run,
         scores=score_returns(tasks.maze.name, result.returns, result.success),
@@ -201,16 +232,62 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         batch_size=batch, compile_seconds=compile_s, environment=environment)
 
 
+def _environment(planner: Planner) -> dict:
+    return {"device": str(planner.device), "torch": torch.__version__, "machine": platform.machine(),
+            "processor": platform.processor() or platform.machine(),
+            "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
+
+
+def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo | None, batch_size: int | None,
+                          compiled: bool, precomputed_floors: dict[str, dict] | None,
+                          execution: Execution) -> EvalResult:
+    """:func:`evaluate_planner` with replanning, candidates or an arrival rule (``execution``)."""
+    n, maze, m = tasks.episodes, tasks.maze, execution.candidates
+    starts, goals = tasks.starts_xy, tasks.goals_xy
+    compile_s = None
+    if compiled:  # the first decision's shape; replans at other shapes compile when they first occur
+        t0 = time.perf_counter()
+        warm_up = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(0), n,
+                             maze, batch_size)
+        warm_up(tasks.start_states, goals, np.arange(n), 0)
+        compile_s = time.perf_counter() - t0
+    source = PlanSource(planner, execution, nfe, tasks.generator(planner.device), n, maze, batch_size)
+    result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance)
+    # decision latency at batch 1: the first episode again, alone, after one untimed decision
+    single = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(tasks.seed + 1),
+                        1, maze)
+    single(tasks.start_states[:1], goals[:1], np.zeros(1, dtype=np.int64), 0)
+    single.decision_seconds.clear()
+    single.reset()
+    execute_closed_loop(maze, starts[:1], goals[:1], single, execution.replan_every, execution.tolerance)
+    per_batch = percentiles_ms(source.decision_seconds)
+    per_batch["mean_batch"] = float(np.mean(source.decision_batch)) * m
+    decisions = {"decision_ms_batch1": percentiles_ms(single.decision_seconds),
+                 "decision_ms_per_batch": per_batch}
+    return EvalResult(
+        planner=planner, tasks=tasks, nfe=nfe, run=run,
+        scores=score_returns(maze.name, result.returns, result.success),
+        per_start_cell=_per_start_cell(maze, starts, result.returns),
+        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks),
+        plan_ms_per_plan=1000.0 * (source.prior_seconds + source.sample_seconds) / source.plans_sampled,
+        prior_ms_per_plan=1000.0 * source.prior_seconds / source.plans_sampled,
+        batch_size=min(batch_size or n * m, n * m), compile_seconds=compile_s, environment=_environment(planner),
+        execution=execution, plans_made=result.plans_made, decisions=decisions)
+
+
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
              multi_task: bool = False, batch_size: int | None = None, snapshot: int | None = None,
-             device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False) -> EvalResult:
-    """Load a trained run (or one of its snapshots) and :func:`evaluate_planner` it on seeded tasks."""
+             device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False,
+             execution: Execution | None = None) -> EvalResult:
+    """Load a trained run (or one of its snapshots) and :func:`evaluate_planner` it on seeded tasks
+    (``execution``: closed loop, candidates, arrival; default open loop)."""
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
     planner.process.validate_nfe(planner.process.max_nfe if nfe is None else nfe)
     tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
-    return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile)
+    return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,
+                            execution=execution)
 
 
 def _per_start_cell(maze, starts_xy: np.ndarray, returns: np.ndarray) -> list[dict]:
@@ -244,6 +321,17 @@ def format_table(result: dict) -> str:
         f"(prior {result['prior_ms_per_plan']:.2f} ms; batch {result['batch_size']}"
         + (f"; compiled in {result['compile_seconds']:.0f} s, untimed)" if result["compiled"] else ")"),
     ]
+    ex = result.get("execution")
+    if ex is not None and (ex["mode"] == "closed_loop" or ex["candidates"] > 1 or ex["arrival"] != "end"):
+        b1, pb = result["decision_ms_batch1"], result["decision_ms_per_batch"]
+        lines.append(f"  execution:                 {ex['mode']}, replan every {ex['replan_every']}, tolerance "
+                     f"{ex['replan_tolerance']}, candidates {ex['candidates']}"
+                     + (f" ({ex['select']})" if ex["select"] else "")
+                     + f", arrival {ex['arrival']}, replan prior {ex['replan_prior']}")
+        lines.append(f"  plans per episode:         {result['plans_per_episode']['mean']:7.1f} "
+                     f"({result['calls_per_episode']:.1f} network calls per episode)")
+        lines.append(f"  decision latency:          batch 1: p50 {b1['p50']:.2f} ms, p95 {b1['p95']:.2f} ms; "
+                     f"per batch ({pb['mean_batch']:.0f} plans): p50 {pb['p50']:.2f} ms, p95 {pb['p95']:.2f} ms")
     for key in [k for k in result if k.startswith(("floor_", "prior_only_"))]:
         f = result[key]
         lines.append(f"  {key:<26} {f['score']['minari']['mean']:7.1f} ± {f['score']['minari']['se']:.1f} "

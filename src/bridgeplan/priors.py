@@ -4,6 +4,8 @@ A prior is a small class with a ``name`` and ``sample(conditions, horizon, batch
 ``conditions`` are the planner's normalized ``{0: start, horizon - 1: goal}`` states ``[B, obs_dim]``.
 Every prior returns its sample with the start and goal inpainted (``apply_conditions``).
 A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, net)``).
+Priors in ``REPLAN_ONLY`` (``warm``: the previous plan, shifted) exist only while executing closed loop;
+they cannot be trained with and cannot make a first plan.
 """
 
 from __future__ import annotations
@@ -109,6 +111,70 @@ class LearnedPrior:
         return apply_conditions(x, conditions)
 
 
+class WarmPrior:
+    """Warm start for replanning: the previous plan of each episode, shifted by the steps elapsed since it was
+    made, its tail extended toward the goal with the line prior's rule, the conditions re-applied.
+
+    ``previous`` ``[B, H, 6]`` are the previous plans in physical units (actions, x, y, vx, vy) and
+    ``elapsed`` ``[B]`` the steps since each was made (``with_previous``). The sample at ``t`` is the
+    previous plan at ``t + elapsed`` while that is inside its horizon; after it (the last ``elapsed`` steps)
+    positions go in a straight line from the previous plan's last position to the goal condition at
+    ``t = H - 1``, at the constant velocity that covers it (clipped to ``MAX_SPEED``), actions the unit vector
+    toward the goal: the previous plan ended at the goal, so this holds the goal with zero velocity and
+    action, unless the goal has moved. Then the current state is inpainted at ``t = 0`` and the goal at
+    ``t = H - 1`` (``apply_conditions``). Built without previous plans (``make_prior("warm", ...)``), it
+    refuses to sample: a first plan has nothing to start from.
+    """
+
+    name = "warm"
+
+    def __init__(self, normalizer: Normalizer, previous=None, elapsed=None):
+        self.normalizer = normalizer
+        self.previous = None if previous is None else torch.as_tensor(previous, dtype=torch.float64)
+        self.elapsed = None if elapsed is None else torch.as_tensor(elapsed, dtype=torch.int64).reshape(-1)
+        if self.previous is not None:
+            if self.previous.ndim != 3 or self.previous.shape[2] != TRANSITION_DIM:
+                raise BridgeplanError(f"previous plans must be [B, H, {TRANSITION_DIM}], "
+                                      f"got {list(self.previous.shape)}")
+            if self.elapsed is None or len(self.elapsed) != len(self.previous) or bool((self.elapsed < 0).any()):
+                raise BridgeplanError("the warm prior needs one elapsed step count >= 0 per previous plan")
+
+    def with_previous(self, previous, elapsed) -> WarmPrior:
+        """This prior starting from ``previous`` plans ``[B, H, 6]`` made ``elapsed [B]`` steps ago."""
+        return WarmPrior(self.normalizer, previous, elapsed)
+
+    def sample(self, conditions: Conditions, horizon: int, batch: int,
+               generator: torch.Generator | None = None) -> torch.Tensor:
+        if self.previous is None:
+            raise BridgeplanError("the warm prior is only valid on replans: it starts from the previous plan, "
+                                  "and a first plan has none")
+        start_n, goal_n = _endpoints(conditions, horizon, batch)
+        if tuple(self.previous.shape[:2]) != (batch, horizon):
+            raise BridgeplanError(f"the warm prior holds previous plans of shape {list(self.previous.shape[:2])}, "
+                                  f"asked for batch {batch} and horizon {horizon}")
+        device = start_n.device
+        prev = self.previous.to(device)
+        elapsed = self.elapsed.to(device)[:, None]
+        t = torch.arange(horizon, device=device)[None, :]
+        src = (t + elapsed).clamp(max=horizon - 1)
+        traj = torch.gather(prev, 1, src[..., None].expand(-1, -1, TRANSITION_DIM)).clone()
+        # the tail after the previous plan's end: a straight line from its last position to the goal
+        anchor = (horizon - 1 - elapsed).clamp(min=0)
+        goal = self.normalizer.unnormalize(goal_n.double(), slice(ACT_DIM, None))[:, :2]
+        last = prev[:, -1, ACT_DIM:ACT_DIM + 2]
+        delta = goal - last
+        span = (horizon - 1 - anchor).clamp(min=1).double()
+        frac = ((t - anchor).clamp(min=0).double() / span)[..., None]
+        tail = t > anchor
+        pos = last[:, None] + frac * delta[:, None]
+        vel = (delta[:, None] / (span[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED).expand(-1, horizon, -1)
+        direction = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None].expand(-1, horizon, -1)
+        line = torch.cat([direction, pos, vel], dim=-1)
+        traj = torch.where(tail[..., None], line, traj)
+        x = self.normalizer.normalize(traj).to(start_n.dtype)
+        return apply_conditions(x, conditions)
+
+
 def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor) -> torch.Tensor:
     """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``."""
     out = net(x0[:, 0, ACT_DIM:], x0[:, -1, ACT_DIM:])
@@ -125,7 +191,10 @@ PRIORS: dict[str, Callable[[Normalizer, torch.nn.Module | None], Prior]] = {
     "gaussian": lambda normalizer, net: GaussianPrior(),
     "line": lambda normalizer, net: LinePrior(normalizer),
     "learned": _learned,
+    "warm": lambda normalizer, net: WarmPrior(normalizer),
 }
+REPLAN_ONLY = frozenset({"warm"})
+"""Priors that start from a previous plan: valid on replans only (never for training or a first plan)."""
 
 
 def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None) -> Prior:

@@ -79,8 +79,12 @@ def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: 
 
 
 def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int = 0, multi_task: bool = False,
-               out: str | None = None, pairs: bool = False, video: bool = False, device: str = "auto") -> list[Path]:
-    """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written."""
+               out: str | None = None, pairs: bool = False, video: bool = False, device: str = "auto",
+               execution=None) -> list[Path]:
+    """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written.
+
+    ``execution`` (:class:`~bridgeplan.replan.Execution`): closed loop, candidates, arrival rule; the picture
+    then shows each episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
     from bridgeplan.evaluate import make_tasks
@@ -97,11 +101,32 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     tasks = make_tasks(config.maze, episodes, seed, multi_task)
     gen = tasks.generator(planner.device)
     maze = tasks.maze
-    plan = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen)
-    result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan.states)
-    base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}.png"
+    from bridgeplan.maze.rollout import execute_closed_loop
+    from bridgeplan.replan import Execution, PlanSource
+
+    execution = execution or Execution()
+    execution.validate(planner.process, tasks.maze.episode_steps)
+    if execution.is_open_loop_default:
+        plan_states = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen).states
+        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states)
+    else:
+        first: list[np.ndarray] = []
+        source = PlanSource(planner, execution, nfe, gen, episodes, maze)
+
+        def plan_fn(states, goals, idx, t):
+            planned = source(states, goals, idx, t)
+            if t == 0:
+                first.append(planned)
+            return planned
+
+        result = execute_closed_loop(maze, tasks.starts_xy, tasks.goals_xy, plan_fn, execution.replan_every,
+                                     execution.tolerance)
+        plan_states = first[0]
+    tag = f"-{execution.tag()}" if execution.tag() else ""
+    base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
     title = f"{maze.name} {config.label()} NFE={nfe} step={info.step}"
-    plot_trajectory_grid(maze, [(plan.states, "winter", "plan"), (result.states, "autumn", "executed")],
+    plot_trajectory_grid(maze, [(plan_states, "winter", "plan" if not tag else "first plan"),
+                                (result.states, "autumn", "executed")],
                          base, title, goals=tasks.goals_xy)
     written = [base]
     if pairs:

@@ -29,6 +29,19 @@ def planned_target(plans: np.ndarray, t: int) -> np.ndarray:
     return np.concatenate([plans[:, -1, :2], np.zeros_like(plans[:, -1, 2:])], axis=1)
 
 
+def planned_targets(plans: np.ndarray, steps_into_plan: np.ndarray) -> np.ndarray:
+    """:func:`planned_target` with a step per plan: ``plans[n, s_n + 1]`` for ``steps_into_plan [N]`` (the
+    steps since each plan was made; closed loop), or past its end its last position with zero velocity."""
+    plans = np.asarray(plans, np.float64)
+    steps = np.asarray(steps_into_plan, dtype=np.int64)
+    horizon = plans.shape[1]
+    rows = np.arange(len(plans))
+    target = plans[rows, np.minimum(steps + 1, horizon - 1)].copy()
+    ended = steps + 1 >= horizon
+    target[ended, 2:] = 0.0
+    return target
+
+
 def tracking_actions(states: np.ndarray, plans: np.ndarray, t: int) -> np.ndarray:
     """Actions ``[N, 2]`` at step ``t`` for observed ``states [N, 4]`` tracking ``plans [N, H, 4]``."""
     return tracking_action(states, planned_target(plans, t))

@@ -1,0 +1,93 @@
+"""A trained planner as a policy for your own loop: a gymnasium-robotics ``PointMaze_*-v3`` observation dict
+in, an action out, replanning inside.
+
+    policy = PlannerPolicy.from_run("runs/umaze-bridge-learned-N16-H128-cpu-small-s0", nfe=1, replan_every=8)
+    obs, _ = env.reset(seed=0)
+    policy.reset()
+    action = policy(obs)
+
+It is the evaluation's closed loop (``maze.rollout.ClosedLoopController`` over ``replan.PlanSource``) for one
+episode at a time: it plans from ``obs["observation"]`` (x, y, vx, vy) to ``obs["desired_goal"]`` (x, y) at
+the first step after :meth:`PlannerPolicy.reset`, again every ``replan_every`` steps (and/or when the
+position drifts more than ``tolerance`` from the plan, or when ``desired_goal`` changes), and tracks the
+newest plan with Diffuser's controller.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.layouts import Maze, get_maze
+from bridgeplan.maze.rollout import ClosedLoopController
+from bridgeplan.replan import Execution, PlanSource
+
+
+class PlannerPolicy:
+    """One episode at a time: ``policy(obs_dict) -> action [2]``; ``reset()`` between episodes.
+
+    Attributes: ``planner``, ``maze`` (the run's maze: make the env with ``maze.gym_id``), ``execution``,
+    ``nfe``, ``steps`` (steps since the last reset) and ``plans_made`` (plans in this episode).
+    """
+
+    def __init__(self, planner, maze: Maze, nfe: int = 1, execution: Execution | None = None, seed: int = 0):
+        execution = Execution(replan_every=8) if execution is None else execution
+        planner.process.validate_nfe(nfe)
+        execution.validate(planner.process, maze.episode_steps)
+        self.planner, self.maze, self.nfe, self.execution = planner, maze, nfe, execution
+        self.source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed),
+                                 1, maze)
+        self.controller = ClosedLoopController(self.source, 1, execution.replan_every, execution.tolerance)
+        self.reset()
+
+    @classmethod
+    def from_run(cls, run: str | Path, nfe: int = 1, replan_every: int | None = 8, tolerance: float | None = None,
+                 candidates: int = 1, select: str = "arrival", warm: bool = False, arrival: str | None = None,
+                 device: str = "cpu", seed: int = 0, snapshot: int | None = None) -> PlannerPolicy:
+        """Load a trained run (EMA weights; ``snapshot``: that training step's) as a policy.
+
+        ``replan_every``/``tolerance``/``candidates``/``select``/``warm``/``arrival``: as ``bridgeplan eval``'s
+        flags (:class:`~bridgeplan.replan.Execution`); ``replan_every=None`` and no tolerance plans once per
+        episode (open loop). ``seed`` seeds the planning generator (the same episode, the same plans).
+        """
+        from bridgeplan.runs import load_planner
+
+        planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
+        execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
+                              warm=warm, arrival=arrival)
+        return cls(planner, get_maze(info.config.maze), nfe=nfe, execution=execution, seed=seed)
+
+    def reset(self) -> None:
+        """Start a new episode: the next call plans afresh."""
+        self.controller.reset()
+        self.source.reset()
+        self.steps = 0
+        self.goal: np.ndarray | None = None
+
+    @property
+    def plans_made(self) -> int:
+        return int(self.controller.plans_made[0])
+
+    def __call__(self, obs: dict) -> np.ndarray:
+        """The action ``[2]`` (float32, in [-1, 1]) for a PointMaze observation dict."""
+        try:
+            if not isinstance(obs, Mapping):
+                raise TypeError("not a mapping")
+            state = np.asarray(obs["observation"], dtype=np.float64).reshape(1, 4)
+            goal = np.asarray(obs["desired_goal"], dtype=np.float64).reshape(1, 2)
+        except (KeyError, TypeError, ValueError) as e:
+            raise BridgeplanError("a PointMaze observation dict with 'observation' (x, y, vx, vy) and "
+                                  f"'desired_goal' (x, y) is needed, got {type(obs).__name__}: {e}") from None
+        due = None
+        if self.goal is not None and not np.array_equal(goal, self.goal):
+            due = np.ones(1, dtype=bool)  # the goal moved: plan for the new one now
+        self.goal = goal
+        action = self.controller.act(self.steps, state, goal, due=due)
+        self.steps += 1
+        return action[0].astype(np.float32)
+
+    act = __call__

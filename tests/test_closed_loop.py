@@ -1,0 +1,359 @@
+"""Closed-loop execution: replanning counts, the warm prior, arrival truncation, candidate selection, the
+policy in a real gymnasium env, and the CLI's bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from bridgeplan.cli import main
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.evaluate import evaluate_planner, make_tasks, score_returns
+from bridgeplan.maze.expert import WaypointExpert
+from bridgeplan.maze.layouts import get_maze
+from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
+from bridgeplan.maze.sim import BatchedPointMaze
+from bridgeplan.normalizer import Normalizer
+from bridgeplan.planner import Plan, Planner
+from bridgeplan.priors import PRIORS, WarmPrior, make_prior
+from bridgeplan.replan import Execution, PlanSource, select_candidates, truncate_at_arrival
+from bridgeplan.runs import load_planner
+
+UMAZE = get_maze("umaze")
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+# ---------------------------------------------------------------- open loop is unchanged
+
+def test_open_loop_json_scores_are_todays(tiny_runs, tmp_path):
+    """Flags absent: the eval JSON's scores are exactly those of today's protocol spelled out here (one plan
+    per episode from the tasks' generator, executed open loop)."""
+    out = tmp_path / "open.json"
+    assert main(["eval", str(tiny_runs["bridge"]), "--episodes", "5", "--nfe", "2", "--device", "cpu",
+                 "--out", str(out)]) == 0
+    saved = json.loads(out.read_text())
+    planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
+    tasks = make_tasks("umaze", 5, 0)
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, tasks.generator(planner.device))
+    today = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states)
+    expected = json.loads(json.dumps(score_returns("umaze", today.returns, today.success)))
+    assert {k: saved[k] for k in expected} == expected
+    assert saved["execution"]["mode"] == "open_loop" and saved["plans_per_episode"]["max"] == 1
+    assert saved["calls_per_episode"] == 2 and "decision_ms_batch1" not in saved
+
+
+def test_closed_loop_without_replanning_is_open_loop():
+    """The closed-loop controller with neither K nor D plans once and moves exactly as execute_plans."""
+    tasks = make_tasks("umaze", 4, 1)
+    plans = np.stack([np.linspace(np.r_[s, 0, 0], np.r_[g, 0, 0], 40) for s, g in zip(tasks.starts_xy, tasks.goals_xy)])
+    open_loop = execute_plans(UMAZE, tasks.starts_xy, tasks.goals_xy, plans, steps=60)
+    closed = execute_closed_loop(UMAZE, tasks.starts_xy, tasks.goals_xy, lambda s, g, idx, t: plans[idx], steps=60)
+    np.testing.assert_array_equal(open_loop.states, closed.states)
+    np.testing.assert_array_equal(open_loop.returns, closed.returns)
+    assert closed.plans_made.tolist() == [1] * 4 and closed.call_steps == [0]
+
+
+# ---------------------------------------------------------------- replanning counts
+
+@pytest.mark.parametrize("k", [1, 7, 128, 300])
+def test_replan_every_makes_ceil_steps_over_k_plans(tiny_runs, monkeypatch, k):
+    """--replan-every K: ceil(300 / K) plans per episode, counted at the planner itself, and
+    calls_per_episode = that x NFE in the JSON."""
+    planner, info = load_planner(tiny_runs["bridge"], device="cpu")
+    rows = []
+    original = Planner.plan
+
+    def counting(self, starts, goals, nfe, generator, prior_only=False):
+        rows.append(len(starts))
+        return original(self, starts, goals, nfe, generator, prior_only)
+
+    monkeypatch.setattr(Planner, "plan", counting)
+    tasks = make_tasks("umaze", 3, 2)
+    result = evaluate_planner(planner, tasks, 2, run=info, precomputed_floors={},
+                              execution=Execution(replan_every=k)).to_dict()
+    plans = math.ceil(300 / k)
+    decided = rows[:plans]  # then the batch-1 latency episode: one warm-up decision and ceil(300/K) more
+    assert decided == [3] * plans and rows[plans:] == [1] * (plans + 1)
+    assert result["plans_per_episode"] == {"mean": plans, "min": plans, "max": plans}
+    assert result["calls_per_episode"] == plans * 2
+    assert result["decision_ms_batch1"]["count"] == plans and result["decision_ms_per_batch"]["count"] == plans
+    assert result["decision_ms_batch1"]["p50"] > 0 and result["decision_ms_per_batch"]["mean_batch"] == 3
+    assert result["execution"] == {"mode": "closed_loop", "replan_every": k, "replan_tolerance": None,
+                                   "candidates": 1, "select": None, "arrival": "truncate",
+                                   "first_prior": "learned", "replan_prior": "learned"}
+
+
+def test_tolerance_replans_only_the_drifted_episode():
+    """Episode 0's plan is to stay where it is (no drift); episode 1's plan puts it 1.0 away at once: only
+    episode 1 replans, and every replan is a call for it alone."""
+    starts = np.array([[1.0, 1.0], [-1.0, 1.0]])
+    goals = np.array([[1.0, -1.0], [1.0, -1.0]])
+    calls = []
+
+    def plan_fn(states, goals_, idx, t):
+        calls.append(idx.tolist())
+        plans = np.repeat(np.c_[states[:, :2], np.zeros((len(idx), 2))][:, None], 16, axis=1)
+        plans[idx == 1, 1:, 0] += 1.0  # unreachable in one step: the state drifts from it
+        return plans
+
+    result = execute_closed_loop(UMAZE, starts, goals, plan_fn, tolerance=0.3, steps=20)
+    assert result.plans_made[0] == 1 and result.plans_made[1] > 1
+    assert calls[0] == [0, 1] and all(c == [1] for c in calls[1:])
+
+
+# ---------------------------------------------------------------- warm prior
+
+def _normalizer() -> Normalizer:
+    return Normalizer((-1.0, -1.0, -1.5, -1.5, -5.0, -5.0), (1.0, 1.0, 1.5, 1.5, 5.0, 5.0))
+
+
+def test_warm_prior_is_the_previous_plan_shifted():
+    """The sample equals the previous plan shifted by K steps, the goal held after the previous plan's end,
+    with the current state exact at t = 0 and the goal exact at t = H - 1."""
+    norm, h, k, b = _normalizer(), 16, 5, 3
+    rng = np.random.default_rng(0)
+    prev = rng.uniform(-0.9, 0.9, size=(b, h, 6))
+    goal = rng.uniform(-1.2, 1.2, size=(b, 2))
+    prev[:, -1, 2:4], prev[:, -1, 4:] = goal, 0.0  # plans end at the goal, at rest
+    start = np.c_[rng.uniform(-1.2, 1.2, size=(b, 2)), rng.uniform(-1, 1, size=(b, 2))]
+    cond = {0: torch.as_tensor(norm.normalize(start, slice(2, None)), dtype=torch.float32),
+            h - 1: torch.as_tensor(norm.normalize(np.c_[goal, np.zeros((b, 2))], slice(2, None)), dtype=torch.float32)}
+    x = WarmPrior(norm, prev, [k] * b).sample(cond, h, b)
+    assert torch.equal(x[:, 0, 2:], cond[0]) and torch.equal(x[:, h - 1, 2:], cond[h - 1])
+    traj = norm.unnormalize(x.double().numpy())
+    np.testing.assert_allclose(traj[:, 1:h - k], prev[:, k + 1:], atol=1e-6)  # shifted
+    np.testing.assert_allclose(traj[:, h - k:, 2:4], np.repeat(goal[:, None], k, axis=1), atol=1e-6)  # held
+    np.testing.assert_allclose(traj[:, h - k:-1, 4:], 0.0, atol=1e-6)
+    # elapsed 0: the previous plan itself; per-row shifts; a moved goal: a straight line to it
+    same = norm.unnormalize(WarmPrior(norm, prev, [0] * b).sample(cond, h, b).double().numpy())
+    np.testing.assert_allclose(same[:, 1:-1], prev[:, 1:-1], atol=1e-6)
+    moved = dict(cond)
+    moved[h - 1] = torch.as_tensor(norm.normalize(np.zeros((b, 4)), slice(2, None)), dtype=torch.float32)
+    line = norm.unnormalize(WarmPrior(norm, prev, [4, 4, 4]).sample(moved, h, b).double().numpy())
+    steps = np.diff(line[:, h - 5:, 2:4], axis=1)
+    np.testing.assert_allclose(steps, np.repeat(steps[:, :1], 4, axis=1), atol=1e-6)
+
+
+def test_warm_prior_registry_and_first_plan():
+    assert "warm" in PRIORS
+    prior = make_prior("warm", _normalizer())
+    cond = {0: torch.zeros(2, 4), 7: torch.zeros(2, 4)}
+    with pytest.raises(BridgeplanError, match="only valid on replans"):
+        prior.sample(cond, 8, 2)
+
+
+def test_warm_prior_cannot_be_trained(tiny_dataset, tmp_path, capsys):
+    from tests.test_train import train_args
+
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2, "--process", "bridge", "--prior", "warm")) == 2
+    assert "only valid on replans" in capsys.readouterr().err and not run.exists()
+
+
+def test_warm_replans_start_from_the_previous_plan(tiny_runs):
+    """Through PlanSource: a replan with --prior warm samples its prior from the episode's previous plan."""
+    planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
+    seen = []
+
+    class Spy(Planner):
+        def plan(self, starts, goals, nfe, generator, prior_only=False):
+            seen.append(self.prior)
+            return super().plan(starts, goals, nfe, generator, prior_only)
+
+    spy = Spy(**{f: getattr(planner, f) for f in ("model", "process", "prior", "normalizer", "horizon", "device")})
+    source = PlanSource(spy, Execution(replan_every=4, warm=True), 1, torch.Generator().manual_seed(0), 2, UMAZE)
+    tasks = make_tasks("umaze", 2, 0)
+    first = source(tasks.start_states, tasks.goals_xy, np.arange(2), 0)
+    source(np.c_[first[:, 4, :2], first[:, 4, 2:]], tasks.goals_xy, np.arange(2), 4)
+    assert seen[0].name == "learned" and isinstance(seen[1], WarmPrior)
+    np.testing.assert_array_equal(seen[1].elapsed.numpy(), [4, 4])
+    np.testing.assert_array_equal(seen[1].previous[:, :, 2:].numpy(), first)
+
+
+# ---------------------------------------------------------------- a perfect plan source beats open loop
+
+def expert_paths(states: np.ndarray, goals: np.ndarray, horizon: int) -> np.ndarray:
+    """The shortest-path expert's own motion from ``states`` for ``horizon`` states: a perfect plan."""
+    sim = BatchedPointMaze(UMAZE, len(states))
+    obs = sim.reset(states[:, :2], goals, velocities=states[:, 2:])
+    expert = WaypointExpert(UMAZE)
+    expert.plan(obs[:, :2], goals)
+    path = [obs]
+    for _ in range(horizon - 1):
+        obs, _ = sim.step(expert(obs))
+        path.append(obs)
+    return np.stack(path, axis=1)
+
+
+def test_replanning_a_perfect_plan_source_beats_open_loop():
+    """Plans that are the expert's own path, but only H = 32 steps long: open loop the point mass stops where
+    the first plan ends, short of the goal (late forever); replanning every 8 steps follows the expert all
+    the way and scores far higher."""
+    tasks = make_tasks("umaze", 6, 0)
+    plan_fn = lambda s, g, idx, t: expert_paths(s, g, 32)  # noqa: E731
+    open_loop = execute_plans(UMAZE, tasks.starts_xy, tasks.goals_xy,
+                              plan_fn(tasks.start_states, tasks.goals_xy, None, 0))
+    closed = execute_closed_loop(UMAZE, tasks.starts_xy, tasks.goals_xy, plan_fn, replan_every=8)
+    far = np.linalg.norm(tasks.starts_xy - tasks.goals_xy, axis=1) > 1.5
+    assert far.any()
+    assert (closed.returns[far] > open_loop.returns[far] + 50).all()
+    assert closed.success.all() and not open_loop.success[far].any()
+    score = score_returns("umaze", closed.returns, closed.success)["score"]["minari"]["mean"]
+    assert score > score_returns("umaze", open_loop.returns, open_loop.success)["score"]["minari"]["mean"] + 30
+
+
+# ---------------------------------------------------------------- arrival and candidates
+
+def test_truncate_at_arrival_holds_the_goal():
+    h = 10
+    traj = np.zeros((2, h, 6))
+    traj[:, :, 2] = np.linspace(0, 2, h)  # along x toward the goal at x = 2
+    traj[:, :, 4] = 1.0
+    goals = np.array([[2.0, 0.0], [0.9, 0.0]])
+    out, arrival = truncate_at_arrival(traj, goals)
+    assert arrival.tolist() == [7, 3]  # first x within 0.45 of the goal: 1.56 (index 7); 0.67 (index 3)
+    np.testing.assert_array_equal(out[1, :4], traj[1, :4])
+    np.testing.assert_array_equal(out[1, 4:, 2:4], np.repeat(goals[1:], h - 4, axis=0))
+    assert not out[1, 4:, 4:].any() and not out[1, 4:, :2].any()
+
+
+class KnownCandidates:
+    """A fake planner: every episode's candidate j is a straight walk that reaches the goal at step ARRIVE[j]
+    and holds it; candidate 3 cuts through the wall of the U."""
+
+    ARRIVE = (20, 9, 14, 5)
+
+    def __init__(self, horizon=24):
+        self.horizon, self.prior, self.normalizer, self.device = horizon, make_prior("gaussian", None), None, "cpu"
+
+    def with_prior(self, prior):
+        return self
+
+    def plan(self, starts, goals, nfe, generator, prior_only=False):
+        m = len(self.ARRIVE)
+        states = np.zeros((len(starts), self.horizon, 4))
+        for r in range(len(starts)):
+            a = self.ARRIVE[r % m]
+            frac = np.minimum(np.arange(self.horizon) / a, 1.0)[:, None]
+            if r % m == 3:  # straight through the wall
+                states[r, :, :2] = starts[r, :2] + frac * (goals[r] - starts[r, :2])
+            else:  # around the U: along the bottom row to the right column, up it, then along the top row
+                corner1, corner2 = np.array([1.0, starts[r, 1]]), np.array([1.0, goals[r, 1]])
+                pts = np.array([starts[r, :2], corner1, corner2, goals[r]])
+                seg = np.interp(frac[:, 0] * 3, np.arange(4), np.arange(4))
+                i = np.minimum(seg.astype(int), 2)
+                w = (seg - i)[:, None]
+                states[r, :, :2] = pts[i] * (1 - w) + pts[i + 1] * w
+        return Plan(states, np.zeros((len(starts), self.horizon, 2)), 0.0, 0.0)
+
+
+@pytest.mark.parametrize("how, expected", [("arrival", 3), ("walls", 1)])
+def test_candidates_pick_by_the_criterion(how, expected):
+    """M = 4 known candidates per episode in one batch: ``arrival`` picks the earliest (candidate 3, through
+    the wall), ``walls`` the earliest of those that stay out of walls (candidate 1)."""
+    planner = KnownCandidates()
+    batches = []
+    original = planner.plan
+    planner.plan = lambda s, g, nfe, gen, prior_only=False: batches.append(len(s)) or original(s, g, nfe, gen)
+    starts = np.array([[-1.0, -1.0, 0, 0], [-1.2, -0.9, 0, 0]])  # bottom left; goals top left, over the wall
+    goals = np.array([[-1.0, 1.0], [-1.1, 1.1]])
+    source = PlanSource(planner, Execution(replan_every=8, candidates=4, select=how), 1, None, 2, UMAZE)
+    chosen = source(starts, goals, np.arange(2), 0)
+    assert batches == [8]  # 2 episodes x 4 candidates, one batch
+    want = planner.plan(np.repeat(starts, 4, axis=0), np.repeat(goals, 4, axis=0), 1, None).states
+    want, _ = truncate_at_arrival(np.concatenate([np.zeros((8, 24, 2)), want], axis=2), np.repeat(goals, 4, axis=0))
+    np.testing.assert_array_equal(chosen, want.reshape(2, 4, 24, 6)[:, expected, :, 2:])
+
+
+def test_agreement_picks_the_medoid():
+    traj = np.zeros((1, 3, 5, 6))
+    traj[0, 0, :, 2], traj[0, 1, :, 2], traj[0, 2, :, 2] = 0.0, 0.1, 1.0  # 1 sits between 0 and the outlier 2
+    assert select_candidates(traj, np.zeros((1, 2)), "agreement").tolist() == [1]
+
+
+def test_candidates_through_the_cli(tiny_runs, tmp_path):
+    out = tmp_path / "cand.json"
+    assert main(["eval", str(tiny_runs["bridge"]), "--episodes", "3", "--nfe", "2", "--device", "cpu",
+                 "--candidates", "3", "--select", "walls", "--replan-every", "100", "--prior", "warm",
+                 "--out", str(out)]) == 0
+    saved = json.loads(out.read_text())
+    assert saved["execution"]["candidates"] == 3 and saved["execution"]["select"] == "walls"
+    assert saved["execution"]["replan_prior"] == "warm" and saved["plans_per_episode"]["mean"] == 3
+    assert saved["calls_per_episode"] == 6 and saved["candidate_plans_per_episode"] == 9
+    assert saved["decision_ms_per_batch"]["mean_batch"] == 9
+
+
+# ---------------------------------------------------------------- the policy, as the README shows it
+
+def test_readme_policy_example_runs_in_the_real_env(tiny_runs):
+    """The README's code, run as written on a tiny run (the run path and the step count substituted)."""
+    text = README.read_text()
+    section = text.split("## Use a planner in your own loop", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    run_line = re.search(r'PlannerPolicy\.from_run\("([^"]+)"', code)
+    assert run_line and "range(300)" in code
+    code = code.replace(run_line.group(1), str(tiny_runs["bridge"])).replace("range(300)", "range(12)")
+    code = code.replace("nfe=1, replan_every=8)", "nfe=1, replan_every=8, device='cpu')") \
+        if "device=" not in code else code
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    env, policy, obs = scope["env"], scope["policy"], scope["obs"]
+    assert {"observation", "desired_goal"} <= set(env.observation_space.spaces)
+    assert set(obs) == set(env.observation_space.spaces)
+    assert env.spec.id == "PointMaze_UMaze-v3" and policy.steps == 12 and policy.plans_made == 2
+    action = policy(obs)
+    assert action.shape == (2,) and env.action_space.contains(action)
+    policy.reset()
+    assert policy.steps == 0 and policy.plans_made == 0
+    env.close()
+
+
+def test_policy_replans_when_the_goal_moves(tiny_runs):
+    from bridgeplan.policy import PlannerPolicy
+
+    policy = PlannerPolicy.from_run(tiny_runs["bridge"], replan_every=None, device="cpu")
+    obs = {"observation": np.array([1.0, 1.0, 0, 0]), "desired_goal": np.array([1.0, -1.0])}
+    policy(obs)
+    policy(obs)
+    assert policy.plans_made == 1
+    policy({**obs, "desired_goal": np.array([-1.0, 1.0])})
+    assert policy.plans_made == 2
+    with pytest.raises(BridgeplanError, match="observation dict"):
+        policy(np.zeros(4))
+
+
+# ---------------------------------------------------------------- render and bad input
+
+def test_render_closed_loop(tiny_runs, tmp_path):
+    out = tmp_path / "closed.png"
+    assert main(["render", str(tiny_runs["bridge"]), "--episodes", "2", "--device", "cpu", "--out", str(out),
+                 "--replan-every", "50", "--candidates", "2"]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("process, bad, message", [
+    ("bridge", ["--replan-every", "0"], "--replan-every must be in 1..300"),
+    ("bridge", ["--replan-every", "301"], "--replan-every must be in 1..300"),
+    ("bridge", ["--candidates", "0"], "--candidates must be >= 1"),
+    ("bridge", ["--prior", "warm"], "--prior warm is only valid on replans"),
+    ("ddpm", ["--prior", "warm", "--replan-every", "8"], "--prior warm needs a process that starts from a prior"),
+    ("bridge", ["--replan-tolerance", "-0.1"], "--replan-tolerance must be >= 0"),
+    ("bridge", ["--prior", "line", "--replan-every", "8"], "--prior takes warm"),
+    ("bridge", ["--select", "best", "--candidates", "2"], "unknown --select"),
+    ("bridge", ["--arrival", "soon"], "unknown --arrival"),
+])
+@pytest.mark.parametrize("command", ["eval", "render"])
+def test_bad_closed_loop_input(tiny_runs, tmp_path, capsys, process, bad, message, command):
+    run = tiny_runs[process]
+    before = sorted(p.name for p in run.rglob("*"))
+    out = tmp_path / ("r.json" if command == "eval" else "r.png")
+    assert main([command, str(run), "--episodes", "2", "--device", "cpu", "--out", str(out), *bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and message in err[0]
+    assert not out.exists() and sorted(p.name for p in run.rglob("*")) == before
