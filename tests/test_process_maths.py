@@ -12,7 +12,7 @@ import math
 import pytest
 import torch
 
-from bridgeplan.processes import DDPM, Bridge
+from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.processes.samplers import bridge_posterior, bridge_sample, ddpm_ancestral, ddpm_posterior
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
 from bridgeplan.trajectory import ACT_DIM
@@ -115,7 +115,8 @@ def test_bridge_sampler_step_has_the_conditional_moments():
 # --- the training label is the inverse of predict_x0 ------------------------------------------------
 
 @pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10), Bridge(steps=10, beta_max=0.3, ot_ode=True),
-                                     Bridge(steps=10, consistent=True)])
+                                     Bridge(steps=10, consistent=True), Flow(steps=10), Flow(steps=10, sigma=0.5),
+                                     Flow(steps=1, sigma=0.2)])
 def test_exact_label_has_zero_loss_and_predicts_x0(process):
     """A network that outputs the exact label has zero loss and its x0 prediction is x0 at every step."""
     b, h = 64, 8

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.processes import DDPM, Bridge, make_process, process_from_dict
+from bridgeplan.processes import DDPM, Bridge, Flow, make_process, process_from_dict
 from bridgeplan.processes.samplers import bridge_posterior_step
 from bridgeplan.processes.schedules import (
     bridge_stds,
@@ -242,7 +242,7 @@ def test_bridge_dict_without_consistent_is_i2sb():
     assert process_from_dict({"name": "bridge", "steps": 16, "beta_max": 1.0, "ot_ode": False}).consistent is False
 
 
-@pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10)])
+@pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10), Flow(steps=10, sigma=0.2)])
 def test_training_reduces_the_loss(process):
     from bridgeplan.nets.unet import TemporalUNet
 

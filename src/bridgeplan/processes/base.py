@@ -6,7 +6,10 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
+import torch
+
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.trajectory import Conditions
 
 
 class Process:
@@ -41,6 +44,13 @@ class Process:
         """The parts of a run's name that say what was trained: ``[bridge, line, N16, beta_max0.3]``."""
         tag = [self.name] + ([prior] if self.uses_prior else []) + [f"N{self.steps}"]
         return tag + [k if v is True else f"{k}{v}" for k, v in self.variant().items()]
+
+    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> torch.Tensor:
+        """L2 between the network's output and the label of the process's ``training_pair`` (``x1``: the
+        prior sample for ``x0``; a process without a prior ignores it)."""
+        x_n, n, target = self.training_pair(x0, x1, conditions, generator)
+        return torch.mean((model(x_n, n.float()) - target) ** 2)
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Process:
         """The same trained process sampled another way; only processes with samplers to choose have it."""

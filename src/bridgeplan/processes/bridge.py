@@ -94,12 +94,6 @@ class Bridge(Process):
         x_n = apply_conditions(self.marginal(x0, x1, n, generator), conditions)
         return x_n, n, self.training_target(x0, x_n, n)
 
-    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
-                      generator: torch.Generator | None = None) -> torch.Tensor:
-        """L2 between the network's output and the label of :meth:`training_pair`."""
-        x_n, n, target = self.training_pair(x0, x1, conditions, generator)
-        return torch.mean((model(x_n, n.float()) - target) ** 2)
-
     def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
         """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls."""

@@ -78,12 +78,6 @@ class DDPM(Process):
         x_t = apply_conditions(ab.sqrt() * x0 + (1 - ab).sqrt() * noise, conditions)
         return x_t, t, self.training_target(x0, x_t, t)
 
-    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
-                      generator: torch.Generator | None = None) -> torch.Tensor:
-        """L2 between the network's x0 prediction and the label of :meth:`training_pair`."""
-        x_t, t, target = self.training_pair(x0, x1, conditions, generator)
-        return torch.mean((model(x_t, t.float()) - target) ** 2)
-
     def sample_steps(self, nfe: int) -> list[int]:
         """``nfe`` evenly spaced steps from ``steps - 1`` down to 0."""
         self.validate_nfe(nfe)

@@ -170,12 +170,6 @@ class Flow(Process):
         x_t = apply_conditions(self.interpolate(x0, x1, n, generator), conditions)
         return x_t, n, self.training_target(x0, x_t, n)
 
-    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
-                      generator: torch.Generator | None = None) -> torch.Tensor:
-        """L2 between the network's x0 prediction and the label of :meth:`training_pair`."""
-        x_t, n, target = self.training_pair(x0, x1, conditions, generator)
-        return torch.mean((model(x_t, n.float()) - target) ** 2)
-
     def sample_steps(self, nfe: int) -> list[int]:
         """The ``nfe`` network steps, decreasing from N-1 (t = 1): evenly spaced on the grid ``j / N``."""
         self.validate_nfe(nfe)
