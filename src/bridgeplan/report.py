@@ -45,24 +45,36 @@ def _aggregate(rows: list[dict]) -> list[tuple[int, float, float, int]]:
 
 
 def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
-    """Score vs training steps with standard-error bands, one line per series; False if no data."""
+    """Score vs training steps with standard-error bands, one line per series (a colour per method, a
+    line style per NFE); False if no data."""
     rows = store.rows(name)
     if not rows:
         return False
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    def method(r: dict) -> str:
+        return f"{method_label(r)} N={r['diffusion_steps']}"
+
+    methods = list(dict.fromkeys(method(r) for r in sorted(rows, key=lambda r: (r["process"], r["prior"]))))
+    nfes = {m: sorted({r["nfe"] for r in rows if method(r) == m}) for m in methods}
+    styles = ["-", "--", ":", "-."]
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
     for label, srows in _series(rows).items():
         steps, mean, se = (np.array(v) for v in list(zip(*_aggregate(srows)))[:3])
-        ax.plot(steps, mean, marker="o", ms=3, label=label)
-        ax.fill_between(steps, mean - se, mean + se, alpha=0.2)
+        m = method(srows[0])
+        color = plt.cm.tab10(methods.index(m) % 10)
+        ax.plot(steps, mean, marker="o", ms=3, color=color, ls=styles[nfes[m].index(srows[0]["nfe"]) % len(styles)],
+                label=label)
+        ax.fill_between(steps, mean - se, mean + se, color=color, alpha=0.12)
     floors = [r["floor_minari"] for r in rows if r["floor_minari"] is not None]
     if floors:
         ax.axhline(float(np.mean(floors)), color="0.5", ls="--", lw=1, label="floor (line, tracked)")
     ax.set_xlabel("training steps")
     ax.set_ylabel("normalized score (minari convention)")
-    ax.set_title(f"{rows[0]['maze']}: {EXPERIMENTS[name].title if name in EXPERIMENTS else name}", fontsize=9)
+    processes = {r["process"] for r in rows}
+    title = EXPERIMENTS[name].title if name in EXPERIMENTS and processes <= {"ddpm", "bridge"} else name
+    ax.set_title(f"{rows[0]['maze']}: {title}", fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
     save_figure(fig, path)
     return True
 
