@@ -42,6 +42,20 @@ def _endpoints(conditions: Conditions, horizon: int, batch: int) -> tuple[torch.
     return start, goal
 
 
+def straight_segment(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
+    """Physical trajectory ``[B, T, 6]`` along the straight line from ``start`` to ``goal`` (``[B, 2]``) at the
+    fractions ``frac`` ``[B or 1, T]`` of the way: positions on the line, the constant velocity that covers it
+    in ``steps`` ``[B, 1]`` environment steps (the data's velocities are per second; each component clipped
+    to the simulator's ``MAX_SPEED``), and the unit vector toward the goal as the action (zero when start ==
+    goal): the data's actions come from a saturating controller, so their magnitude is about 1."""
+    delta = goal - start
+    horizon = frac.shape[1]
+    pos = start[:, None] + frac[..., None] * delta[:, None]
+    vel = (delta[:, None] / (steps[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED).expand(-1, horizon, -1)
+    direction = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None].expand(-1, horizon, -1)
+    return torch.cat([direction, pos, vel], dim=-1)
+
+
 class GaussianPrior:
     """White noise: the bridge from it is a noise-to-data bridge (the thesis's control experiment)."""
 
@@ -78,13 +92,9 @@ class LinePrior:
         state = slice(ACT_DIM, None)
         start = self.normalizer.unnormalize(start_n.double(), state)[:, :2]
         goal = self.normalizer.unnormalize(goal_n.double(), state)[:, :2]
-        delta = goal - start
-        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
-        pos = start[:, None] + frac * delta[:, None]
-        vel = (delta / (max(horizon - 1, 1) * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED)
-        direction = delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9)
-        traj = torch.cat([direction[:, None].expand(-1, horizon, -1), pos,
-                          vel[:, None].expand(-1, horizon, -1)], dim=-1)
+        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
+        traj = straight_segment(start, goal, frac, torch.full((batch, 1), float(max(horizon - 1, 1)),
+                                                              dtype=torch.float64, device=start.device))
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -161,16 +171,9 @@ class WarmPrior:
         # the tail after the previous plan's end: a straight line from its last position to the goal
         anchor = (horizon - 1 - elapsed).clamp(min=0)
         goal = self.normalizer.unnormalize(goal_n.double(), slice(ACT_DIM, None))[:, :2]
-        last = prev[:, -1, ACT_DIM:ACT_DIM + 2]
-        delta = goal - last
         span = (horizon - 1 - anchor).clamp(min=1).double()
-        frac = ((t - anchor).clamp(min=0).double() / span)[..., None]
-        tail = t > anchor
-        pos = last[:, None] + frac * delta[:, None]
-        vel = (delta[:, None] / (span[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED).expand(-1, horizon, -1)
-        direction = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None].expand(-1, horizon, -1)
-        line = torch.cat([direction, pos, vel], dim=-1)
-        traj = torch.where(tail[..., None], line, traj)
+        line = straight_segment(prev[:, -1, ACT_DIM:ACT_DIM + 2], goal, (t - anchor).clamp(min=0).double() / span, span)
+        traj = torch.where((t > anchor)[..., None], line, traj)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
