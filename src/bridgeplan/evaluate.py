@@ -284,7 +284,6 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
-    planner.process.validate_nfe(planner.process.max_nfe if nfe is None else nfe)
     tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
     return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,
                             execution=execution)

@@ -45,6 +45,20 @@ class Process:
         tag = [self.name] + ([prior] if self.uses_prior else []) + [f"N{self.steps}"]
         return tag + [k if v is True else f"{k}{v}" for k, v in self.variant().items()]
 
+    def network(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
+        """The network's output on the batch ``x_n`` at step ``n`` (given as a float, as in training)."""
+        return model(x_n, torch.full((x_n.shape[0],), float(n), device=x_n.device))
+
+    def predict_x0(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
+        """The clean trajectory the network sees in ``x_n`` at step ``n``, clipped to [-1, 1]. By default the
+        network predicts x0 itself (Diffuser's parametrization; a process with another one overrides this and
+        :meth:`training_target` together)."""
+        return self.network(model, x_n, n).clamp(-1, 1)
+
+    def training_target(self, x0: torch.Tensor, x_n: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        """The regression label at ``(x_n, n)``: the inverse of :meth:`predict_x0` (here x0 itself)."""
+        return x0
+
     def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> torch.Tensor:
         """L2 between the network's output and the label of the process's ``training_pair`` (``x1``: the

@@ -79,8 +79,7 @@ class Bridge(Process):
         return x_n
 
     def predict_x0(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
-        nn_ = torch.full((x_n.shape[0],), float(n), device=x_n.device)
-        return (x_n - float(self.std_fwd[n]) * model(x_n, nn_)).clamp(-1, 1)
+        return (x_n - float(self.std_fwd[n]) * self.network(model, x_n, n)).clamp(-1, 1)
 
     def training_target(self, x0: torch.Tensor, x_n: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
         """I2SB's label ``(x_n - x0) / std_fwd[n]``, the inverse of ``predict_x0``."""

@@ -61,14 +61,6 @@ class DDPM(Process):
     def with_sampler(self, sampler: str, eta: float = 0.0) -> DDPM:
         return dataclasses.replace(self, sampler=sampler, eta=eta)
 
-    def predict_x0(self, model, x_t: torch.Tensor, t: int) -> torch.Tensor:
-        tt = torch.full((x_t.shape[0],), float(t), device=x_t.device)
-        return model(x_t, tt).clamp(-1, 1)
-
-    def training_target(self, x0: torch.Tensor, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """The network predicts x0 itself (Diffuser), the inverse of ``predict_x0``."""
-        return x0
-
     def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(x_t, t, target)`` with x_t from q(x_t | x0) at a uniform random step t (``x1`` unused)."""

@@ -155,14 +155,6 @@ class Flow(Process):
             x_t = x_t + g * torch.randn(x0.shape, generator=generator, device=x0.device, dtype=x0.dtype)
         return x_t
 
-    def predict_x0(self, model, x_t: torch.Tensor, n: int) -> torch.Tensor:
-        nn_ = torch.full((x_t.shape[0],), float(n), device=x_t.device)
-        return model(x_t, nn_).clamp(-1, 1)
-
-    def training_target(self, x0: torch.Tensor, x_t: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
-        """The network predicts x0 itself, the inverse of ``predict_x0``."""
-        return x0
-
     def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(x_t, n, target)`` with x_t on the path at a uniform random step n in [0, N-1]."""
