@@ -90,7 +90,7 @@ def test_a_sweep_trains_the_process_it_declares():
 
 
 def test_defaults_follow_the_maze():
-    assert cfg.PriorTrainConfig(maze="medium").horizon == cfg.preset_config("medium", "cpu-small").horizon == 256
+    assert cfg.PriorTrainConfig(maze="medium").horizon == cfg.preset_config("medium", "diffuser").horizon == 256
     assert cfg.PriorTrainConfig(maze="large").horizon == 384
     with pytest.raises(BridgeplanError, match="horizon 400 does not fit umaze"):
         cfg.preset_config("umaze", "cpu-small", horizon=400)

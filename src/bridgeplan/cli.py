@@ -133,6 +133,8 @@ def _add_train_commands(sub) -> None:
 
     p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
     _common_train_flags(p)
+    p.add_argument("--preset", default="diffuser",
+                   help="the planner preset the prior serves: its horizon and stride are the defaults")
     p.set_defaults(func=_cmd_train_prior)
 
 
@@ -142,7 +144,9 @@ def _common_train_flags(p) -> None:
     p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
     p.add_argument("--runs-root", default="runs")
     p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
-    p.add_argument("--horizon", type=int, default=None)
+    p.add_argument("--horizon", type=int, default=None, help="planned states (default: the preset's for the maze)")
+    p.add_argument("--stride", type=int, default=None,
+                   help="environment steps between planned states (default: the preset's for the maze)")
     p.add_argument("--steps", type=int, default=None, help="optimizer steps")
     p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
     p.add_argument("--batch-size", type=int, default=None)
@@ -170,7 +174,7 @@ def _overrides(args, names) -> dict:
     return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
 
 
-_COMMON = ("horizon", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
+_COMMON = ("horizon", "stride", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
            "device", "threads")
 
 
@@ -217,8 +221,8 @@ def _cmd_train_prior(args) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train_prior
 
-    config = cfg.replace(cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset)),
-                         **_overrides(args, _COMMON))
+    config = cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset),
+                                  **_overrides(args, _COMMON + ("preset",)))
     run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
     train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
     print(f"run: {run_dir}")
@@ -375,6 +379,7 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--workers", type=int, default=1, help="local backend: parallel jobs (cores divided)")
     p.add_argument("--ray-address", default=None, help="existing Ray cluster (default: start a local one)")
     p.add_argument("--horizon", type=int, default=None)
+    p.add_argument("--stride", type=int, default=None, help="environment steps between planned states")
     p.add_argument("--dim", type=int, default=None)
     p.add_argument("--dim-mults", default=None)
     p.add_argument("--batch-size", type=int, default=None)
@@ -403,7 +408,7 @@ def _cmd_experiment(args) -> int:
 
     informed = make_process(args.process, **_process_params(args, args.process))
     experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, informed)
-    overrides = _overrides(args, ("horizon", "batch_size", "device", "threads"))
+    overrides = _overrides(args, ("horizon", "stride", "batch_size", "device", "threads"))
     preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:

@@ -18,9 +18,13 @@ from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
+from bridgeplan.trajectory import span
 
 # Diffuser's Maze2D settings per maze: horizon and diffusion steps.
 _DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
+# cpu-small's plan shape per maze: (horizon, stride). Medium and large span Diffuser's 256 / 384 steps
+# less a few (249 / 377) with 32 / 48 planned states: ~3x the training steps per CPU second (docs/results).
+_CPU_SMALL_SHAPE = {"umaze": (128, 1), "medium": (32, 8), "large": (48, 8), "open": (128, 1)}
 PRESETS = ("diffuser", "cpu-small")
 
 
@@ -31,11 +35,27 @@ def maze_horizon(maze: str) -> int:
     return _DIFFUSER_MAZE[maze][0]
 
 
-def _check_horizon(maze: str, horizon: int) -> None:
+def plan_shape(maze: str, preset: str) -> tuple[int, int]:
+    """``(horizon, stride)`` of ``preset``'s plans in ``maze``: Diffuser's horizon at stride 1 for ``diffuser``;
+    for ``cpu-small`` the same span planned every ``stride``-th step where that is what lets a CPU learn
+    the maze in minutes (measured in docs/results)."""
+    horizon = maze_horizon(maze)
+    if preset == "diffuser":
+        return horizon, 1
+    if preset == "cpu-small":
+        return _CPU_SMALL_SHAPE[maze]
+    raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+
+
+def _check_horizon(maze: str, horizon: int, stride: int) -> None:
+    if stride < 1:
+        raise BridgeplanError(f"stride must be >= 1 (environment steps between planned states), got {stride}")
     episode = get_maze(maze).episode_steps
-    if not 2 <= horizon <= episode:
-        raise BridgeplanError(f"horizon {horizon} does not fit {maze}: a plan spans 2..{episode} steps "
-                              f"(the maze's episode length)")
+    if horizon < 2 or span(horizon, stride) > episode:
+        at = f" at stride {stride}" if stride > 1 else ""
+        raise BridgeplanError(f"horizon {horizon}{at} does not fit {maze}: a plan spans (horizon - 1) * stride + 1 "
+                              f"= {span(horizon, stride)} steps, at least 2 and at most {episode} (the maze's "
+                              f"episode length)")
 
 
 @dataclass(frozen=True)
@@ -47,7 +67,11 @@ class TrainConfig:
     dataset: str = ""
     """Path to the dataset directory (``bridgeplan data generate``) or a legacy D4RL hdf5 file."""
     horizon: int = 128
-    """Planning horizon H (trajectory length); divisible by the U-Net's downsampling factor."""
+    """Planning horizon H (planned states); divisible by the U-Net's downsampling factor."""
+    stride: int = 1
+    """Environment steps between planned states: a plan spans ``(H - 1) * stride + 1`` steps and is linearly
+    interpolated to every step for the controller (Hierarchical Diffuser's high level plans every 15th state).
+    1 is Diffuser's (every state); a larger stride buys a long span with a short, cheap network input."""
     preset: str = "diffuser"
     """Name of the preset the defaults came from (``diffuser`` or ``cpu-small``)."""
     model: UNetConfig = field(default_factory=UNetConfig)
@@ -83,12 +107,13 @@ class TrainConfig:
 
     def __post_init__(self):
         maze_horizon(self.maze)
-        _check_horizon(self.maze, self.horizon)
+        _check_horizon(self.maze, self.horizon, self.stride)
         check_prior(self.process, self.prior)
 
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
-        parts = [self.maze, *self.process.run_tag(self.prior), f"H{self.horizon}", self.preset, f"s{self.seed}"]
+        parts = [self.maze, *self.process.run_tag(self.prior), _horizon_tag(self.horizon, self.stride),
+                 self.preset, f"s{self.seed}"]
         return "-".join(parts)
 
     def label(self) -> str:
@@ -114,8 +139,12 @@ class PriorTrainConfig:
 
     maze: str = "umaze"
     dataset: str = ""
+    preset: str = "diffuser"
+    """The planner preset whose plans the prior serves: ``horizon`` and ``stride`` 0 take its values."""
     horizon: int = 0
-    """Horizon of the planner runs that will use the prior (0: the maze's default, as ``preset_config``)."""
+    """Horizon of the planner runs that will use the prior (0: ``preset``'s for the maze)."""
+    stride: int = 0
+    """Stride of the planner runs that will use the prior (0: ``preset``'s for the maze)."""
     steps: int = 20_000
     minutes: float = 0.0
     batch_size: int = 64
@@ -127,31 +156,37 @@ class PriorTrainConfig:
     threads: int = 0
 
     def __post_init__(self):
+        horizon, stride = plan_shape(self.maze, self.preset)
         if self.horizon == 0:
-            object.__setattr__(self, "horizon", maze_horizon(self.maze))
-        _check_horizon(self.maze, self.horizon)
+            object.__setattr__(self, "horizon", horizon)
+        if self.stride == 0:
+            object.__setattr__(self, "stride", stride)
+        _check_horizon(self.maze, self.horizon, self.stride)
 
     def run_name(self) -> str:
-        return f"{self.maze}-prior-learned-H{self.horizon}-s{self.seed}"
+        return f"{self.maze}-prior-learned-{_horizon_tag(self.horizon, self.stride)}-s{self.seed}"
+
+
+def _horizon_tag(horizon: int, stride: int) -> str:
+    """``H128``, or ``H32k8`` for a stride (run names of stride 1 are unchanged)."""
+    return f"H{horizon}" + (f"k{stride}" if stride > 1 else "")
 
 
 def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> TrainConfig:
     """Default training config for ``maze`` and ``preset``, with field ``overrides`` applied."""
-    horizon = maze_horizon(maze)
+    horizon, stride = plan_shape(maze, preset)
     n_steps = _DIFFUSER_MAZE[maze][1]
     if preset == "diffuser":
         base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
-    elif preset == "cpu-small":
+    else:
         base = TrainConfig(
-            maze=maze, preset=preset, horizon=horizon,
+            maze=maze, preset=preset, horizon=horizon, stride=stride,
             model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),
             process=DDPM(steps=16),  # the thesis's 16 diffusion steps
             steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
             # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
             ema_every=1, ema_start=200, checkpoint_every=1000, log_every=50,
         )
-    else:
-        raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
     return replace(base, **overrides)
 
 

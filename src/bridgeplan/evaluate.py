@@ -83,7 +83,7 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
 def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None) -> dict:
     """The tasks executed from a prior's sample alone (no network): the planner's prior, or ``prior_name``."""
     if prior_name is not None:
-        planner = planner.with_prior(make_prior(prior_name, planner.normalizer))
+        planner = planner.with_prior(make_prior(prior_name, planner.normalizer, stride=planner.stride))
     plan = planner.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
     result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states)
     return {"prior": planner.prior.name, **score_returns(tasks.maze.name, result.returns, result.success)}
@@ -138,7 +138,8 @@ class EvalResult:
             "method": process.label(self.prior), "process": process.name, "prior": self.prior,
             "process_params": process.to_dict(), "diffusion_steps": process.steps, "nfe": self.nfe,
             "episodes": self.tasks.episodes, "seed": self.tasks.seed, "multi_task": self.tasks.multi_task,
-            "horizon": self.planner.horizon, "episode_steps": self.tasks.maze.episode_steps,
+            "horizon": self.planner.horizon, "stride": self.planner.stride,
+            "episode_steps": self.tasks.maze.episode_steps,
             **self.scores,
             "plan_ms_per_plan": self.plan_ms_per_plan, "prior_ms_per_plan": self.prior_ms_per_plan,
             "batch_size": self.batch_size, "compiled": self.compile_seconds is not None,

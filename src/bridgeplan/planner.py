@@ -12,7 +12,7 @@ import torch
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import Prior
 from bridgeplan.processes import Process
-from bridgeplan.trajectory import ACT_DIM, Conditions
+from bridgeplan.trajectory import ACT_DIM, Conditions, densify
 
 
 @dataclass
@@ -20,9 +20,10 @@ class Plan:
     """Plans in physical units and what they cost."""
 
     states: np.ndarray
-    """``[N, H, 4]`` planned (x, y, vx, vy)."""
+    """``[N, S, 4]`` planned (x, y, vx, vy) at every environment step: ``S = (H - 1) * stride + 1`` (the
+    planned states, linearly interpolated between them at a stride)."""
     actions: np.ndarray
-    """``[N, H, 2]`` planned actions (the tracking controller ignores them, as Diffuser's did)."""
+    """``[N, S, 2]`` planned actions (the tracking controller ignores them, as Diffuser's did)."""
     prior_seconds: float
     """Wall time to sample the prior for the whole batch."""
     sample_seconds: float
@@ -37,6 +38,8 @@ class Planner:
     normalizer: Normalizer
     horizon: int
     device: torch.device
+    stride: int = 1
+    """Environment steps between planned states (``TrainConfig.stride``)."""
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Planner:
         """The same network sampled another way (no reload): ``process.with_sampler``."""
@@ -75,7 +78,7 @@ class Planner:
             x = self.process.sample(self.model, x, conditions, nfe, generator=generator)
         t2 = _now(self.device)
         states, actions = self.unnormalize(x)
-        return Plan(states, actions, t1 - t0, t2 - t1)
+        return Plan(densify(states, self.stride), densify(actions, self.stride), t1 - t0, t2 - t1)
 
 
 def _now(device: torch.device) -> float:

@@ -3,7 +3,7 @@
 A prior is a small class with a ``name`` and ``sample(conditions, horizon, batch, generator=None)``;
 ``conditions`` are the planner's normalized ``{0: start, horizon - 1: goal}`` states ``[B, obs_dim]``.
 Every prior returns its sample with the start and goal inpainted (``apply_conditions``).
-A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, net)``).
+A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, net, stride)``).
 Priors in ``REPLAN_ONLY`` (``warm``: the previous plan, shifted) exist only while executing closed loop;
 they cannot be trained with and cannot make a first plan.
 """
@@ -16,7 +16,7 @@ import torch
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
-from bridgeplan.trajectory import ACT_DIM, TRANSITION_DIM, Conditions, apply_conditions
+from bridgeplan.trajectory import ACT_DIM, TRANSITION_DIM, Conditions, apply_conditions, span
 
 SIM_DT = 0.01
 """Seconds per environment step (MuJoCo timestep, one step per action): converts positions to velocities."""
@@ -72,19 +72,19 @@ class GaussianPrior:
 class LinePrior:
     """The thesis's analytical prior: a straight line from start to goal in position, walls ignored.
 
-    In physical units: positions evenly spaced over the H steps (``start`` at t=0, ``goal`` at t=H-1);
-    the constant velocity that covers the line in ``(H - 1) * SIM_DT`` seconds (the data's velocities
-    are per second), each component clipped to the simulator's ``MAX_SPEED``; the constant action is the
-    unit vector toward the goal (zero when start == goal): the data's actions come from a saturating
-    waypoint controller, so their magnitude is about 1, and the tracking controller ignores planned
-    actions anyway. The result is normalized with the normalizer of the data, then the start state
+    In physical units: positions evenly spaced over the H planned states (``start`` at t=0, ``goal`` at
+    t=H-1); the constant velocity that covers the line in ``(H - 1) * stride * SIM_DT`` seconds (the plan's
+    span; the data's velocities are per second), each component clipped to the simulator's ``MAX_SPEED``;
+    the constant action is the unit vector toward the goal (zero when start == goal): the data's actions come
+    from a saturating waypoint controller, so their magnitude is about 1, and the tracking controller ignores
+    planned actions anyway. The result is normalized with the normalizer of the data, then the start state
     (with its velocity) and the goal state (zero velocity, from the planner) are inpainted.
     """
 
     name = "line"
 
-    def __init__(self, normalizer: Normalizer):
-        self.normalizer = normalizer
+    def __init__(self, normalizer: Normalizer, stride: int = 1):
+        self.normalizer, self.stride = normalizer, int(stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
@@ -93,8 +93,9 @@ class LinePrior:
         start = self.normalizer.unnormalize(start_n.double(), state)[:, :2]
         goal = self.normalizer.unnormalize(goal_n.double(), state)[:, :2]
         frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
-        traj = straight_segment(start, goal, frac, torch.full((batch, 1), float(max(horizon - 1, 1)),
-                                                              dtype=torch.float64, device=start.device))
+        steps = float(max(horizon - 1, 1) * self.stride)
+        traj = straight_segment(start, goal, frac, torch.full((batch, 1), steps, dtype=torch.float64,
+                                                              device=start.device))
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -125,33 +126,34 @@ class WarmPrior:
     """Warm start for replanning: the previous plan of each episode, shifted by the steps elapsed since it was
     made, its tail extended toward the goal with the line prior's rule, the conditions re-applied.
 
-    ``previous`` ``[B, H, 6]`` are the previous plans in physical units (actions, x, y, vx, vy) and
-    ``elapsed`` ``[B]`` the steps since each was made (``with_previous``). The sample at ``t`` is the
-    previous plan at ``t + elapsed`` while that is inside its horizon; after it (the last ``elapsed`` steps)
-    positions go in a straight line from the previous plan's last position to the goal condition at
-    ``t = H - 1``, at the constant velocity that covers it (clipped to ``MAX_SPEED``), actions the unit vector
-    toward the goal: the previous plan ended at the goal, so this holds the goal with zero velocity and
-    action, unless the goal has moved. Then the current state is inpainted at ``t = 0`` and the goal at
-    ``t = H - 1`` (``apply_conditions``). Built without previous plans (``make_prior("warm", ...)``), it
-    refuses to sample: a first plan has nothing to start from.
+    ``previous`` ``[B, S, 6]`` are the previous plans as executed, in physical units (actions, x, y, vx, vy),
+    one row per environment step (``S = (H - 1) * stride + 1``), and ``elapsed`` ``[B]`` the steps since each
+    was made (``with_previous``). The sample at planned index ``t`` is the previous plan at step
+    ``t * stride + elapsed`` while that is inside it; after its end (the last ``elapsed`` steps) positions go
+    in a straight line from the previous plan's last position to the goal condition at ``t = H - 1``, at the
+    constant velocity that covers it (clipped to ``MAX_SPEED``), actions the unit vector toward the goal: the
+    previous plan ended at the goal, so this holds the goal with zero velocity and action, unless the goal has
+    moved. Then the current state is inpainted at ``t = 0`` and the goal at ``t = H - 1``
+    (``apply_conditions``). Built without previous plans (``make_prior("warm", ...)``), it refuses to
+    sample: a first plan has nothing to start from.
     """
 
     name = "warm"
 
-    def __init__(self, normalizer: Normalizer, previous=None, elapsed=None):
-        self.normalizer = normalizer
+    def __init__(self, normalizer: Normalizer, previous=None, elapsed=None, stride: int = 1):
+        self.normalizer, self.stride = normalizer, int(stride)
         self.previous = None if previous is None else torch.as_tensor(previous, dtype=torch.float64)
         self.elapsed = None if elapsed is None else torch.as_tensor(elapsed, dtype=torch.int64).reshape(-1)
         if self.previous is not None:
             if self.previous.ndim != 3 or self.previous.shape[2] != TRANSITION_DIM:
-                raise BridgeplanError(f"previous plans must be [B, H, {TRANSITION_DIM}], "
+                raise BridgeplanError(f"previous plans must be [B, S, {TRANSITION_DIM}], "
                                       f"got {list(self.previous.shape)}")
             if self.elapsed is None or len(self.elapsed) != len(self.previous) or bool((self.elapsed < 0).any()):
                 raise BridgeplanError("the warm prior needs one elapsed step count >= 0 per previous plan")
 
     def with_previous(self, previous, elapsed) -> WarmPrior:
-        """This prior starting from ``previous`` plans ``[B, H, 6]`` made ``elapsed [B]`` steps ago."""
-        return WarmPrior(self.normalizer, previous, elapsed)
+        """This prior starting from ``previous`` plans ``[B, S, 6]`` made ``elapsed [B]`` steps ago."""
+        return WarmPrior(self.normalizer, previous, elapsed, self.stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
@@ -159,21 +161,25 @@ class WarmPrior:
             raise BridgeplanError("the warm prior is only valid on replans: it starts from the previous plan, "
                                   "and a first plan has none")
         start_n, goal_n = _endpoints(conditions, horizon, batch)
-        if tuple(self.previous.shape[:2]) != (batch, horizon):
+        steps = span(horizon, self.stride)
+        if tuple(self.previous.shape[:2]) != (batch, steps):
             raise BridgeplanError(f"the warm prior holds previous plans of shape {list(self.previous.shape[:2])}, "
-                                  f"asked for batch {batch} and horizon {horizon}")
+                                  f"asked for batch {batch} and {steps} steps (horizon {horizon}, stride "
+                                  f"{self.stride})")
         device = start_n.device
         prev = self.previous.to(device)
         elapsed = self.elapsed.to(device)[:, None]
         t = torch.arange(horizon, device=device)[None, :]
-        src = (t + elapsed).clamp(max=horizon - 1)
+        src = (t * self.stride + elapsed).clamp(max=steps - 1)
         traj = torch.gather(prev, 1, src[..., None].expand(-1, -1, TRANSITION_DIM)).clone()
-        # the tail after the previous plan's end: a straight line from its last position to the goal
-        anchor = (horizon - 1 - elapsed).clamp(min=0)
+        # the tail after the previous plan's end (planned index `end`, fractional at a stride): a straight
+        # line from its last position to the goal
+        end = (steps - 1 - elapsed).clamp(min=0).double() / self.stride
+        left = (horizon - 1 - end).clamp(min=1e-9)
         goal = self.normalizer.unnormalize(goal_n.double(), slice(ACT_DIM, None))[:, :2]
-        span = (horizon - 1 - anchor).clamp(min=1).double()
-        line = straight_segment(prev[:, -1, ACT_DIM:ACT_DIM + 2], goal, (t - anchor).clamp(min=0).double() / span, span)
-        traj = torch.where((t > anchor)[..., None], line, traj)
+        line = straight_segment(prev[:, -1, ACT_DIM:ACT_DIM + 2], goal, (t - end).clamp(min=0) / left,
+                                (left * self.stride).clamp(min=1))
+        traj = torch.where((t > end)[..., None], line, traj)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -184,24 +190,25 @@ def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor) -> torch.Tensor:
     return torch.mean((out - x0) ** 2)
 
 
-def _learned(normalizer: Normalizer, net: torch.nn.Module | None) -> LearnedPrior:
+def _learned(net: torch.nn.Module | None) -> LearnedPrior:
     if net is None:
         raise BridgeplanError("the learned prior needs a trained network (--prior-run)")
     return LearnedPrior(net)
 
 
-PRIORS: dict[str, Callable[[Normalizer, torch.nn.Module | None], Prior]] = {
-    "gaussian": lambda normalizer, net: GaussianPrior(),
-    "line": lambda normalizer, net: LinePrior(normalizer),
-    "learned": _learned,
-    "warm": lambda normalizer, net: WarmPrior(normalizer),
+PRIORS: dict[str, Callable[[Normalizer, torch.nn.Module | None, int], Prior]] = {
+    "gaussian": lambda normalizer, net, stride: GaussianPrior(),
+    "line": lambda normalizer, net, stride: LinePrior(normalizer, stride),
+    "learned": lambda normalizer, net, stride: _learned(net),
+    "warm": lambda normalizer, net, stride: WarmPrior(normalizer, stride=stride),
 }
 REPLAN_ONLY = frozenset({"warm"})
 """Priors that start from a previous plan: valid on replans only (never for training or a first plan)."""
 
 
-def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None) -> Prior:
-    """Build a prior by name; ``learned`` needs its trained ``net``."""
+def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None, stride: int = 1) -> Prior:
+    """Build a prior by name for plans whose states are ``stride`` steps apart; ``learned`` needs its trained
+    ``net``."""
     if name not in PRIORS:
         raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
-    return PRIORS[name](normalizer, net)
+    return PRIORS[name](normalizer, net, stride)

@@ -130,7 +130,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
                          base, title, goals=tasks.goals_xy)
     written = [base]
     if pairs:
-        windows, _ = load_windows(config.dataset, config.maze, config.horizon)
+        windows, _ = load_windows(config.dataset, config.maze, config.horizon, config.stride)
         idx = torch.randint(len(windows), (episodes,), generator=torch.Generator().manual_seed(seed))
         x0 = windows.batch(idx).to(planner.device)
         with torch.inference_mode():

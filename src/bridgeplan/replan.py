@@ -228,7 +228,8 @@ class PlanSource:
         for lo in range(0, total, batch):
             sub = planner
             if warm:  # the warm prior over this chunk's previous plans
-                sub = planner.with_prior(WarmPrior(planner.normalizer, prev[lo:lo + batch], elapsed[lo:lo + batch]))
+                sub = planner.with_prior(WarmPrior(planner.normalizer, prev[lo:lo + batch], elapsed[lo:lo + batch],
+                                                   planner.stride))
             plan = sub.plan(starts[lo:lo + batch], goals_m[lo:lo + batch], self.nfe, self.generator)
             parts.append(np.concatenate([plan.actions, plan.states], axis=2))
             self.prior_seconds += plan.prior_seconds

@@ -24,15 +24,15 @@ from bridgeplan.priors import make_prior
 from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
 
 
-def windows_of(stream, horizon: int):
+def windows_of(stream, horizon: int, stride: int = 1):
     """Training windows of ``stream`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
     from bridgeplan.data import WindowDataset
 
     normalizer = Normalizer.fit(stream.transitions())
-    return WindowDataset(stream, horizon, normalizer), normalizer
+    return WindowDataset(stream, horizon, normalizer, stride), normalizer
 
 
-def load_windows(dataset: str, maze: str, horizon: int):
+def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
     """:func:`windows_of` the dataset at ``dataset``, checked to be from ``maze``."""
     from bridgeplan.data import load_stream
 
@@ -41,7 +41,7 @@ def load_windows(dataset: str, maze: str, horizon: int):
     stream = load_stream(dataset)
     if stream.maze != maze:
         raise BridgeplanError(f"dataset {dataset} is from maze {stream.maze!r}, not {maze!r}")
-    return windows_of(stream, horizon)
+    return windows_of(stream, horizon, stride)
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
@@ -56,16 +56,17 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
                 prior_net: torch.nn.Module | None = None):
     """The prior ``config.prior``; ``learned`` loads its net from ``config.prior_run`` unless given one."""
     if config.prior != "learned" or prior_net is not None:
-        return make_prior(config.prior, normalizer, net=prior_net)
+        return make_prior(config.prior, normalizer, net=prior_net, stride=config.stride)
     if not config.prior_run:
         raise BridgeplanError("the learned prior needs --prior-run (a run of `bridgeplan train-prior`)")
     state = load_checkpoint(Path(config.prior_run))
     if state["kind"] != "prior":
         raise BridgeplanError(f"{config.prior_run} is not a learned-prior run")
     saved = state["config"]
-    for name in ("maze", "horizon"):
-        if saved[name] != getattr(config, name):
-            raise BridgeplanError(f"learned prior {config.prior_run} was trained for {name} {saved[name]!r}, "
+    for name in ("maze", "horizon", "stride"):
+        trained_for = saved.get(name, 1)  # runs from before strides planned every step
+        if trained_for != getattr(config, name):
+            raise BridgeplanError(f"learned prior {config.prior_run} was trained for {name} {trained_for!r}, "
                                   f"not {getattr(config, name)!r}")
     if state["normalizer"] != normalizer.to_dict():
         raise BridgeplanError(f"learned prior {config.prior_run} was trained on a different dataset")
@@ -78,7 +79,7 @@ def build_planner(config: cfg.TrainConfig, model: torch.nn.Module, normalizer: N
                   device: torch.device, prior_net: torch.nn.Module | None = None) -> Planner:
     """The planner of ``config`` around a network (trained or not)."""
     prior = build_prior(config, normalizer, device, prior_net)
-    return Planner(model, config.process, prior, normalizer, config.horizon, device)
+    return Planner(model, config.process, prior, normalizer, config.horizon, device, config.stride)
 
 
 @dataclass(frozen=True)

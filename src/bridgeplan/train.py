@@ -84,7 +84,7 @@ def make_ema(model: torch.nn.Module) -> torch.nn.Module:
 def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
     """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
     device = _setup(config)
-    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
+    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     return _fit(planner_job(config, normalizer, device), windows, run_dir, resume, device, progress)
 
 
@@ -107,7 +107,7 @@ def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = Fals
                 progress: bool = True) -> Path:
     """Train the learned prior (the thesis's MLP on start and goal) on the same windows and loss."""
     device = _setup(config)
-    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon)
+    windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     net = build_prior_net(config.horizon).to(device)
     job = TrainJob("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
     return _fit(job, windows, run_dir, resume, device, progress)

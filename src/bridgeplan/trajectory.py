@@ -8,6 +8,7 @@ have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 ACT_DIM = 2
@@ -31,3 +32,20 @@ def apply_conditions(x: torch.Tensor, conditions: Conditions, act_dim: int = ACT
 def window_conditions(x0: torch.Tensor) -> Conditions:
     """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser)."""
     return {0: x0[:, 0, ACT_DIM:], x0.shape[1] - 1: x0[:, -1, ACT_DIM:]}
+
+
+def span(horizon: int, stride: int) -> int:
+    """Environment steps covered by ``horizon`` planned states ``stride`` steps apart (both ends included)."""
+    return (horizon - 1) * stride + 1
+
+
+def densify(x, stride: int):
+    """Plans ``x [N, H, D]`` whose states are ``stride`` environment steps apart, linearly interpolated to every
+    step: ``[N, (H - 1) * stride + 1, D]``, equal to ``x`` at every ``stride``-th step."""
+    x = np.asarray(x)
+    if stride == 1:
+        return x
+    frac = (np.arange(stride) / stride)[None, None, :, None]
+    a, b = x[:, :-1, None], x[:, 1:, None]
+    inner = (a + frac * (b - a)).reshape(len(x), -1, x.shape[2])
+    return np.concatenate([inner, x[:, -1:]], axis=1)

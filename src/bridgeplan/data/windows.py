@@ -1,8 +1,9 @@
 """Fixed-horizon training windows ``[horizon, actions + state]``, normalized to [-1, 1].
 
-Windows are cut from continuous segments only: they cross goal changes (as Diffuser's did) but
-never a reset, a stream boundary or a gap in a file. A window is returned as ``x [H, 6]`` alone
-(float32, normalized); its start/goal conditions are its own first and last states,
+A window holds every ``stride``-th transition of a stretch of ``(horizon - 1) * stride + 1`` steps
+(stride 1: consecutive steps, Diffuser's). Windows are cut from continuous segments only: they cross
+goal changes (as Diffuser's did) but never a reset, a stream boundary or a gap in a file. A window is
+returned as ``x [H, 6]`` alone (float32, normalized); its start/goal conditions are its own first and last states,
 ``{0: x[0, 2:], H - 1: x[-1, 2:]}``, which the trainer takes from ``x``.
 """
 
@@ -14,6 +15,7 @@ import torch
 from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
+from bridgeplan.trajectory import span
 
 
 def window_starts(stream: Stream, horizon: int) -> np.ndarray:
@@ -29,22 +31,21 @@ def window_starts(stream: Stream, horizon: int) -> np.ndarray:
 
 
 class WindowDataset(torch.utils.data.Dataset):
-    """All windows of ``horizon`` steps of ``stream``, normalized by ``normalizer`` (fit on
-    ``stream.transitions()``); ``dataset[i]`` is ``x [horizon, 6]`` float32, columns
+    """All windows of ``horizon`` states ``stride`` steps apart of ``stream``, normalized by ``normalizer`` (fit
+    on ``stream.transitions()``); ``dataset[i]`` is ``x [horizon, 6]`` float32, columns
     ``(ax, ay, x, y, vx, vy)``; ``dataset.batch(indices)`` gathers ``[B, horizon, 6]`` at once."""
 
-    def __init__(self, stream: Stream, horizon: int, normalizer: Normalizer):
-        self.horizon = int(horizon)
-        self.starts = torch.as_tensor(window_starts(stream, self.horizon))
+    def __init__(self, stream: Stream, horizon: int, normalizer: Normalizer, stride: int = 1):
+        self.horizon, self.stride = int(horizon), int(stride)
+        self.starts = torch.as_tensor(window_starts(stream, span(self.horizon, self.stride)))
         self.data = torch.as_tensor(normalizer.normalize(stream.transitions()), dtype=torch.float32)
-        self._offsets = torch.arange(self.horizon)
+        self._offsets = torch.arange(self.horizon) * self.stride
 
     def __len__(self) -> int:
         return len(self.starts)
 
     def __getitem__(self, i: int) -> torch.Tensor:
-        s = int(self.starts[i])
-        return self.data[s:s + self.horizon]
+        return self.data[int(self.starts[i]) + self._offsets]
 
     def batch(self, indices: torch.Tensor) -> torch.Tensor:
         """Windows ``[len(indices), horizon, 6]`` in one gather."""

@@ -51,10 +51,11 @@ def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) ->
         prior_run=prior_run if spec.prior == "learned" else "")
 
 
-def _prior_config(s: SweepSettings, seed: int, horizon: int) -> cfg.PriorTrainConfig:
+def _prior_config(s: SweepSettings, seed: int, planner: cfg.TrainConfig) -> cfg.PriorTrainConfig:
+    """The learned prior for the planners of ``s``: trained on their windows (horizon and stride)."""
     extra = {k: v for k, v in s.overrides.items() if k in ("device", "threads")}
-    return cfg.PriorTrainConfig(maze=s.maze, dataset=s.dataset, horizon=horizon, steps=s.prior_steps,
-                                checkpoint_every=s.prior_steps, seed=seed, **extra)
+    return cfg.PriorTrainConfig(maze=s.maze, dataset=s.dataset, horizon=planner.horizon, stride=planner.stride,
+                                steps=s.prior_steps, checkpoint_every=s.prior_steps, seed=seed, **extra)
 
 
 def _trained_step(run_dir: Path) -> int:
@@ -134,11 +135,11 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
     try:
         settings = ensure_dataset(settings)
         specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
-        horizon = cfg.preset_config(settings.maze, settings.preset, **settings.overrides).horizon
+        planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
         prior_runs = {}
         for seed in settings.seeds:
             if any(r.prior == "learned" for r in specs):
-                prior_runs[seed] = _ensure_prior(settings, seed, horizon, progress)
+                prior_runs[seed] = _ensure_prior(settings, seed, planner, progress)
         jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
         if ray is not None:
             from bridgeplan.experiments.ray_backend import run_ray
@@ -170,10 +171,10 @@ def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: 
     return sum(len(r) for r in results)
 
 
-def _ensure_prior(settings: SweepSettings, seed: int, horizon: int, progress: bool) -> str:
+def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, progress: bool) -> str:
     from bridgeplan.train import train_prior
 
-    config = _prior_config(settings, seed, horizon)
+    config = _prior_config(settings, seed, planner)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
     with run_lock(run_dir):  # as in run_job
         done = _trained_step(run_dir)
