@@ -22,7 +22,7 @@ from bridgeplan.maze.sim import BatchedPointMaze
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Plan, Planner
 from bridgeplan.priors import PRIORS, WarmPrior, make_prior
-from bridgeplan.replan import Execution, PlanSource, select_candidates, truncate_at_arrival
+from bridgeplan.replan import Execution, PlanSource, arrival_index, select_candidates, truncate_at_arrival
 from bridgeplan.runs import load_planner
 
 UMAZE = get_maze("umaze")
@@ -69,9 +69,9 @@ def test_replan_every_makes_ceil_steps_over_k_plans(tiny_runs, monkeypatch, k):
     rows = []
     original = Planner.plan
 
-    def counting(self, starts, goals, nfe, generator, prior_only=False):
+    def counting(self, starts, goals, nfe, generator, **kwargs):
         rows.append(len(starts))
-        return original(self, starts, goals, nfe, generator, prior_only)
+        return original(self, starts, goals, nfe, generator, **kwargs)
 
     monkeypatch.setattr(Planner, "plan", counting)
     tasks = make_tasks("umaze", 3, 2)
@@ -162,9 +162,9 @@ def test_warm_replans_start_from_the_previous_plan(tiny_runs):
     seen = []
 
     class Spy(Planner):
-        def plan(self, starts, goals, nfe, generator, prior_only=False):
+        def plan(self, starts, goals, nfe, generator, **kwargs):
             seen.append(self.prior)
-            return super().plan(starts, goals, nfe, generator, prior_only)
+            return super().plan(starts, goals, nfe, generator, **kwargs)
 
     spy = Spy(**{f: getattr(planner, f) for f in ("model", "process", "prior", "normalizer", "horizon", "device")})
     source = PlanSource(spy, Execution(replan_every=4, warm=True), 1, torch.Generator().manual_seed(0), 2, UMAZE)
@@ -174,6 +174,48 @@ def test_warm_replans_start_from_the_previous_plan(tiny_runs):
     assert seen[0].name == "learned" and isinstance(seen[1], WarmPrior)
     np.testing.assert_array_equal(seen[1].elapsed.numpy(), [4, 4])
     np.testing.assert_array_equal(seen[1].previous[:, :, 2:].numpy(), first)
+
+
+@pytest.mark.parametrize("process", ["ddpm", "bridge"])
+def test_arrival_holds_the_goal_from_its_index(tiny_runs, process):
+    """A plan with an arrival index a sits at the goal (zero velocity) at every t >= a; a row with a = H-1 is
+    exactly the plan made without arrival indices (same generator)."""
+    planner, _ = load_planner(tiny_runs[process], device="cpu")
+    tasks = make_tasks("umaze", 3, 0)
+    h = planner.horizon
+    arrival = np.array([5, h - 1, 20])
+    held = planner.plan(tasks.start_states, tasks.goals_xy, 1, torch.Generator().manual_seed(0), arrival=arrival)
+    free = planner.plan(tasks.start_states, tasks.goals_xy, 1, torch.Generator().manual_seed(0))
+    for row, a in enumerate(arrival):
+        np.testing.assert_allclose(held.states[row, a:, :2], np.repeat(tasks.goals_xy[row][None], h - a, 0), atol=1e-5)
+        np.testing.assert_allclose(held.states[row, a:, 2:], 0.0, atol=1e-5)
+    np.testing.assert_array_equal(held.states[1], free.states[1])
+    assert not np.allclose(held.states[0, 1:5], free.states[0, 1:5])
+
+
+def test_keep_conditions_replans_on_the_previous_arrival(tiny_runs):
+    """Through PlanSource: the first plan has no arrival index; a replan 4 steps later holds the goal from the
+    previous plan's arrival step less 4 (at least 1), and arrives by then."""
+    planner, _ = load_planner(tiny_runs["ddpm"], device="cpu")
+    seen = []
+
+    class Spy(Planner):
+        def plan(self, starts, goals, nfe, generator, prior_only=False, arrival=None):
+            seen.append(arrival)
+            return super().plan(starts, goals, nfe, generator, prior_only, arrival)
+
+    spy = Spy(**{f: getattr(planner, f) for f in ("model", "process", "prior", "normalizer", "horizon", "device")})
+    source = PlanSource(spy, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 3,
+                        UMAZE)
+    tasks = make_tasks("umaze", 3, 0)
+    first = source(tasks.start_states, tasks.goals_xy, np.arange(3), 0)
+    full = np.c_[np.zeros((3, first.shape[1], 2)), first]
+    before = arrival_index(full, tasks.goals_xy)
+    second = source(first[:, 4], tasks.goals_xy, np.arange(3), 4)
+    assert seen[0] is None
+    np.testing.assert_array_equal(seen[1], np.clip(before - 4, 1, planner.horizon - 1))
+    after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy)
+    assert (after <= seen[1]).all()
 
 
 # ---------------------------------------------------------------- a perfect plan source beats open loop
@@ -235,7 +277,7 @@ class KnownCandidates:
     def with_prior(self, prior):
         return self
 
-    def plan(self, starts, goals, nfe, generator, prior_only=False):
+    def plan(self, starts, goals, nfe, generator, prior_only=False, arrival=None):
         m = len(self.ARRIVE)
         states = np.zeros((len(starts), self.horizon, 4))
         for r in range(len(starts)):
@@ -260,7 +302,7 @@ def test_candidates_pick_by_the_criterion(how, expected):
     planner = KnownCandidates()
     batches = []
     original = planner.plan
-    planner.plan = lambda s, g, nfe, gen, prior_only=False: batches.append(len(s)) or original(s, g, nfe, gen)
+    planner.plan = lambda s, g, nfe, gen, **kw: batches.append(len(s)) or original(s, g, nfe, gen, **kw)
     starts = np.array([[-1.0, -1.0, 0, 0], [-1.2, -0.9, 0, 0]])  # bottom left; goals top left, over the wall
     goals = np.array([[-1.0, 1.0], [-1.1, 1.1]])
     source = PlanSource(planner, Execution(replan_every=8, candidates=4, select=how), 1, None, 2, UMAZE)
@@ -347,6 +389,7 @@ def test_render_closed_loop(tiny_runs, tmp_path):
     ("bridge", ["--prior", "line", "--replan-every", "8"], "--prior takes warm"),
     ("bridge", ["--select", "best", "--candidates", "2"], "unknown --select"),
     ("bridge", ["--arrival", "soon"], "unknown --arrival"),
+    ("bridge", ["--arrival", "keep"], "--arrival keep conditions replans"),
 ])
 @pytest.mark.parametrize("command", ["eval", "render"])
 def test_bad_closed_loop_input(tiny_runs, tmp_path, capsys, process, bad, message, command):

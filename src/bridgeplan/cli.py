@@ -302,8 +302,9 @@ def _execution_flags(p) -> None:
                    help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
                         "replanning; the first plan uses the run's own prior)")
     g.add_argument("--arrival", default=None,
-                   help="end (the plan as sampled, arriving at t=H-1) or truncate (cut at its first state within "
-                        "0.45 of the goal, then hold the goal); default truncate when replanning or with "
+                   help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
+                        "0.45 of the goal, then hold the goal) or keep (truncate, and replans hold the goal from "
+                        "the step the previous plan arrived at); default truncate when replanning or with "
                         "candidates, else end")
 
 

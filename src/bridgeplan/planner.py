@@ -48,8 +48,9 @@ class Planner:
     def with_prior(self, prior: Prior) -> Planner:
         return dataclasses.replace(self, prior=prior)
 
-    def conditions(self, starts: np.ndarray, goals: np.ndarray) -> Conditions:
-        """Normalized conditions: the start state at t=0, the goal with zero velocity at t=H-1."""
+    def conditions(self, starts: np.ndarray, goals: np.ndarray, arrival: np.ndarray | None = None) -> Conditions:
+        """Normalized conditions: the start state at t=0, the goal with zero velocity at t=H-1 and, for a plan
+        with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every t >= a as well (held)."""
         goal_states = np.concatenate([goals, np.zeros_like(goals)], axis=1)
         state_dims = slice(ACT_DIM, None)
 
@@ -57,7 +58,13 @@ class Planner:
             return torch.as_tensor(self.normalizer.normalize(s, state_dims), dtype=torch.float32,
                                    device=self.device)
 
-        return {0: norm(starts), self.horizon - 1: norm(goal_states)}
+        goal = norm(goal_states)
+        conditions = {0: norm(starts), self.horizon - 1: goal}
+        if arrival is not None:
+            arrival = torch.as_tensor(np.asarray(arrival), device=self.device)[:, None]
+            for t in range(max(int(arrival.min()), 1), self.horizon - 1):
+                conditions[t] = torch.where(arrival <= t, goal, torch.nan)
+        return conditions
 
     def unnormalize(self, x: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         traj = self.normalizer.unnormalize(x.double().cpu().numpy())
@@ -65,12 +72,13 @@ class Planner:
 
     @torch.inference_mode()
     def plan(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator,
-             prior_only: bool = False) -> Plan:
+             prior_only: bool = False, arrival: np.ndarray | None = None) -> Plan:
         """Plan from ``starts`` ``[N, 4]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
 
-        ``prior_only`` returns the prior sample itself (the floor every model must beat).
+        ``prior_only`` returns the prior sample itself (the floor every model must beat). ``arrival`` ``[N]``
+        (planned states): hold the goal from there on (:meth:`conditions`).
         """
-        conditions = self.conditions(starts, goals)
+        conditions = self.conditions(starts, goals, arrival)
         t0 = _now(self.device)
         x = self.prior.sample(conditions, self.horizon, len(starts), generator=generator)
         t1 = _now(self.device)

@@ -9,7 +9,9 @@ whenever episodes are due to plan. Each call is one decision for every due episo
 2. **Candidates.** ``candidates`` (M) plans per episode, sampled in the same batch (N x M plans).
 3. **Arrival.** ``arrival="truncate"``: each plan is cut at its first state within ``GOAL_RADIUS`` (0.45)
    of the goal, and holds the goal (zero velocity) from there on; ``"end"``: the plan as sampled, which
-   arrives at ``t = H - 1`` (the goal is inpainted there).
+   arrives at ``t = H - 1`` (the goal is inpainted there); ``"keep"``: truncated as well, and a replan is
+   conditioned to arrive no later than the episode's previous plan did (the goal inpainted, held, from
+   the planned index of that arrival step on).
 4. **Selection** of one candidate per episode (:data:`SELECTIONS`): ``arrival`` (earliest arrival within
    0.45 of the goal), ``agreement`` (the medoid: closest in position, on average, to the other candidates)
    or ``walls`` (fewest planned positions inside a wall, then earliest arrival; it reads the maze's wall
@@ -29,8 +31,11 @@ expert's own path slowed down to arrive exactly at ``t = H - 1`` (H = 128, umaze
 88.8 +- 1.5 open loop (the issue's plateau) but -7.0 +- 1.3 replanned every 8 steps and 7.1 +- 4.9 every 32,
 with either arrival rule: each replan stretches what is left of the path over another H - 1 steps, so the
 point mass slows down and never arrives. Replanning pays only for a model whose samples reach the goal
-early (detours through it, or candidates that do); for one that slows down, arrival would have to be
-imposed (a goal held from ``k < H - 1``), which is not implemented here.
+early (detours through it, or candidates that do); for one that slows down, arrival has to be imposed:
+``keep`` holds the goal from the step the previous plan arrived at, so what is left of a plan is never
+stretched. It does put the network on a held tail it never saw in training (the cost measured in
+docs/results); the first plan is the run's own, so ``keep`` never asks for an arrival earlier than the
+model's own first plan.
 """
 
 from __future__ import annotations
@@ -48,7 +53,7 @@ from bridgeplan.priors import WarmPrior
 from bridgeplan.trajectory import ACT_DIM
 
 SELECTIONS = ("arrival", "agreement", "walls")
-ARRIVALS = ("end", "truncate")
+ARRIVALS = ("end", "truncate", "keep")
 
 
 @dataclass(frozen=True)
@@ -59,7 +64,7 @@ class Execution:
     ``tolerance`` (D): also plan again when the position is more than D from where the plan put it now.
     ``candidates`` (M): plans sampled per decision; ``select`` picks one (:data:`SELECTIONS`).
     ``warm``: replans start from the previous plan (:class:`~bridgeplan.priors.WarmPrior`) instead of the
-    run's prior; needs a process with a prior and replanning. ``arrival``: ``end`` or ``truncate``
+    run's prior; needs a process with a prior and replanning. ``arrival``: ``end``, ``truncate`` or ``keep``
     (see the module); None: ``truncate`` when replanning or sampling candidates, else ``end``.
     """
 
@@ -94,6 +99,9 @@ class Execution:
             raise BridgeplanError(f"unknown --select {self.select!r}: choose from {', '.join(SELECTIONS)}")
         if self.arrival is not None and self.arrival not in ARRIVALS:
             raise BridgeplanError(f"unknown --arrival {self.arrival!r}: choose from {', '.join(ARRIVALS)}")
+        if self.arrival == "keep" and not self.replans:
+            raise BridgeplanError("--arrival keep conditions replans on the previous plan's arrival: give "
+                                  "--replan-every K or --replan-tolerance D")
         if self.warm and not process.uses_prior:
             raise BridgeplanError(f"--prior warm needs a process that starts from a prior; {process.display_name} "
                                   f"starts from Gaussian noise")
@@ -217,11 +225,16 @@ class PlanSource:
         t0 = time.perf_counter()
         ex, m = self.execution, self.execution.candidates
         planner = self.planner
-        warm = ex.warm and self.previous is not None
-        if warm:
+        replan = self.previous is not None
+        warm = ex.warm and replan
+        if replan:
             prev = np.repeat(self.previous[episodes], m, axis=0)
             elapsed = np.repeat(t - self.previous_at[episodes], m)
         starts, goals_m = np.repeat(states, m, axis=0), np.repeat(goals, m, axis=0)
+        arrival = None
+        if ex.arrival_rule == "keep" and replan:  # no later than the previous plan: its arrival step, now
+            left = np.maximum(arrival_index(prev, goals_m) - elapsed, 0)
+            arrival = np.clip(-(-left // planner.stride), 1, planner.horizon - 1)
         total = len(starts)
         batch = min(self.batch_size or total, total)
         parts = []
@@ -230,13 +243,14 @@ class PlanSource:
             if warm:  # the warm prior over this chunk's previous plans
                 sub = planner.with_prior(WarmPrior(planner.normalizer, prev[lo:lo + batch], elapsed[lo:lo + batch],
                                                    planner.stride))
-            plan = sub.plan(starts[lo:lo + batch], goals_m[lo:lo + batch], self.nfe, self.generator)
+            plan = sub.plan(starts[lo:lo + batch], goals_m[lo:lo + batch], self.nfe, self.generator,
+                            arrival=None if arrival is None else arrival[lo:lo + batch])
             parts.append(np.concatenate([plan.actions, plan.states], axis=2))
             self.prior_seconds += plan.prior_seconds
             self.sample_seconds += plan.sample_seconds
         traj = np.concatenate(parts)
         self.plans_sampled += total
-        if ex.arrival_rule == "truncate":
+        if ex.arrival_rule in ("truncate", "keep"):
             traj, _ = truncate_at_arrival(traj, goals_m)
         horizon = traj.shape[1]
         traj = traj.reshape(len(states), m, horizon, -1)

@@ -3,7 +3,8 @@
 A trajectory is a tensor ``[batch, horizon, transition_dim]`` whose columns are
 ``(actions, state)`` = ``(ax, ay, x, y, vx, vy)`` (Diffuser's layout). Goal reaching is
 inpainting: ``conditions`` maps a time index to the state (normalized) that the trajectory must
-have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``.
+have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``; a row of NaN leaves that
+trajectory free at that index (conditions that hold for some episodes of a batch only).
 """
 
 from __future__ import annotations
@@ -19,13 +20,15 @@ Conditions = dict[int, torch.Tensor]
 
 
 def apply_conditions(x: torch.Tensor, conditions: Conditions, act_dim: int = ACT_DIM) -> torch.Tensor:
-    """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor).
+    """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor); rows of
+    ``state`` that are NaN leave theirs as they are.
 
     Used by training and by every sampler step alike, so conditions hold exactly in every sample.
     """
     x = x.clone()
     for t, state in conditions.items():
-        x[:, t, act_dim:] = state.to(x.dtype)
+        state = state.to(x.dtype)
+        x[:, t, act_dim:] = torch.where(torch.isnan(state), x[:, t, act_dim:], state)
     return x
 
 
