@@ -10,8 +10,8 @@ whenever episodes are due to plan. Each call is one decision for every due episo
 3. **Arrival.** ``arrival="truncate"``: each plan is cut at its first state within ``GOAL_RADIUS`` (0.45)
    of the goal, and holds the goal (zero velocity) from there on; ``"end"``: the plan as sampled, which
    arrives at ``t = H - 1`` (the goal is inpainted there); ``"keep"``: truncated as well, and a replan is
-   conditioned to arrive no later than the episode's previous plan did (the goal inpainted, held, from
-   the planned index of that arrival step on).
+   conditioned to arrive by the step at which the episode's first plan came within 0.45 of the goal (the
+   goal inpainted, held, from the planned index of that step on).
 4. **Selection** of one candidate per episode (:data:`SELECTIONS`): ``arrival`` (earliest arrival within
    0.45 of the goal), ``agreement`` (the medoid: closest in position, on average, to the other candidates)
    or ``walls`` (fewest planned positions inside a wall, then earliest arrival; it reads the maze's wall
@@ -32,10 +32,12 @@ expert's own path slowed down to arrive exactly at ``t = H - 1`` (H = 128, umaze
 with either arrival rule: each replan stretches what is left of the path over another H - 1 steps, so the
 point mass slows down and never arrives. Replanning pays only for a model whose samples reach the goal
 early (detours through it, or candidates that do); for one that slows down, arrival has to be imposed:
-``keep`` holds the goal from the step the previous plan arrived at, so what is left of a plan is never
-stretched. It does put the network on a held tail it never saw in training (the cost measured in
-docs/results); the first plan is the run's own, so ``keep`` never asks for an arrival earlier than the
-model's own first plan.
+``keep`` holds the goal from the step the first plan arrived at, so what is left of the path is never
+stretched. The step is fixed per episode: taking each replan's own (truncated) arrival instead compounds
+the 0.45 lead into ever earlier deadlines (measured: 3 points instead of 66 at K = 8). It puts the network
+on a held tail it never saw in training; planning over a shorter horizon instead (the U-Net is
+convolutional) was worse still, because a short plan cuts through walls (12% of planned states in walls at
+H = 64 against 2% at 128, open loop). Measured in docs/results/README.md.
 """
 
 from __future__ import annotations
@@ -210,6 +212,8 @@ class PlanSource:
     batch_size: int | None = None
     previous: np.ndarray | None = None
     previous_at: np.ndarray | None = None
+    deadline: np.ndarray | None = None
+    """``[n]`` the step at which each episode's first plan came within 0.45 of the goal (``keep``)."""
     decision_seconds: list[float] = field(default_factory=list)
     decision_batch: list[int] = field(default_factory=list)
     prior_seconds: float = 0.0
@@ -220,6 +224,7 @@ class PlanSource:
         """Forget the previous plans (a new episode); counters and timings are kept."""
         self.previous = None
         self.previous_at = None
+        self.deadline = None
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
         t0 = time.perf_counter()
@@ -232,8 +237,8 @@ class PlanSource:
             elapsed = np.repeat(t - self.previous_at[episodes], m)
         starts, goals_m = np.repeat(states, m, axis=0), np.repeat(goals, m, axis=0)
         arrival = None
-        if ex.arrival_rule == "keep" and replan:  # no later than the previous plan: its arrival step, now
-            left = np.maximum(arrival_index(prev, goals_m) - elapsed, 0)
+        if ex.arrival_rule == "keep" and replan:  # hold the goal from the first plan's arrival step on
+            left = np.maximum(np.repeat(self.deadline[episodes], m) - t, 0)
             arrival = np.clip(-(-left // planner.stride), 1, planner.horizon - 1)
         total = len(starts)
         batch = min(self.batch_size or total, total)
@@ -259,6 +264,7 @@ class PlanSource:
         if self.previous is None:
             self.previous = np.zeros((self.n, horizon, chosen.shape[2]))
             self.previous_at = np.zeros(self.n, dtype=np.int64)
+            self.deadline = t + arrival_index(chosen, goals)
         self.previous[episodes] = chosen
         self.previous_at[episodes] = t
         self.decision_seconds.append(time.perf_counter() - t0)
