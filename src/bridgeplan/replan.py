@@ -34,10 +34,9 @@ point mass slows down and never arrives. Replanning pays only for a model whose 
 early (detours through it, or candidates that do); for one that slows down, arrival has to be imposed:
 ``keep`` holds the goal from the step the first plan arrived at, so what is left of the path is never
 stretched. The step is fixed per episode: taking each replan's own (truncated) arrival instead compounds
-the 0.45 lead into ever earlier deadlines (measured: 3 points instead of 66 at K = 8). It puts the network
-on a held tail it never saw in training; planning over a shorter horizon instead (the U-Net is
-convolutional) was worse still, because a short plan cuts through walls (12% of planned states in walls at
-H = 64 against 2% at 128, open loop). Measured in docs/results/README.md.
+the 0.45 lead into ever earlier deadlines, until no plan can keep them. It puts the network on a held tail
+it never saw in training; planning over a shorter horizon instead (the U-Net is convolutional) was worse in
+a trial, because a plan too short for the path cuts through walls. Results: docs/results/README.md.
 """
 
 from __future__ import annotations
