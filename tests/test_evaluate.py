@@ -77,3 +77,25 @@ def test_learned_prior_for_another_horizon_is_refused(tiny_dataset, tiny_runs, t
     err = capsys.readouterr().err
     assert "trained for horizon 32, not 64" in err
     assert not (run / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("command", ["eval", "render"])
+def test_multi_task_refuses_data_that_misses_cells(tmp_path, capsys, command):
+    """A run trained on 40 steps of data (a few cells of the U): Multi2D would draw goals where it has no data."""
+    data, run = tmp_path / "few", tmp_path / "run"
+    assert main(["data", "generate", "--maze", "umaze", "--steps", "40", "--seed", "1", "--out", str(data),
+                 "--no-progress"]) == 0
+    assert main(train_args(str(data), run, 1)) == 0
+    capsys.readouterr()
+    out = tmp_path / ("r.json" if command == "eval" else "r.png")
+    assert main([command, str(run), "--episodes", "2", "--device", "cpu", "--multi-task", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "never visits" in err[0] and not out.exists()
+    assert main([command, str(run), "--episodes", "2", "--device", "cpu", "--out", str(out)]) == 0  # single-task
+
+
+def test_multi_task_on_covering_data_runs(tiny_runs, tmp_path):
+    out = tmp_path / "r.json"
+    assert main(["eval", str(tiny_runs["ddpm"]), "--episodes", "2", "--device", "cpu", "--multi-task",
+                 "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["multi_task"] is True

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import platform
+import sys
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -285,9 +286,31 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
+    if multi_task:
+        check_multi_task_data(info.config.maze, info.config.dataset)
     tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
     return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,
                             execution=execution)
+
+
+def check_multi_task_data(maze_name: str, dataset: str) -> None:
+    """Multi2D draws starts and goals in every free cell: refuse a run whose dataset never visits some of them
+    (its planner has never seen a state there); warn when the dataset is not at hand to check."""
+    from bridgeplan.data import load_stream
+    from bridgeplan.data.info import visited_cells
+
+    if not Path(dataset).exists():
+        print(f"warning: the run's dataset {dataset!r} is not here: cannot check that it covers every cell "
+              f"that --multi-task draws goals in", file=sys.stderr)
+        return
+    maze = get_maze(maze_name)
+    free = maze.free_cells
+    missing = free[~visited_cells(load_stream(dataset))[free[:, 0], free[:, 1]]]
+    if len(missing):
+        cells = ", ".join(f"({r}, {c})" for r, c in missing[:5]) + (" ..." if len(missing) > 5 else "")
+        raise BridgeplanError(f"--multi-task draws goals in every free cell, but the run's dataset never visits "
+                              f"{len(missing)} of the {len(free)}: {cells}; evaluate single-task, or train on "
+                              f"data that covers the maze")
 
 
 def _per_start_cell(maze, starts_xy: np.ndarray, returns: np.ndarray) -> list[dict]:
