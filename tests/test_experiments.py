@@ -92,3 +92,49 @@ def test_ray_address_that_does_not_answer(tiny_dataset, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ray" in err[0].lower()
     assert not (results / "runs").exists()
+
+
+def test_closed_loop_sweep(tiny_dataset, tmp_path, capsys):
+    """The closed-loop experiment: at the final snapshot only, each run open loop (NFE 1 and full) and replanned
+    every 32 steps (truncated, keep; the bridge warm), single-task and Multi2D; keyed apart in the store."""
+    results = tmp_path / "results"
+    args = ["experiment", "closed-loop", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    assert main(args) == 0
+    rows = ResultsStore(results / "results.sqlite").rows("closed-loop")
+    assert len(rows) == 2 * 2 * 4 and {r["step"] for r in rows} == {2}
+    assert {(r["process"], r["execution"]) for r in rows} == {
+        ("ddpm", ""), ("ddpm", "replan32"), ("ddpm", "replan32-arrival-keep"),
+        ("bridge", ""), ("bridge", "replan32-warm"), ("bridge", "replan32-warm-arrival-keep")}
+    assert sorted({r["multi_task"] for r in rows}) == [0, 1]
+    for r in rows:
+        replanned = r["execution"] != ""
+        assert r["calls_per_episode"] == (10 * r["nfe"] if replanned else r["nfe"])  # ceil(300 / 32) plans
+        assert (r["decision_ms_p50"] is not None) == replanned
+    capsys.readouterr()
+    assert main(args) == 0 and "0 new results" in capsys.readouterr().out
+    assert main(["report", "--results", str(results)]) == 0
+    report = (results / "report" / "report.md").read_text()
+    assert "## closed-loop" in report and "replan32-warm-arrival-keep Multi2D | 2 |" in report
+    assert (results / "report" / "closed-loop.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
+    """Version 1 had no execution / multi-task columns: its rows become open-loop, single-task rows."""
+    db = tmp_path / "results.sqlite"
+    v1 = ["experiment", "run_name", "maze", "process", "prior", "diffusion_steps", "seed", "step", "nfe", "episodes",
+          "eval_seed", "score_minari"]
+    with sqlite3.connect(db) as con:
+        con.execute(f"CREATE TABLE results (id INTEGER PRIMARY KEY, {', '.join(v1)}, "
+                    "UNIQUE (experiment, run_name, step, nfe, episodes, eval_seed))")
+        con.execute(f"INSERT INTO results ({', '.join(v1)}) VALUES "
+                    "('nfe1', 'r', 'umaze', 'ddpm', 'gaussian', 16, 0, 1000, 1, 200, 0, 42.5)")
+        con.execute("PRAGMA user_version=1")
+    store = ResultsStore(db)
+    (row,) = store.rows()
+    assert (row["score_minari"], row["execution"], row["multi_task"], row["step"]) == (42.5, "", 0, 1000)
+    assert store.has(experiment="nfe1", run_name="r", step=1000, nfe=1, execution="", multi_task=0, episodes=200,
+                     eval_seed=0)
+    with sqlite3.connect(db) as con:
+        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
+    ResultsStore(db)  # opening it again changes nothing
+    assert len(store.rows()) == 1

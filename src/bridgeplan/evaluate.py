@@ -170,6 +170,7 @@ class EvalResult:
         if self.run is None:
             raise BridgeplanError("a store row needs the run the planner was loaded from")
         run = self.run
+        latency = self.decisions.get("decision_ms_batch1", {})
         return {
             "experiment": experiment, "run_name": run.config.run_name(), "maze": self.tasks.maze.name,
             "process": self.planner.process.name, "prior": self.prior, "diffusion_steps": self.planner.process.steps,
@@ -179,6 +180,9 @@ class EvalResult:
             "score_d4rl": self.score("d4rl")["mean"], "score_d4rl_se": self.score("d4rl")["se"],
             "success_rate": self.scores["success_rate"]["mean"], "plan_ms": self.plan_ms_per_plan,
             "prior_ms": self.prior_ms_per_plan, "floor_minari": self.floors["floor_line"]["score"]["minari"]["mean"],
+            "execution": self.execution.tag(), "multi_task": int(self.tasks.multi_task),
+            "calls_per_episode": self.execution_fields()["calls_per_episode"],
+            "decision_ms_p50": latency.get("p50"), "decision_ms_p95": latency.get("p95"),
             "config": run.config_dict, "code_version": self.environment["code_version"],
         }
 

@@ -21,11 +21,22 @@ def method_label(row: dict) -> str:
 
 
 def _series(rows: list[dict]) -> dict[str, list[dict]]:
-    """Rows grouped into the lines of a figure: one per (method, diffusion steps, NFE)."""
+    """Rows grouped into the lines of a figure: one per (method, diffusion steps, NFE, execution, task set)."""
     groups: dict[str, list[dict]] = {}
-    for r in sorted(rows, key=lambda r: (r["process"], r["prior"], r["diffusion_steps"], r["nfe"], r["step"])):
-        groups.setdefault(f"{method_label(r)} N={r['diffusion_steps']} NFE={r['nfe']}", []).append(r)
+    for r in sorted(rows, key=lambda r: (r["process"], r["prior"], r["diffusion_steps"], r["multi_task"], r["nfe"],
+                                         r["execution"], r["step"])):
+        label = " ".join([f"{method_label(r)} N={r['diffusion_steps']} NFE={r['nfe']}", r["execution"],
+                          "Multi2D" if r["multi_task"] else ""]).strip()
+        groups.setdefault(label, []).append(r)
     return groups
+
+
+def _latency(rows: list[dict]) -> str:
+    """Median over seeds of the decision latency p50 / p95 at batch 1 ('-' for open loop: one plan)."""
+    if rows[0]["decision_ms_p50"] is None:
+        return "-"
+    return (f"{np.median([r['decision_ms_p50'] for r in rows]):.1f} / "
+            f"{np.median([r['decision_ms_p95'] for r in rows]):.1f}")
 
 
 def _aggregate(rows: list[dict]) -> list[tuple[int, float, float, int]]:
@@ -50,6 +61,8 @@ def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
     rows = store.rows(name)
     if not rows:
         return False
+    if name in EXPERIMENTS and EXPERIMENTS[name].last_snapshot_only:
+        return plot_calls(rows, name, path)
     plt = _pyplot()
     def method(r: dict) -> str:
         return f"{method_label(r)} N={r['diffusion_steps']}"
@@ -79,6 +92,37 @@ def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
     return True
 
 
+def plot_calls(rows: list[dict], name: str, path: Path) -> bool:
+    """Score against network calls per episode (log axis), mean ± standard error over seeds, one point per
+    series: a colour per method, a marker per execution, filled for single-task and hollow for Multi2D; the
+    floors (line prior tracked) of both task sets as grey lines."""
+    plt = _pyplot()
+    methods = list(dict.fromkeys(method_label(r) for r in sorted(rows, key=lambda r: (r["process"], r["prior"]))))
+    executions = list(dict.fromkeys(r["execution"] for r in sorted(rows, key=lambda r: r["execution"])))
+    markers = ["o", "s", "^", "D", "v", "P"]
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for label, srows in _series(rows).items():
+        _, mean, se, _ = _aggregate(srows)[-1]
+        r = srows[0]
+        color = plt.cm.tab10(methods.index(method_label(r)) % 10)
+        calls = float(np.mean([x["calls_per_episode"] for x in srows]))
+        ax.errorbar([calls], [mean], yerr=[se], color=color, marker=markers[executions.index(r["execution"]) % 6],
+                    mfc="none" if r["multi_task"] else color, ls="none", capsize=2, label=label)
+    for multi, ls in ((0, "--"), (1, ":")):
+        floors = [r["floor_minari"] for r in rows if r["multi_task"] == multi and r["floor_minari"] is not None]
+        if floors:
+            ax.axhline(float(np.mean(floors)), color="0.5", ls=ls, lw=1,
+                       label=f"floor (line, tracked){' Multi2D' if multi else ''}")
+    ax.set_xscale("log")
+    ax.set_xlabel("network calls per episode")
+    ax.set_ylabel("normalized score (minari convention)")
+    ax.set_title(f"{rows[0]['maze']}: {name}, step {max(r['step'] for r in rows)}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    save_figure(fig, path)
+    return True
+
+
 def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
     """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path."""
     results_dir = Path(results_dir)
@@ -95,8 +139,8 @@ def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
         title = EXPERIMENTS[name].title if name in EXPERIMENTS else name
         lines += [f"## {name}: {title}", "", f"![{name}]({png.name})", "",
                   "| series | step | train s | NFE | episodes | seeds | score (minari) | score (d4rl) | success "
-                  "| plan ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "| plan ms | calls/episode | decision ms p50/p95 (batch 1) |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for label, srows in _series(rows).items():
             for step, mean, se, seeds in _aggregate(srows):
                 at = [r for r in srows if r["step"] == step]
@@ -104,7 +148,8 @@ def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
                 lines.append(
                     f"| {label} | {step} | {np.mean([r['train_seconds'] or 0 for r in at]):.0f} | "
                     f"{at[0]['nfe']} | {at[0]['episodes']} | {seeds} | {mean:.1f} ± {se:.1f} | {d4rl:.1f} | "
-                    f"{np.mean([r['success_rate'] for r in at]):.2f} | {np.mean([r['plan_ms'] for r in at]):.1f} |")
+                    f"{np.mean([r['success_rate'] for r in at]):.2f} | {np.mean([r['plan_ms'] for r in at]):.1f} | "
+                    f"{np.mean([r['calls_per_episode'] or r['nfe'] for r in at]):.0f} | {_latency(at)} |")
         lines.append("")
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(lines) + "\n")

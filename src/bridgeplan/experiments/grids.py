@@ -1,8 +1,9 @@
-"""The thesis's experiments as declared grids (thesis, chapter "Experiments"; its five figures).
+"""The thesis's experiments as declared grids (thesis, chapter "Experiments"; its five figures), and ours.
 
 An experiment is a set of series, each one line in its figure: a trained run (a process with its
-parameters, and a prior) sampled at one NFE, scored at every training-step snapshot. Two
-experiments that name the same run share its training.
+parameters, and a prior) sampled at one NFE and executed one way (open loop, or replanned) on single- or
+multi-task episodes, scored at every training-step snapshot (or the last one). Two experiments that name
+the same run share its training.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from bridgeplan.config import check_prior
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM, Bridge, Process
+from bridgeplan.replan import Execution
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,10 @@ class Series:
     label: str
     run: RunSpec
     nfe: int
+    execution: Execution = Execution()
+    """How its plans are executed (default: open loop, one plan per episode)."""
+    multi_task: bool = False
+    """Multi2D tasks (random goals) instead of the maze's single evaluation goal."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +47,8 @@ class Experiment:
     name: str
     title: str
     series: tuple[Series, ...]
+    last_snapshot_only: bool = False
+    """Evaluate only each run's final snapshot (a comparison at one budget, not a curve over training)."""
 
     def runs(self) -> list[RunSpec]:
         return list(dict.fromkeys(s.run for s in self.series))
@@ -79,7 +87,28 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
         Experiment("nfe-curves", f"DDPM and {name} from the line prior at NFE 1, 2, 4 and full, N={steps}",
                    tuple(Series(f"{r.label()} NFE {k}", r, k) for r in (ddpm, runs["line"])
                          for k in sorted({1, 2, 4, r.process.max_nfe}) if k <= r.process.max_nfe)),
+        Experiment("closed-loop", f"DDPM and {name} from the line prior, open loop and replanned every "
+                   f"{REPLAN_EVERY} steps, single-task and Multi2D, at the final snapshot, N={steps}",
+                   tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)
+                         for s in closed_loop_series(r, multi)), last_snapshot_only=True),
     ]}
+
+
+REPLAN_EVERY = 32
+"""Steps between replans in the closed-loop experiment (10 / 19 / 25 plans per umaze / medium / large episode)."""
+
+
+def closed_loop_series(run: RunSpec, multi_task: bool) -> list[Series]:
+    """One run's series in the closed-loop experiment: open loop at NFE 1 and at the most NFE (Diffuser's
+    protocol: the matched-calls baseline of a replanner), and replanned at NFE 1 with the arrival as sampled
+    (truncated) and kept to the first plan's (``keep``); processes with a prior replan from the warm prior."""
+    warm = run.process.uses_prior
+    task = " Multi2D" if multi_task else ""
+    replans = [Execution(replan_every=REPLAN_EVERY, warm=warm),
+               Execution(replan_every=REPLAN_EVERY, warm=warm, arrival="keep")]
+    return ([Series(f"{run.label()} NFE {k} open loop{task}", run, k, multi_task=multi_task)
+             for k in sorted({1, run.process.max_nfe})]
+            + [Series(f"{run.label()} NFE 1 {ex.tag()}{task}", run, 1, ex, multi_task) for ex in replans])
 
 
 EXPERIMENTS = build_experiments()

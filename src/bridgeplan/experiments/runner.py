@@ -66,10 +66,10 @@ def _trained_step(run_dir: Path) -> int:
 
 def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
             prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
-    """Train (or finish) one run and evaluate every (snapshot, NFE) its series need; returns new rows.
+    """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
 
-    Each snapshot is loaded once and evaluated at every NFE missing from the store; the floors are
-    computed once for the job (same prior, same tasks at every snapshot).
+    Each snapshot is loaded once and evaluated for every series (NFE, execution, task set) missing from the
+    store; the floors are computed once per task set for the job.
     """
     from bridgeplan.device import configure_threads
     from bridgeplan.evaluate import evaluate_planner, floors, make_tasks
@@ -84,20 +84,27 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         if done < config.steps:
             train(config, run_dir, resume=done >= 0, progress=progress)
     store = ResultsStore(layout.store_path(settings.results_dir))
-    wanted = [(exp.name, series.nfe) for exp in experiments for series in exp.series if series.run == spec]
-    tasks = make_tasks(settings.maze, settings.episodes, seed)
-    job_floors = None
+    wanted = [(exp.name, series) for exp in experiments for series in exp.series if series.run == spec]
+    last_only = {exp.name for exp in experiments if exp.last_snapshot_only}
+    tasks = {multi: make_tasks(settings.maze, settings.episodes, seed, multi) for multi in (False, True)}
+    job_floors = {}  # per task set, computed once for the job (same prior, same tasks at every snapshot)
     rows = []
-    for step in (s for s in layout.snapshot_steps(run_dir) if s <= config.steps):
-        missing = [(name, nfe) for name, nfe in wanted
-                   if not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=nfe,
-                                    episodes=settings.episodes, eval_seed=seed)]
+    steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
+    for step in steps:
+        missing = [(name, series) for name, series in wanted
+                   if (step == steps[-1] or name not in last_only)
+                   and not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=series.nfe,
+                                     execution=series.execution.tag(), multi_task=int(series.multi_task),
+                                     episodes=settings.episodes, eval_seed=seed)]
         if not missing:
             continue
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
-        job_floors = job_floors or floors(planner, tasks)
-        for name, nfe in missing:
-            row = evaluate_planner(planner, tasks, nfe, run=info, precomputed_floors=job_floors).to_row(name)
+        for name, series in missing:
+            task_set = tasks[series.multi_task]
+            if series.multi_task not in job_floors:
+                job_floors[series.multi_task] = floors(planner, task_set)
+            row = evaluate_planner(planner, task_set, series.nfe, run=info, execution=series.execution,
+                                   precomputed_floors=job_floors[series.multi_task]).to_row(name)
             store.add(row)
             rows.append(row)
     return rows

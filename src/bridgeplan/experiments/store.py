@@ -2,7 +2,9 @@
 
 WAL journaling and a busy timeout let two sweeps write at once; every insert is one transaction,
 so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the schema
-version: a database from a newer bridgeplan is refused, untouched.
+version: a database from a newer bridgeplan is refused, untouched; one from an older one is upgraded in
+place, in one transaction (version 1 had no execution or multi-task columns: its rows were open loop,
+single-task).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from typing import Iterator
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 COLUMNS = {
     "experiment": "TEXT NOT NULL",
@@ -42,11 +44,22 @@ COLUMNS = {
     "plan_ms": "REAL",
     "prior_ms": "REAL",
     "floor_minari": "REAL",
+    "execution": "TEXT NOT NULL DEFAULT ''",
+    "multi_task": "INTEGER NOT NULL DEFAULT 0",
+    "calls_per_episode": "REAL",
+    "decision_ms_p50": "REAL",
+    "decision_ms_p95": "REAL",
     "config": "TEXT",
     "code_version": "TEXT",
     "created": "REAL",
 }
-KEY = ("experiment", "run_name", "step", "nfe", "episodes", "eval_seed")
+KEY = ("experiment", "run_name", "step", "nfe", "execution", "multi_task", "episodes", "eval_seed")
+"""What makes an evaluation: ``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1."""
+
+
+def _table_columns() -> str:
+    cols = ", ".join(f"{k} {v}" for k, v in COLUMNS.items())
+    return f"id INTEGER PRIMARY KEY, {cols}, UNIQUE ({', '.join(KEY)})"
 
 
 class ResultsStore:
@@ -59,9 +72,17 @@ class ResultsStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
-            cols = ", ".join(f"{k} {v}" for k, v in COLUMNS.items())
-            db.execute(f"CREATE TABLE IF NOT EXISTS results (id INTEGER PRIMARY KEY, {cols}, "
-                       f"UNIQUE ({', '.join(KEY)}))")
+        with self._connect() as db:
+            db.execute("BEGIN IMMEDIATE")  # one writer creates or upgrades; a second sweep waits, then sees it done
+            version = db.execute("PRAGMA user_version").fetchone()[0]
+            exists = db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone()
+            if exists and version < SCHEMA_VERSION:  # the old table's rows into today's, keyed by today's KEY
+                db.execute("ALTER TABLE results RENAME TO results_old")
+                db.execute(f"CREATE TABLE results ({_table_columns()})")
+                old = [r[1] for r in db.execute("PRAGMA table_info(results_old)") if r[1] in COLUMNS]
+                db.execute(f"INSERT INTO results ({', '.join(old)}) SELECT {', '.join(old)} FROM results_old")
+                db.execute("DROP TABLE results_old")
+            db.execute(f"CREATE TABLE IF NOT EXISTS results ({_table_columns()})")
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
 
     @contextmanager
@@ -108,7 +129,7 @@ class ResultsStore:
         with self._connect() as db:
             db.row_factory = sqlite3.Row
             query = "SELECT * FROM results" + (" WHERE experiment = ?" if experiment else "")
-            query += " ORDER BY experiment, run_name, nfe, step"
+            query += " ORDER BY experiment, run_name, nfe, execution, multi_task, step"
             return [dict(r) for r in db.execute(query, [experiment] if experiment else [])]
 
     def experiments(self) -> list[str]:
