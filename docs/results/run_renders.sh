@@ -1,8 +1,7 @@
 #!/usr/bin/env bash
 # Pictures for issues 12 and 13: per maze, the seed-0 runs of run_maze_curves.sh (umaze: run_umaze_v2_curves.sh)
 # at their final snapshot, 8 episodes (eval seed 0): DDPM at its full NFE and the bridge (line prior) at NFE 1
-# open loop, then the same bridge replanned every 32 steps from the warm prior with the arrival kept; the
-# bridge's prior/target pairs from the training data.
+# open loop, then the same bridge replanned every 32 steps from the warm prior with the arrival kept.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export PATH="$PWD/.venv/bin:$PATH" MUJOCO_GL=${MUJOCO_GL:-egl}
