@@ -105,8 +105,8 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                 job_floors[series.multi_task] = floors(planner, task_set)
             row = evaluate_planner(planner, task_set, series.nfe, run=info, execution=series.execution,
                                    precomputed_floors=job_floors[series.multi_task]).to_row(name)
-            store.add(row)
-            rows.append(row)
+            if store.add(row):  # a concurrent sweep may have added it meanwhile
+                rows.append(row)
     return rows
 
 

@@ -116,14 +116,17 @@ class ResultsStore:
         with self._connect() as db:
             return db.execute(f"SELECT 1 FROM results WHERE {where}", [key[k] for k in KEY]).fetchone() is not None
 
-    def add(self, row: dict) -> None:
+    def add(self, row: dict) -> bool:
+        """Insert ``row``; False (and the store unchanged) when a row with its KEY is there already (another
+        sweep evaluated the same thing first: the evaluations are seeded, so it holds the same numbers)."""
         row = dict(row, created=row.get("created", time.time()))
         if isinstance(row.get("config"), dict):
             row["config"] = json.dumps(row["config"], sort_keys=True)
         names = [k for k in COLUMNS if k in row]
         with self._connect() as db:
-            db.execute(f"INSERT OR REPLACE INTO results ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})",
-                       [row[k] for k in names])
+            cursor = db.execute(f"INSERT OR IGNORE INTO results ({', '.join(names)}) "
+                                f"VALUES ({', '.join('?' * len(names))})", [row[k] for k in names])
+            return cursor.rowcount == 1
 
     def rows(self, experiment: str | None = None) -> list[dict]:
         with self._connect() as db:
