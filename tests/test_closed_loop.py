@@ -389,7 +389,7 @@ def test_render_closed_loop(tiny_runs, tmp_path):
     ("bridge", ["--prior", "line", "--replan-every", "8"], "--prior takes warm"),
     ("bridge", ["--select", "best", "--candidates", "2"], "unknown --select"),
     ("bridge", ["--arrival", "soon"], "unknown --arrival"),
-    ("bridge", ["--arrival", "keep"], "--arrival keep conditions replans"),
+    ("bridge", ["--arrival", "keep"], "--arrival keep holds replans"),
 ])
 @pytest.mark.parametrize("command", ["eval", "render"])
 def test_bad_closed_loop_input(tiny_runs, tmp_path, capsys, process, bad, message, command):

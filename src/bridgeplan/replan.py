@@ -101,7 +101,7 @@ class Execution:
         if self.arrival is not None and self.arrival not in ARRIVALS:
             raise BridgeplanError(f"unknown --arrival {self.arrival!r}: choose from {', '.join(ARRIVALS)}")
         if self.arrival == "keep" and not self.replans:
-            raise BridgeplanError("--arrival keep conditions replans on the previous plan's arrival: give "
+            raise BridgeplanError("--arrival keep holds replans to the first plan's arrival step: give "
                                   "--replan-every K or --replan-tolerance D")
         if self.warm and not process.uses_prior:
             raise BridgeplanError(f"--prior warm needs a process that starts from a prior; {process.display_name} "
