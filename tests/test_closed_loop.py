@@ -193,9 +193,9 @@ def test_arrival_holds_the_goal_from_its_index(tiny_runs, process):
     assert not np.allclose(held.states[0, 1:5], free.states[0, 1:5])
 
 
-def test_keep_conditions_replans_on_the_previous_arrival(tiny_runs):
-    """Through PlanSource: the first plan has no arrival index; a replan 4 steps later holds the goal from the
-    previous plan's arrival step less 4 (at least 1), and arrives by then."""
+def test_keep_holds_replans_to_the_first_plans_arrival(tiny_runs):
+    """Through PlanSource: the first plan has no arrival index; replans hold the goal from the first plan's
+    arrival step less the steps elapsed (at least 1), and arrive by then; the deadline stays the first plan's."""
     planner, _ = load_planner(tiny_runs["ddpm"], device="cpu")
     seen = []
 
@@ -216,6 +216,8 @@ def test_keep_conditions_replans_on_the_previous_arrival(tiny_runs):
     np.testing.assert_array_equal(seen[1], np.clip(before - 4, 1, planner.horizon - 1))
     after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy)
     assert (after <= seen[1]).all()
+    source(second[:, 6], tasks.goals_xy, np.arange(3), 10)
+    np.testing.assert_array_equal(seen[2], np.clip(before - 10, 1, planner.horizon - 1))
 
 
 # ---------------------------------------------------------------- a perfect plan source beats open loop
