@@ -1,10 +1,9 @@
 #!/usr/bin/env bash
 # Issue 12 on medium and large (data version 2): the thesis's experiments in the store of run_maze_curves.sh
-# (its DDPM and line-bridge runs are shared, not retrained): bridge vs DDPM from Gaussian noise, the bridge
-# across NFE, the priors (Gaussian, line, learned) at NFE 4, each prior vs DDPM at NFE 1, and beta_max 0.3
-# against the default 1.0 and the consistent bridge (line prior, NFE 1, 2, 4, full); 3 training seeds; then
-# DDPM across diffusion steps (1, 4, 7, 10) on seed 0 alone. cpu-small at its per-maze plan shape,
-# 200 episodes per evaluation, two jobs at a time with one torch thread each.
+# (its DDPM and line-bridge runs are shared, not retrained): each prior vs DDPM at NFE 1, bridge vs DDPM from
+# Gaussian noise, the bridge across NFE, the priors (Gaussian, line, learned) at NFE 4; 3 training seeds.
+# cpu-small at its per-maze plan shape, 200 episodes per evaluation, two jobs at a time with one torch thread
+# each. run_maze_variants.sh has the rest (beta_max 0.3, the consistent bridge, DDPM's diffusion steps).
 # Usage: MAZE=medium bash docs/results/run_maze_thesis.sh (after run_maze_curves.sh, or on its own).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -20,8 +19,5 @@ common=(--maze "$MAZE" --dataset "$D" --preset cpu-small --results "$R" --train-
 for name in nfe1 bridge-vs-ddpm bridge-nfe priors; do
   bridgeplan experiment "$name" "${common[@]}" --seeds 0,1,2
 done
-bridgeplan experiment nfe-curves "${common[@]}" --seeds 0,1,2 --beta-max 0.3
-bridgeplan experiment nfe-curves "${common[@]}" --seeds 0,1,2 --consistent
-bridgeplan experiment ddpm-steps "${common[@]}" --seeds 0
 mkdir -p "$OUT"
 bridgeplan report --results "$R" --out "$OUT" --csv "$OUT/results.csv"
