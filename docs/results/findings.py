@@ -38,6 +38,8 @@ FINDINGS = [
      ("DDPM", "full", ""), ("bridge (gaussian)", "full", ""), "above", "last"),
     ("Thesis: early in training an informative prior helps (line vs Gaussian, NFE 4, first snapshot)",
      ("bridge (line)", 4, ""), ("bridge (gaussian)", 4, ""), "above", "first"),
+    ("Thesis: early in training an informative prior helps (learned vs Gaussian, NFE 4, first snapshot)",
+     ("bridge (learned)", 4, ""), ("bridge (gaussian)", 4, ""), "above", "first"),
     ("Thesis: the learned prior beats the straight line (NFE 4)",
      ("bridge (learned)", 4, ""), ("bridge (line)", 4, ""), "above", "last"),
     ("Thesis schedule: beta_max 0.3 beats the default 1.0 (line prior, NFE 1)",
