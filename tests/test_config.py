@@ -42,6 +42,9 @@ def test_labels_and_run_names_say_what_was_trained():
     variant = dataclasses.replace(base, process=Bridge(16, beta_max=0.3, ot_ode=True))
     assert variant.run_name() == "umaze-bridge-line-N16-beta_max0.3-ot_ode-H128-cpu-small-s0"
     assert cfg.preset_config("umaze", "cpu-small").run_name() == "umaze-ddpm-N16-H128-cpu-small-s0"
+    ablation = dataclasses.replace(base, process=Bridge(16, predict="x0", weighting="uniform"), hold_share=0.5)
+    assert ablation.run_name() == "umaze-bridge-line-N16-predictx0-weightinguniform-hold0.5-H128-cpu-small-s0"
+    assert ablation.label() == "bridge (line; predict=x0; weighting=uniform), hold 0.5"
 
 
 def test_a_process_without_a_prior_refuses_one():

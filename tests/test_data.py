@@ -16,7 +16,7 @@ from bridgeplan.data.generate import DATA_VERSION, _plan, generate_stream, gener
 from bridgeplan.data.info import summarize
 from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
 from bridgeplan.data.stream import Stream, join_episodes
-from bridgeplan.data.windows import WindowDataset, window_starts
+from bridgeplan.data.windows import WindowDataset, hold_tails, window_starts
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.expert import D_GAIN, P_GAIN, WAYPOINT_RADIUS, WaypointExpert, noisy_action, pd_action, waypoints
 from bridgeplan.maze.layouts import GOAL_RADIUS, get_maze
@@ -253,6 +253,26 @@ def test_windows():
         WindowDataset(stream, 31, normalizer)
     with pytest.raises(BridgeplanError):
         WindowDataset(stream, 1, normalizer)
+
+
+def test_hold_tails_wait_still_after_a_random_index():
+    """A held window keeps its states up to k, then k's position with zero velocity and zero action (normalized
+    by ``rest``); the share of held windows follows ``share``; share 0 changes nothing."""
+    gen = torch.Generator().manual_seed(0)
+    x = torch.rand((4000, 16, 6), generator=gen) * 2 - 1
+    rest = torch.tensor([0.1, -0.2, 0.3, 0.4, -0.5, 0.6])
+    out = hold_tails(x, 0.5, rest, gen)
+    changed = (out != x).any(dim=2)  # [B, H]
+    held = changed.any(dim=1)
+    assert abs(held.float().mean().item() - 0.5) < 0.03
+    for i in torch.nonzero(held)[:50, 0].tolist():
+        k = int(torch.nonzero(changed[i])[0]) - 1  # the first waiting state follows k
+        assert 1 <= k <= 14 and changed[i, k + 1:].all() and not changed[i, :k + 1].any()
+        torch.testing.assert_close(out[i, k + 1:, 2:4], x[i, k, 2:4].expand(15 - k, 2))  # position of state k
+        torch.testing.assert_close(out[i, k + 1:, :2], rest[:2].expand(15 - k, 2))  # no action
+        torch.testing.assert_close(out[i, k + 1:, 4:], rest[4:].expand(15 - k, 2))  # no velocity
+    assert torch.equal(hold_tails(x, 0.0, rest, gen), x)
+    assert (hold_tails(x, 1.0, rest, gen)[:, -1] != x[:, -1]).any(dim=1).all()
 
 
 def _write_d4rl(path, stream, maze, stale_after=()):

@@ -12,6 +12,7 @@ import math
 import pytest
 import torch
 
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.processes.samplers import bridge_posterior, bridge_sample, ddpm_ancestral, ddpm_posterior
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
@@ -115,7 +116,8 @@ def test_bridge_sampler_step_has_the_conditional_moments():
 # --- the training label is the inverse of predict_x0 ------------------------------------------------
 
 @pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10), Bridge(steps=10, beta_max=0.3, ot_ode=True),
-                                     Bridge(steps=10, consistent=True), Flow(steps=10), Flow(steps=10, sigma=0.5),
+                                     Bridge(steps=10, consistent=True), Bridge(steps=10, predict="x0"),
+                                     Bridge(steps=10, weighting="uniform"), Flow(steps=10), Flow(steps=10, sigma=0.5),
                                      Flow(steps=1, sigma=0.2)])
 def test_exact_label_has_zero_loss_and_predicts_x0(process):
     """A network that outputs the exact label has zero loss and its x0 prediction is x0 at every step."""
@@ -269,3 +271,46 @@ def test_default_bridge_keeps_i2sb_marginal():
     for got, want in zip(bridge.marginal_coefs, gaussian_product(bridge.std_fwd, bridge.std_bwd)):
         assert torch.equal(got, want)
     assert Bridge().consistent is False and Bridge().to_dict()["consistent"] is False
+
+
+# --- the bridge's loss ablation (predict x weighting) ----------------------------------------------------
+
+@pytest.mark.parametrize("predict", ["eps", "x0"])
+@pytest.mark.parametrize("weighting", ["i2sb", "uniform"])
+def test_bridge_loss_is_the_weighted_x0_error(predict, weighting):
+    """Every variant's loss is ``mean(w(n) |x0_hat - x0|^2)`` with I2SB's ``w = 1 / std_fwd[n]^2`` or 1, for any
+    network: the output is what ``predict`` says, and the weighting alone sets w."""
+    bridge = Bridge(steps=16, predict=predict, weighting=weighting)
+    b, h = 256, 8
+    x0 = torch.rand((b, h, 6), generator=torch.Generator().manual_seed(1), dtype=F64) * 1.8 - 0.9
+    x1 = torch.randn((b, h, 6), generator=torch.Generator().manual_seed(2), dtype=F64)
+    cond = {0: x0[:, 0, ACT_DIM:], h - 1: x0[:, -1, ACT_DIM:]}
+    net = torch.nn.Linear(6, 6).double()
+
+    def model(x, n):
+        return torch.tanh(net(x)) * (1 + n[:, None, None] / 16)
+
+    loss = bridge.training_loss(model, x0, x1, cond, torch.Generator().manual_seed(3))
+    x_n, n, _ = bridge.training_pair(x0, x1, cond, torch.Generator().manual_seed(3))
+    out, std = model(x_n, n.float()), bridge.std_fwd.double()[n][:, None, None]
+    x0_hat = x_n - std * out if predict == "eps" else out
+    w = 1 / std ** 2 if weighting == "i2sb" else torch.ones_like(std)
+    assert torch.allclose(loss, torch.mean(w * (x0_hat - x0) ** 2), rtol=1e-10)
+
+
+def test_bridge_default_loss_is_unchanged():
+    """I2SB's loss is the plain L2 on its label, bit for bit (runs trained before the ablation resume exactly)."""
+    bridge = Bridge(steps=16)
+    x0 = torch.rand((32, 8, 6), generator=torch.Generator().manual_seed(1)) * 1.8 - 0.9
+    x1 = torch.randn((32, 8, 6), generator=torch.Generator().manual_seed(2))
+    cond = {0: x0[:, 0, ACT_DIM:], 7: x0[:, -1, ACT_DIM:]}
+    net = torch.nn.Linear(6, 6)
+    loss = bridge.training_loss(lambda x, n: net(x), x0, x1, cond, torch.Generator().manual_seed(3))
+    x_n, n, target = bridge.training_pair(x0, x1, cond, torch.Generator().manual_seed(3))
+    assert torch.equal(loss, torch.mean((net(x_n) - target) ** 2))
+
+
+@pytest.mark.parametrize("field", ["predict", "weighting"])
+def test_bridge_refuses_unknown_loss_variants(field):
+    with pytest.raises(BridgeplanError, match=f"unknown {'prediction' if field == 'predict' else 'weighting'}"):
+        Bridge(**{field: "v"})

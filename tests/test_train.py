@@ -24,10 +24,13 @@ def weights(run_dir):
     return state["model"], state["ema"], state["step"]
 
 
-@pytest.mark.parametrize("process", ["ddpm", "bridge"])
-def test_resume_is_exact(tiny_dataset, tmp_path, process):
+HOLD_AND_ABLATION = ["--hold-share", "0.5", "--process-param", "predict=x0", "--process-param", "weighting=uniform"]
+
+
+@pytest.mark.parametrize("process,extra", [("ddpm", []), ("bridge", []), ("bridge", HOLD_AND_ABLATION)])
+def test_resume_is_exact(tiny_dataset, tmp_path, process, extra):
     straight, interrupted = tmp_path / "straight", tmp_path / "interrupted"
-    flags = ["--process", process] + (["--prior", "line"] if process == "bridge" else [])
+    flags = ["--process", process] + (["--prior", "line"] if process == "bridge" else []) + extra
     assert main(train_args(tiny_dataset, straight, 6, *flags)) == 0
     assert main(train_args(tiny_dataset, interrupted, 3, *flags)) == 0
     assert weights(interrupted)[2] == 3
@@ -49,6 +52,21 @@ def test_run_directory_holds_config_and_snapshots(tiny_dataset, tmp_path):
     assert saved["config"]["maze"] == "umaze" and saved["config"]["horizon"] == 32
     assert saved["config"]["model"]["dim_mults"] == [1, 2]
     assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["step_00000002.pt", "step_00000004.pt"]
+
+
+def test_hold_share_and_loss_variants_are_saved_and_checked(tiny_dataset, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2, "--process", "bridge", *HOLD_AND_ABLATION)) == 0
+    saved = json.loads((run / "config.json").read_text())["config"]
+    assert saved["hold_share"] == 0.5
+    assert saved["process"]["predict"] == "x0" and saved["process"]["weighting"] == "uniform"
+    for bad, message in ((["--hold-share", "1.5"], "hold_share must be in [0, 1]"),
+                         (["--process-param", "weighting=snr"], "unknown weighting 'snr'")):
+        capsys.readouterr()
+        assert main(train_args(tiny_dataset, tmp_path / "bad", 2, "--process", "bridge", *bad)) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "bad").exists()
 
 
 def test_existing_run_without_resume_is_refused(tiny_dataset, tmp_path, capsys):

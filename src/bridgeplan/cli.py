@@ -129,6 +129,7 @@ def _add_train_commands(sub) -> None:
     p.add_argument("--ema-decay", type=float, default=None)
     p.add_argument("--ema-every", type=int, default=None)
     p.add_argument("--ema-start", type=int, default=None)
+    _hold_share_flag(p)
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
@@ -164,6 +165,12 @@ def _process_param_flag(p) -> None:
                    help="any field of the process's dataclass, e.g. beta_max=0.3 (repeatable)")
 
 
+def _hold_share_flag(p) -> None:
+    p.add_argument("--hold-share", type=float, default=None,
+                   help="share of training windows that arrive early and wait still at their end, so plans may "
+                        "reach the goal before the horizon's end (default 0, Diffuser's)")
+
+
 def _threads_flag(p) -> None:
     p.add_argument("--threads", type=int, default=None,
                    help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
@@ -183,7 +190,8 @@ def _cmd_train(args) -> int:
     from bridgeplan.train import train
 
     base = cfg.preset_config(args.maze, args.preset)
-    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start"))
+    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
+                                       "hold_share"))
     process = _process_params(args, args.process or base.process.name)
     if args.process is not None:
         process["name"] = args.process
@@ -384,6 +392,7 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--dim", type=int, default=None)
     p.add_argument("--dim-mults", default=None)
     p.add_argument("--batch-size", type=int, default=None)
+    _hold_share_flag(p)
     p.add_argument("--device", default=None)
     _threads_flag(p)
     p.add_argument("--no-progress", action="store_true")
@@ -409,7 +418,7 @@ def _cmd_experiment(args) -> int:
 
     informed = make_process(args.process, **_process_params(args, args.process))
     experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, informed)
-    overrides = _overrides(args, ("horizon", "stride", "batch_size", "device", "threads"))
+    overrides = _overrides(args, ("horizon", "stride", "batch_size", "device", "threads", "hold_share"))
     preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:

@@ -104,21 +104,29 @@ class TrainConfig:
     """``auto`` (CUDA when present), ``cpu``, ``cuda``, ``cuda:1``, ..."""
     threads: int = 0
     """CPU threads for torch (0: automatic, see ``device.configure_threads``: one on a CPU device)."""
+    hold_share: float = 0.0
+    """Share of training windows that wait still from a random index on (``data.windows.hold_tails``): the
+    expert's windows never stop, so plans conditioned to end at the goal at H - 1 spend the whole horizon
+    getting there; trained with some windows that arrive early and wait, a plan may too (0: Diffuser's)."""
 
     def __post_init__(self):
         maze_horizon(self.maze)
         _check_horizon(self.maze, self.horizon, self.stride)
         check_prior(self.process, self.prior)
+        if not 0 <= self.hold_share <= 1:
+            raise BridgeplanError(f"hold_share must be in [0, 1], got {self.hold_share}")
 
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
-        parts = [self.maze, *self.process.run_tag(self.prior), _horizon_tag(self.horizon, self.stride),
+        hold = [f"hold{self.hold_share:g}"] if self.hold_share else []
+        parts = [self.maze, *self.process.run_tag(self.prior), *hold, _horizon_tag(self.horizon, self.stride),
                  self.preset, f"s{self.seed}"]
         return "-".join(parts)
 
     def label(self) -> str:
-        """The method's name in tables and figures, e.g. ``bridge (line)``."""
-        return self.process.label(self.prior)
+        """The method's name in tables and figures, e.g. ``bridge (line)``, ``DDPM, hold 0.5``."""
+        label = self.process.label(self.prior)
+        return f"{label}, hold {self.hold_share:g}" if self.hold_share else label
 
 
 def check_prior(process: Process, prior: str) -> None:

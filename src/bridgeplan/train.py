@@ -17,11 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
+from bridgeplan.data.windows import hold_tails
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import code_version
@@ -29,7 +31,7 @@ from bridgeplan.layout import checkpoint_path, config_path, snapshot_path
 from bridgeplan.locks import LOCK_NAME, run_lock
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
-from bridgeplan.trajectory import window_conditions
+from bridgeplan.trajectory import TRANSITION_DIM, window_conditions
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
 _RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every"}
@@ -93,8 +95,11 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
     model = build_model(config).to(device)
     process = config.process
     prior = build_prior(config, normalizer, device)
+    rest = torch.as_tensor(normalizer.normalize(np.zeros(TRANSITION_DIM)), dtype=torch.float32, device=device)
 
     def loss(x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        if config.hold_share:  # drawn only then, so runs without holds keep their random stream
+            x0 = hold_tails(x0, config.hold_share, rest, gen)
         conditions = window_conditions(x0)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
         return process.training_loss(model, x0, x1, conditions, generator=gen)

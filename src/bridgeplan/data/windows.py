@@ -15,7 +15,7 @@ import torch
 from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
-from bridgeplan.trajectory import span
+from bridgeplan.trajectory import ACT_DIM, span
 
 
 def window_starts(stream: Stream, horizon: int) -> np.ndarray:
@@ -50,3 +50,19 @@ class WindowDataset(torch.utils.data.Dataset):
     def batch(self, indices: torch.Tensor) -> torch.Tensor:
         """Windows ``[len(indices), horizon, 6]`` in one gather."""
         return self.data[self.starts[torch.as_tensor(indices)][:, None] + self._offsets]
+
+
+def hold_tails(x: torch.Tensor, share: float, rest: torch.Tensor, generator: torch.Generator | None = None
+               ) -> torch.Tensor:
+    """Windows ``x [B, H, 6]`` (normalized) of which a random ``share`` wait still from a random index k in
+    1..H-2 on: every state after k keeps k's position with zero velocity and zero action. ``rest`` ``[6]`` is the
+    normalized all-zero transition (its action and velocity columns are used). The last state, the window's
+    goal condition, is then a position with zero velocity, as the planner's goal is."""
+    b, h, _ = x.shape
+    held = torch.rand(b, generator=generator, device=x.device) < share
+    k = torch.randint(1, h - 1, (b,), generator=generator, device=x.device)
+    after = (torch.arange(h, device=x.device)[None, :] > k[:, None]) & held[:, None]
+    still = x[torch.arange(b, device=x.device), k].clone()
+    still[:, :ACT_DIM] = rest[:ACT_DIM]
+    still[:, ACT_DIM + 2:] = rest[ACT_DIM + 2:]
+    return torch.where(after[..., None], still[:, None, :], x)

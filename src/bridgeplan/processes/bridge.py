@@ -13,6 +13,9 @@ from bridgeplan.processes.samplers import bridge_sample
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
 from bridgeplan.trajectory import Conditions, apply_conditions
 
+PREDICTIONS = ("eps", "x0")
+WEIGHTINGS = ("i2sb", "uniform")
+
 
 @dataclass(frozen=True)
 class Bridge(Process):
@@ -20,6 +23,13 @@ class Bridge(Process):
 
     The network follows I2SB's parametrization: it predicts ``(x_n - x0) / std_fwd[n]``, so
     ``x0_hat = x_n - std_fwd[n] * out``. Sampling takes any NFE from 1 to N - 1.
+
+    ``predict`` and ``weighting`` take the loss apart for an ablation (issue 15: why DDPM, trained as Diffuser
+    does on x0 with equal weight per step, lags the bridge early). Every variant is a weighted L2 on x0,
+    ``w(n) |x0_hat - x0|^2``: ``weighting`` ``i2sb`` is I2SB's ``w = 1 / std_fwd[n]^2`` (its plain L2 on the
+    scaled difference), ``uniform`` is Diffuser's ``w = 1``; ``predict`` only changes what the network outputs
+    (``eps``: the scaled difference, ``x0``: the trajectory), so at one weighting the objective is the same
+    function of ``x0_hat`` and the two differ in the network's output alone.
 
     ``consistent`` trains on the marginal the sampling chain itself implies (``schedules.chain_marginal``)
     instead of I2SB's product of ``(std_fwd[n], std_bwd[n])``, whose variances count ``beta_n`` twice
@@ -31,6 +41,10 @@ class Bridge(Process):
     beta_max: float = 1.0
     ot_ode: bool = False
     consistent: bool = False
+    predict: str = "eps"
+    """What the network outputs: ``eps`` I2SB's ``(x_n - x0) / std_fwd[n]``, ``x0`` the clean trajectory."""
+    weighting: str = "i2sb"
+    """Per-step weight of the squared x0 error: ``i2sb`` ``1 / std_fwd[n]^2`` (I2SB), ``uniform`` 1 (Diffuser)."""
     name = "bridge"
     display_name = "bridge"
 
@@ -39,6 +53,10 @@ class Bridge(Process):
             raise BridgeplanError(f"the bridge needs at least 2 diffusion steps, got {self.steps}")
         if self.beta_max <= 0:
             raise BridgeplanError(f"beta_max must be positive, got {self.beta_max}")
+        if self.predict not in PREDICTIONS:
+            raise BridgeplanError(f"unknown prediction {self.predict!r}: choose from {', '.join(PREDICTIONS)}")
+        if self.weighting not in WEIGHTINGS:
+            raise BridgeplanError(f"unknown weighting {self.weighting!r}: choose from {', '.join(WEIGHTINGS)}")
 
     @cached_property
     def betas(self) -> torch.Tensor:
@@ -79,11 +97,33 @@ class Bridge(Process):
         return x_n
 
     def predict_x0(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
+        if self.predict == "x0":
+            return super().predict_x0(model, x_n, n)
         return (x_n - float(self.std_fwd[n]) * self.network(model, x_n, n)).clamp(-1, 1)
 
     def training_target(self, x0: torch.Tensor, x_n: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
-        """I2SB's label ``(x_n - x0) / std_fwd[n]``, the inverse of ``predict_x0``."""
+        """The label, the inverse of ``predict_x0``: I2SB's ``(x_n - x0) / std_fwd[n]``, or x0 itself."""
+        if self.predict == "x0":
+            return x0
         return (x_n - x0) / self.std_fwd.to(x0.device, x0.dtype)[n][:, None, None]
+
+    def output_weight(self, n: torch.Tensor) -> torch.Tensor | None:
+        """Weight per sample of the squared error of the network's output that makes the loss ``w(n) |x0_hat -
+        x0|^2`` (the x0 error is ``std_fwd[n]`` times the output's with ``eps``); None where it is 1 (I2SB's own
+        loss, computed exactly as before)."""
+        std2 = self.std_fwd.to(n.device)[n] ** 2
+        if self.weighting == "i2sb":
+            return None if self.predict == "eps" else 1 / std2
+        return std2 if self.predict == "eps" else None
+
+    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
+                      generator: torch.Generator | None = None) -> torch.Tensor:
+        x_n, n, target = self.training_pair(x0, x1, conditions, generator)
+        sq = (model(x_n, n.float()) - target) ** 2
+        weight = self.output_weight(n)
+        if weight is None:
+            return torch.mean(sq)
+        return torch.mean(weight.to(sq.dtype)[:, None, None] * sq)
 
     def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
