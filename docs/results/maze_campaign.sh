@@ -5,7 +5,8 @@
 # and `campaign_report` (the store's report and CSV under docs/results/$MAZE-v2-curves).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/../.."
-export PATH="$PWD/.venv/bin:$PATH" MUJOCO_GL=${MUJOCO_GL:-egl}
+# this checkout's code, whatever the venv has installed (its rows record this checkout's code version)
+export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
 MAZE=${MAZE:?set MAZE=umaze, medium or large}
 STEPS=${STEPS:-8000}
 R=${RESULTS:-results/$MAZE-v2-curves}

@@ -5,7 +5,7 @@
 # with one torch thread each. The store skips finished work: rerun to resume.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-export PATH="$PWD/.venv/bin:$PATH" MUJOCO_GL=${MUJOCO_GL:-egl}
+export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
 R=${RESULTS:-results/umaze-v2-curves}
 D=${DATASET:-datasets/umaze-1000000-v2}
 OUT=docs/results/umaze-v2-curves
