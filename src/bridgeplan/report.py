@@ -7,17 +7,18 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan import config as cfg
 from bridgeplan import layout
 from bridgeplan.experiments.grids import EXPERIMENTS
 from bridgeplan.experiments.store import ResultsStore
 from bridgeplan.files import atomic_write_text
-from bridgeplan.processes import process_from_dict
 from bridgeplan.render import _pyplot, save_figure
 
 
 def method_label(row: dict) -> str:
-    """The method of a store row, as its process names it (parameters included)."""
-    return process_from_dict(json.loads(row["config"])["process"]).label(row["prior"])
+    """The method of a store row as its run's config names it (process parameters and training-data holds
+    included: ``TrainConfig.label``)."""
+    return cfg.from_dict(cfg.TrainConfig, json.loads(row["config"])).label()
 
 
 def _series(rows: list[dict]) -> dict[str, list[dict]]:
