@@ -1,5 +1,6 @@
 """The findings table (issue 12): each thesis finding, and ours, per maze and task set, from the committed
-results CSVs (docs/results/<maze>-v2-curves/results.csv, written by `bridgeplan report --csv`).
+results CSVs (docs/results/<maze>-v2-curves/results.csv and, for runs trained on windows that wait,
+docs/results/<maze>-v2-hold/results.csv; written by `bridgeplan report --csv`).
 
 A finding compares two series on the same evaluation episodes, training seed by training seed: the cell is
 the mean ± standard error over seeds of the per-seed difference (first minus second, Minari convention) and
@@ -56,16 +57,30 @@ FINDINGS = [
      ("bridge (line; consistent=True)", 2, ""), ("bridge (line)", 2, ""), "above", "last"),
     ("Ours: replanning every 32 steps beats open loop (bridge, line, NFE 1, warm, arrival kept)",
      ("bridge (line)", 1, "replan32-warm-arrival-keep"), ("bridge (line)", 1, ""), "above", "last"),
+    ("Loss ablation: an x0 output beats I2SB's scaled difference, same loss (line, NFE 1, first snapshot)",
+     ("bridge (line; predict=x0)", 1, ""), ("bridge (line)", 1, ""), "above", "first"),
+    ("Loss ablation: an x0 output beats I2SB's scaled difference, same loss (line, NFE 1)",
+     ("bridge (line; predict=x0)", 1, ""), ("bridge (line)", 1, ""), "above", "last"),
+    ("Loss ablation: Diffuser's equal weight per step beats I2SB's (line, NFE 1, first snapshot)",
+     ("bridge (line; weighting=uniform)", 1, ""), ("bridge (line)", 1, ""), "above", "first"),
+    ("Loss ablation: Diffuser's equal weight per step beats I2SB's (line, NFE 1)",
+     ("bridge (line; weighting=uniform)", 1, ""), ("bridge (line)", 1, ""), "above", "last"),
+    ("Ours: training windows that wait (hold 0.5) raise DDPM's open-loop score (NFE 1)",
+     ("DDPM, hold 0.5", 1, ""), ("DDPM", 1, ""), "above", "last"),
+    ("Ours: training windows that wait (hold 0.5) raise the bridge's open-loop score (line, NFE 1)",
+     ("bridge (line), hold 0.5", 1, ""), ("bridge (line)", 1, ""), "above", "last"),
+    ("Ours: with holds, replanning every 32 steps beats open loop (DDPM, NFE 1, arrival kept)",
+     ("DDPM, hold 0.5", 1, "replan32-arrival-keep"), ("DDPM, hold 0.5", 1, ""), "above", "last"),
+    ("Ours: with holds, replanning every 32 steps beats open loop (bridge, line, NFE 1, warm, as sampled)",
+     ("bridge (line), hold 0.5", 1, "replan32-warm"), ("bridge (line), hold 0.5", 1, ""), "above", "last"),
 ]
 
 
 def load(maze: str) -> dict:
-    """``{(method, multi, execution): {step: {nfe: {seed: (score, floor)}}}}`` from the maze's CSV."""
-    path = HERE / f"{maze}-v2-curves" / "results.csv"
+    """``{(method, multi, execution): {step: {nfe: {seed: (score, floor)}}}}`` from the maze's CSVs."""
     table: dict = {}
-    if not path.exists():
-        return table
-    for r in csv.DictReader(path.open()):
+    paths = [HERE / f"{maze}-v2-{store}" / "results.csv" for store in ("curves", "hold")]
+    for r in (r for path in paths if path.exists() for r in csv.DictReader(path.open())):
         key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
         cell = table.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
         cell.setdefault(int(r["seed"]), (float(r["score_minari"]), float(r["floor_minari"])))
