@@ -108,6 +108,7 @@ def test_eval_result_is_a_store_row_with_its_method(tiny_runs):
     assert (row["process"], row["prior"], row["nfe"], row["episodes"]) == ("bridge", "learned", 1, 2)
     assert method_label(dict(row, config=json.dumps(row["config"]))) == "bridge (learned)"
     held = dict(row["config"], hold_share=0.5)  # a run trained on windows that wait is another method
+    assert cfg.method_label(Bridge(), "learned", 0.5) == "bridge (learned), hold 0.5"
     assert method_label(dict(row, config=json.dumps(held))) == "bridge (learned), hold 0.5"
     assert result.to_dict()["method"] == "bridge (learned)"
 

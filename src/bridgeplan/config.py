@@ -125,8 +125,13 @@ class TrainConfig:
 
     def label(self) -> str:
         """The method's name in tables and figures, e.g. ``bridge (line)``, ``DDPM, hold 0.5``."""
-        label = self.process.label(self.prior)
-        return f"{label}, hold {self.hold_share:g}" if self.hold_share else label
+        return method_label(self.process, self.prior, self.hold_share)
+
+
+def method_label(process: Process, prior: str, hold_share: float = 0.0) -> str:
+    """A trained method's name: its process's label from ``prior``, and the share of waiting windows if any."""
+    label = process.label(prior)
+    return f"{label}, hold {hold_share:g}" if hold_share else label
 
 
 def check_prior(process: Process, prior: str) -> None:

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bridgeplan import config as cfg
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, code_version
 from bridgeplan.maze.layouts import Maze, get_maze
@@ -136,7 +137,8 @@ class EvalResult:
         out = {
             "run": str(run.path) if run else None, "step": run.step if run else None,
             "train_seconds": run.elapsed_seconds if run else None, "maze": self.tasks.maze.name,
-            "method": process.label(self.prior), "process": process.name, "prior": self.prior,
+            "method": cfg.method_label(process, self.prior, run.config.hold_share if run else 0.0),
+            "process": process.name, "prior": self.prior,
             "process_params": process.to_dict(), "diffusion_steps": process.steps, "nfe": self.nfe,
             "episodes": self.tasks.episodes, "seed": self.tasks.seed, "multi_task": self.tasks.multi_task,
             "horizon": self.planner.horizon, "stride": self.planner.stride,
