@@ -13,3 +13,6 @@ OUT=docs/results/$MAZE-v2-hold
 bridgeplan experiment nfe-curves "${common[@]}" --hold-share 0.5
 bridgeplan experiment closed-loop "${common[@]}" --hold-share 0.5
 campaign_report
+# when the plans arrive, with and without holds (the runs of run_maze_curves.sh's store where present)
+python docs/results/planned_arrival.py "$OUT/planned-arrival.json" \
+  results/$MAZE-v2-curves/runs/$MAZE-{ddpm-N16,bridge-line-N16}-H*-s[0-9] "$R"/runs/$MAZE-*-hold0.5-*
