@@ -6,7 +6,8 @@ inverted by ``process_from_dict``; ``label``, ``run_tag``, ``uses_prior``, ``wit
 
 - ``training_pair(x0, x1, conditions, generator=None) -> (x_n, n, target)`` (``x0`` the clean normalized
   window ``[B, H, D]``, ``x1`` the prior sample for it, ignored by DDPM) and ``training_target``; the
-  base class's ``training_loss`` is the L2 between the network's output on ``(x_n, n)`` and ``target``,
+  base class's ``training_loss`` is the L2 between the network's output on ``(x_n, n)`` and ``target``
+  (weighted per step by ``output_weight``, equal by default),
 - ``predict_x0(model, x_n, n) -> x0_hat`` (clipped to [-1, 1]),
 - ``max_nfe``, ``validate_nfe(nfe)``,
 - ``sample(model, x_start, conditions, nfe, generator=None) -> x0`` (``x_start`` the prior sample:

@@ -59,12 +59,20 @@ class Process:
         """The regression label at ``(x_n, n)``: the inverse of :meth:`predict_x0` (here x0 itself)."""
         return x0
 
+    def output_weight(self, n: torch.Tensor) -> torch.Tensor | None:
+        """Per-sample weight ``[B]`` of the squared output error at steps ``n``; None: equal weights."""
+        return None
+
     def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> torch.Tensor:
         """L2 between the network's output and the label of the process's ``training_pair`` (``x1``: the
-        prior sample for ``x0``; a process without a prior ignores it)."""
+        prior sample for ``x0``; a process without a prior ignores it), weighted by :meth:`output_weight`."""
         x_n, n, target = self.training_pair(x0, x1, conditions, generator)
-        return torch.mean((model(x_n, n.float()) - target) ** 2)
+        sq = (model(x_n, n.float()) - target) ** 2
+        weight = self.output_weight(n)
+        if weight is None:
+            return torch.mean(sq)
+        return torch.mean(weight.to(sq.dtype)[:, None, None] * sq)
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Process:
         """The same trained process sampled another way; only processes with samplers to choose have it."""

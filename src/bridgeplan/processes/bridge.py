@@ -116,15 +116,6 @@ class Bridge(Process):
             return None if self.predict == "eps" else 1 / std2
         return std2 if self.predict == "eps" else None
 
-    def training_loss(self, model, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
-                      generator: torch.Generator | None = None) -> torch.Tensor:
-        x_n, n, target = self.training_pair(x0, x1, conditions, generator)
-        sq = (model(x_n, n.float()) - target) ** 2
-        weight = self.output_weight(n)
-        if weight is None:
-            return torch.mean(sq)
-        return torch.mean(weight.to(sq.dtype)[:, None, None] * sq)
-
     def training_pair(self, x0: torch.Tensor, x1: torch.Tensor, conditions: Conditions,
                       generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(x_n, n, target)`` at a uniform random step n in [0, N-1] ([1, N-1] with ``consistent``)."""
