@@ -7,7 +7,9 @@ import sqlite3
 import pytest
 
 from bridgeplan.cli import main
+from bridgeplan.experiments.grids import get_experiment
 from bridgeplan.experiments.store import SCHEMA_VERSION, ResultsStore
+from bridgeplan.processes import Flow
 
 TINY_SWEEP = ["--maze", "umaze", "--train-steps", "2", "--prior-steps", "2", "--checkpoint-every", "1",
               "--episodes", "4", "--no-progress",
@@ -42,6 +44,35 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys):
     assert main(["report", "--results", str(results), "--csv", str(tmp_path / "all.csv")]) == 0
     assert len((tmp_path / "all.csv").read_text().strip().splitlines()) == 1 + len(
         ResultsStore(results / "results.sqlite").rows())
+
+
+def test_validation_sweep_scores_other_episodes_of_the_same_runs(tiny_dataset, tmp_path, capsys):
+    """`--validation`: the final snapshot of each run, on tasks of another seed, under `<name>-validation`;
+    the test rows and the trained runs are left as they were."""
+    results = tmp_path / "results"
+    args = ["experiment", "nfe-curves", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP,
+            "--seeds", "0,1"]
+    assert main(args) == 0
+    store = ResultsStore(results / "results.sqlite")
+    test_rows = store.rows("nfe-curves")
+    runs_before = sorted(p.name for p in (results / "runs").iterdir())
+    assert main([*args, "--validation"]) == 0
+    rows = store.rows("nfe-curves-validation")
+    assert store.rows("nfe-curves") == test_rows
+    assert sorted(p.name for p in (results / "runs").iterdir()) == runs_before
+    # DDPM at NFE 1, 2, 4, 6 and the bridge at 1, 2, 4, 5; two seeds; the final snapshot only
+    assert len(rows) == 2 * 8 and {r["step"] for r in rows} == {2}
+    assert {(r["seed"], r["eval_seed"]) for r in rows} == {(0, 1000), (1, 1001)}
+    assert {(r["seed"], r["eval_seed"]) for r in test_rows} == {(0, 0), (1, 1)}
+    capsys.readouterr()
+    assert main([*args, "--validation"]) == 0 and "0 new results" in capsys.readouterr().out
+
+
+def test_prior_curves_has_each_prior_at_nfe_1_2_4_and_full():
+    experiment = get_experiment("prior-curves", steps=6, informed=Flow())
+    assert {(s.run.process.name, s.run.prior, s.nfe) for s in experiment.series} == {
+        ("flow", p, k) for p in ("gaussian", "line", "learned") for k in (1, 2, 4, 6)}
+    assert not experiment.last_snapshot_only
 
 
 @pytest.mark.parametrize("args, message", [

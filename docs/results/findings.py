@@ -7,8 +7,9 @@ the mean ± standard error over seeds of the per-seed difference (first minus se
 a verdict: "holds" when the difference is more than two standard errors on the finding's side, "does not"
 when it is more than two on the other side, "not decidable" in between. For "not below" findings (a score
 kept), "holds" means not more than two standard errors below. Series are taken at the last training step
-both have (or the first, where the finding says so); "full" is each method's most NFE, "best" DDPM's best
-NFE by the mean over seeds (chosen on the reported episodes: generous to DDPM).
+both have (or the first, where the finding says so); "full" is each method's most NFE, "best" the NFE with
+the best mean over seeds on the validation episodes (rows of `<experiment>-validation`, made by `experiment
+--validation`: other tasks than the reported ones), whose score on the reported (test) episodes the cell uses.
 
 Usage: python docs/results/findings.py > docs/results/findings.md
 """
@@ -21,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.experiments.runner import VALIDATION_SUFFIX
 from bridgeplan.report import method_label
 
 HERE = Path(__file__).resolve().parent
 MAZES = ("umaze", "medium", "large")
 FLOOR = "floor"
+VALIDATION = "validation"
 
 # (finding, (method, nfe, execution), (method or FLOOR, nfe, execution), rule, step)
 FINDINGS = [
@@ -81,21 +84,29 @@ FINDINGS = [
 
 
 def load(maze: str) -> dict:
-    """``{(method, multi, execution): {step: {nfe: {seed: (score, floor)}}}}`` from the maze's CSVs."""
-    table: dict = {}
+    """``{(method, multi, execution): {step: {nfe: {seed: (score, floor)}}}}`` from the maze's CSVs, test
+    episodes; the validation episodes' rows under the key ``VALIDATION``, in the same shape."""
+    table: dict = {VALIDATION: {}}
     paths = [HERE / f"{maze}-v2-{store}" / "results.csv" for store in ("curves", "hold")]
     for r in (r for path in paths if path.exists() for r in csv.DictReader(path.open())):
+        into = table[VALIDATION] if r["experiment"].endswith(VALIDATION_SUFFIX) else table
         key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
-        cell = table.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
+        cell = into.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
         cell.setdefault(int(r["seed"]), (float(r["score_minari"]), float(r["floor_minari"])))
     return table
 
 
+def best_nfe(table: dict, key, step: int) -> int | None:
+    """The NFE with the best mean score over seeds on the validation episodes (None: not evaluated there)."""
+    by_nfe = table[VALIDATION].get(key, {}).get(step)
+    return max(by_nfe, key=lambda k: np.mean([s for s, _ in by_nfe[k].values()])) if by_nfe else None
+
+
 def series(table: dict, spec, multi: int, step: int) -> dict[int, float] | None:
-    """Per-seed scores of ``spec`` = (method or FLOOR, nfe, execution) at ``step``."""
+    """Per-seed scores of ``spec`` = (method or FLOOR, nfe, execution) at ``step``, test episodes."""
     method, nfe, execution = spec
     if method == FLOOR:  # the floor of the other series' episodes: any open-loop series carries it
-        for (m, mt, ex), steps in table.items():
+        for (m, mt, ex), steps in ((k, v) for k, v in table.items() if k != VALIDATION):
             if mt == multi and ex == "" and step in steps:
                 at = next(iter(steps[step].values()))
                 return {seed: floor for seed, (_, floor) in at.items()}
@@ -106,7 +117,7 @@ def series(table: dict, spec, multi: int, step: int) -> dict[int, float] | None:
     if nfe == "full":
         nfe = max(by_nfe)
     elif nfe == "best":
-        nfe = max(by_nfe, key=lambda k: np.mean([s for s, _ in by_nfe[k].values()]))
+        nfe = best_nfe(table, (method, multi, execution), step)
     if nfe not in by_nfe:
         return None
     return {seed: score for seed, (score, _) in by_nfe[nfe].items()}
@@ -120,6 +131,9 @@ def cell(table: dict, finding, multi: int) -> str:
     if not common:
         return "not measured"
     step = common[0] if which == "first" else common[-1]
+    chosen = {spec[0]: best_nfe(table, (spec[0], multi, spec[2]), step) for spec in (a, b) if spec[1] == "best"}
+    if None in chosen.values():
+        return "no validation episodes"
     sa, sb = series(table, a, multi, step), series(table, b, multi, step)
     seeds = sorted(set(sa or {}) & set(sb or {}))
     if len(seeds) < 2:
@@ -130,7 +144,8 @@ def cell(table: dict, finding, multi: int) -> str:
         verdict = "holds" if mean - 2 * se > 0 else "does not" if mean + 2 * se < 0 else "not decidable"
     else:  # not below
         verdict = "holds" if mean + 2 * se >= 0 else "does not"
-    return f"{verdict}: {mean:+.1f} ± {se:.1f} (step {step}, {len(seeds)} seeds)"
+    picked = "".join(f", {m} NFE {k}" for m, k in chosen.items())
+    return f"{verdict}: {mean:+.1f} ± {se:.1f} (step {step}, {len(seeds)} seeds{picked})"
 
 
 def main() -> int:

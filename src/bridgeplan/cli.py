@@ -384,6 +384,9 @@ def _add_experiment_commands(sub) -> None:
     p.add_argument("--fixed-nfe", type=int, default=4, help="NFE of the `priors` experiment")
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--seeds", default="0", help="comma-separated training/evaluation seeds")
+    p.add_argument("--validation", action="store_true",
+                   help="evaluate each run's final snapshot on validation episodes (other task seeds) into "
+                        "EXPERIMENT-validation, to choose settings there and report them on the test episodes")
     p.add_argument("--backend", default="local", help="local or ray")
     p.add_argument("--workers", type=int, default=1, help="local backend: parallel jobs (cores divided)")
     p.add_argument("--ray-address", default=None, help="existing Ray cluster (default: start a local one)")
@@ -430,7 +433,7 @@ def _cmd_experiment(args) -> int:
                              preset=args.preset, train_steps=args.train_steps, prior_steps=args.prior_steps,
                              checkpoint_every=args.checkpoint_every, episodes=args.episodes,
                              seeds=_seeds(args.seeds),
-                             results_dir=args.results, overrides=overrides)
+                             results_dir=args.results, overrides=overrides, validation=args.validation)
     added = run_sweep([experiment], settings, backend=args.backend, workers=args.workers,
                       ray_address=args.ray_address, progress=not args.no_progress)
     print(f"{args.name}: {added} new results in {store_path(args.results)}")

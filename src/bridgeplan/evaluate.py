@@ -59,6 +59,11 @@ class Tasks:
         return torch.Generator(device=device).manual_seed(self.seed)
 
 
+VALIDATION_SEED_OFFSET = 1000
+"""Validation episodes of a run evaluated on test tasks of seed s are the tasks of seed s + this offset
+(disjoint from the test seeds of any sweep with fewer training seeds): settings are chosen on them."""
+
+
 def make_tasks(maze: str, episodes: int, seed: int = 0, multi_task: bool = False) -> Tasks:
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")

@@ -87,6 +87,9 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
         Experiment("nfe-curves", f"DDPM and {name} from the line prior at NFE 1, 2, 4 and full, N={steps}",
                    tuple(Series(f"{r.label()} NFE {k}", r, k) for r in (ddpm, runs["line"])
                          for k in sorted({1, 2, 4, r.process.max_nfe}) if k <= r.process.max_nfe)),
+        Experiment("prior-curves", f"{name} from each prior at NFE 1, 2, 4 and full, N={steps}",
+                   tuple(Series(f"{r.label()} NFE {k}", r, k) for r in runs.values()
+                         for k in sorted({1, 2, 4, r.process.max_nfe}) if k <= r.process.max_nfe)),
         Experiment("closed-loop", f"DDPM and {name} from the line prior, open loop and replanned every "
                    f"{REPLAN_EVERY} steps, single-task and Multi2D, at the final snapshot, N={steps}",
                    tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)

@@ -42,6 +42,13 @@ class SweepSettings:
     results_dir: str = "results"
     overrides: dict = field(default_factory=dict)
     """Extra TrainConfig fields (e.g. a tiny model for tests)."""
+    validation: bool = False
+    """Evaluate on validation episodes (task seed + ``evaluate.VALIDATION_SEED_OFFSET``), each run's final
+    snapshot only, into the experiment ``<name>-validation``: where settings (NFE, sampler) are chosen, to be
+    reported on the test episodes of ``<name>``."""
+
+
+VALIDATION_SUFFIX = "-validation"
 
 
 def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
@@ -72,7 +79,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     store; the floors are computed once per task set for the job.
     """
     from bridgeplan.device import configure_threads
-    from bridgeplan.evaluate import evaluate_planner, floors, make_tasks
+    from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
     from bridgeplan.runs import load_planner
     from bridgeplan.train import train
 
@@ -84,9 +91,11 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         if done < config.steps:
             train(config, run_dir, resume=done >= 0, progress=progress)
     store = ResultsStore(layout.store_path(settings.results_dir))
-    wanted = [(exp.name, series) for exp in experiments for series in exp.series if series.run == spec]
-    last_only = {exp.name for exp in experiments if exp.last_snapshot_only}
-    tasks = {multi: make_tasks(settings.maze, settings.episodes, seed, multi) for multi in (False, True)}
+    suffix = VALIDATION_SUFFIX if settings.validation else ""
+    wanted = [(exp.name + suffix, series) for exp in experiments for series in exp.series if series.run == spec]
+    last_only = {exp.name + suffix for exp in experiments if exp.last_snapshot_only or settings.validation}
+    task_seed = seed + VALIDATION_SEED_OFFSET if settings.validation else seed
+    tasks = {multi: make_tasks(settings.maze, settings.episodes, task_seed, multi) for multi in (False, True)}
     job_floors = {}  # per task set, computed once for the job (same prior, same tasks at every snapshot)
     rows = []
     steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
@@ -95,7 +104,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                    if (step == steps[-1] or name not in last_only)
                    and not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=series.nfe,
                                      execution=series.execution.tag(), multi_task=int(series.multi_task),
-                                     episodes=settings.episodes, eval_seed=seed)]
+                                     episodes=settings.episodes, eval_seed=task_seed)]
         if not missing:
             continue
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
