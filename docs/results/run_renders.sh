@@ -1,20 +1,50 @@
 #!/usr/bin/env bash
-# Pictures for issues 12 and 13: per maze, the seed-0 runs of run_maze_curves.sh (umaze: run_umaze_v2_curves.sh)
-# at their final snapshot, 8 episodes (eval seed 0): DDPM at its full NFE and the bridge (line prior) at NFE 1
-# open loop, then the same bridge replanned every 32 steps from the warm prior with the arrival kept.
+# Pictures for issues 12 and 13, 8 episodes each (eval seed 0), seed-0 runs at their final snapshot.
+# curves: per maze, the runs of run_maze_curves.sh (umaze: run_umaze_v2_curves.sh): DDPM at its full NFE and the
+#   bridge (line prior) at NFE 1 open loop, then the same bridge replanned every 32 steps from the warm prior with
+#   the arrival kept.
+# hold: the runs trained on windows that wait (run_hold.sh), open loop next to replanned every 32 steps with the
+#   arrival kept: umaze's bridge (line prior, warm replans) on Multi2D tasks, medium's DDPM on its single task.
+# Usage: bash docs/results/run_renders.sh; PARTS picks among "curves hold" (default both).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-export PATH="$PWD/.venv/bin:$PATH" MUJOCO_GL=${MUJOCO_GL:-egl}
-for spec in umaze:H128:4000 medium:H32k8:8000 large:H48k8:8000; do
-  IFS=: read -r maze shape step <<< "$spec"
-  R=${RESULTS_ROOT:-results}/$maze-v2-curves/runs
-  OUT=docs/results/$maze-v2-curves/pictures
-  [ -d "$R/$maze-ddpm-N16-$shape-cpu-small-s0" ] || { echo "skip $maze: no runs"; continue; }
-  mkdir -p "$OUT"
-  bridge="$R/$maze-bridge-line-N16-$shape-cpu-small-s0"
-  bridgeplan render "$R/$maze-ddpm-N16-$shape-cpu-small-s0" --episodes 8 --out "$OUT/ddpm-open.png" > /dev/null
-  bridgeplan render "$bridge" --episodes 8 --nfe 1 --out "$OUT/bridge-line-open.png" > /dev/null
-  bridgeplan render "$bridge" --episodes 8 --nfe 1 --replan-every 32 --prior warm --arrival keep \
-    --out "$OUT/bridge-line-replan32-keep.png" > /dev/null
-  echo "$maze: $(ls "$OUT" | tr '\n' ' ')"
+export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
+
+curves() {
+  for spec in umaze:H128 medium:H32k8 large:H48k8; do
+    IFS=: read -r maze shape <<< "$spec"
+    R=${RESULTS_ROOT:-results}/$maze-v2-curves/runs
+    OUT=docs/results/$maze-v2-curves/pictures
+    [ -d "$R/$maze-ddpm-N16-$shape-cpu-small-s0" ] || { echo "skip $maze: no runs"; continue; }
+    mkdir -p "$OUT"
+    bridge="$R/$maze-bridge-line-N16-$shape-cpu-small-s0"
+    bridgeplan render "$R/$maze-ddpm-N16-$shape-cpu-small-s0" --episodes 8 --out "$OUT/ddpm-open.png" > /dev/null
+    bridgeplan render "$bridge" --episodes 8 --nfe 1 --out "$OUT/bridge-line-open.png" > /dev/null
+    bridgeplan render "$bridge" --episodes 8 --nfe 1 --replan-every 32 --prior warm --arrival keep \
+      --out "$OUT/bridge-line-replan32-keep.png" > /dev/null
+    echo "$maze: $(ls "$OUT" | tr '\n' ' ')"
+  done
+}
+
+hold() {
+  for spec in "umaze bridge-line-N16-hold0.5-H128 multi warm" "medium ddpm-N16-hold0.5-H32k8 single cold"; do
+    read -r maze run tasks start <<< "$spec"
+    task=() warm=()
+    [ "$tasks" = multi ] && task=(--multi-task)
+    [ "$start" = warm ] && warm=(--prior warm)
+    dir=${RESULTS_ROOT:-results}/$maze-v2-hold/runs/$maze-$run-cpu-small-s0
+    OUT=docs/results/$maze-v2-hold/pictures
+    [ -d "$dir" ] || { echo "skip $maze: no run $dir"; continue; }
+    mkdir -p "$OUT"
+    bridgeplan render "$dir" --episodes 8 --nfe 1 "${task[@]}" --out "$OUT/${run%%-N16*}-open.png"
+    bridgeplan render "$dir" --episodes 8 --nfe 1 "${task[@]}" --replan-every 32 "${warm[@]}" --arrival keep \
+      --out "$OUT/${run%%-N16*}-replan32-keep.png"
+  done
+}
+
+for part in ${PARTS:-curves hold}; do
+  case $part in
+    curves|hold) "$part" ;;
+    *) echo "unknown part $part (choose from curves hold)" >&2; exit 2 ;;
+  esac
 done
