@@ -126,7 +126,8 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
         plan_states = first[0]
     tag = f"-{execution.tag()}" if execution.tag() else ""
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
-    title = f"{maze.name} {config.label()} NFE={nfe} step={info.step}"
+    title = (f"{maze.name}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} step={info.step}, "
+             f"{execution.tag() or 'open loop'}")
     plot_trajectory_grid(maze, [(plan_states, "winter", "plan" if not tag else "first plan"),
                                 (result.states, "autumn", "executed")],
                          base, title, goals=tasks.goals_xy)
