@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # The benchmark committed in docs/results/bench.{md,json}: four cpu-small planners on umaze trained for the same
 # number of optimizer steps (DDPM; the bridge from the Gaussian, line and learned priors), then `bridgeplan bench`
-# with the score-per-budget table over their EMA snapshots at 7000 and 14000 steps. Run from the repository root
-# after `bash scripts/setup.sh`. About 1.5 hours on a 2-core CPU: the trainings run two at a time with one
-# thread each (a run already there is resumed to STEPS); the bench runs alone.
+# with the score-per-budget table over their EMA snapshots at 7000 and 14000 steps. Run after
+# `bash scripts/setup.sh`. About 1.5 hours on a 2-core CPU: the trainings run two at a time with one thread each
+# (a run already there is resumed to STEPS); the bench runs alone.
 set -euo pipefail
-export MUJOCO_GL=egl
-B=.venv/bin/bridgeplan
+cd "$(dirname "$0")/../.."
+# this checkout's code, whatever the venv has installed (bench.json records this checkout's code version)
+export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
+B=bridgeplan
 R=results/bench
 STEPS=${STEPS:-14000}
 DATA=$R/umaze-1000000
