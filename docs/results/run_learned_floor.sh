@@ -2,11 +2,11 @@
 # The learned prior alone, tracked (no network call), next to the bridge it starts: each seed's bridge run from
 # the learned prior (run_maze_thesis.sh) evaluated at its final snapshot at NFE 1 on its own 200 episodes; the
 # JSON's `prior_only_learned` is the prior alone on the same episodes, `floor_line` the straight line.
-# Usage: MAZE=medium bash docs/results/run_learned_floor.sh
+# Usage: MAZE=medium bash docs/results/run_learned_floor.sh (RESULTS: the store, default results/$MAZE-v2-curves)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-export PATH="$PWD/.venv/bin:$PATH"
-MAZE=${MAZE:?set MAZE=medium or MAZE=large}
+export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
+MAZE=${MAZE:?set MAZE=umaze, medium or large}
 R=${RESULTS:-results/$MAZE-v2-curves}/runs
 OUT=docs/results/$MAZE-v2-curves/learned-floor
 mkdir -p "$OUT"
