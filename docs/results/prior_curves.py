@@ -1,0 +1,129 @@
+"""Issue 15's table: flow matching and the I2SB bridge from each prior across training, against DDPM, and
+the issue's goal checked at every snapshot (umaze and medium; the rows of `prior-curves` and `nfe-curves` in
+docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh and run_maze_curves.sh).
+
+Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
+DDPM reaches at any NFE and the best the bridge reaches from the same prior, and clears the prior it starts
+from, tracked alone. "Best" is the NFE with the best mean over seeds on these same (test) episodes, which
+favours DDPM and the bridge: the bar flow has to reach is raised, not lowered. Per-seed differences (flow
+minus the other, Minari convention), mean ± standard error over seeds; "reaches": yes when the mean is not
+below, "within noise" when below by less than two standard errors; "clears": more than two above. The prior
+alone: the straight line's floor of each evaluation row, the learned prior's from
+docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
+
+Usage: python docs/results/prior_curves.py > docs/results/prior-curves.md
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+from findings import HERE, load
+
+MAZES = ("umaze", "medium")
+PRIORS = ("gaussian", "line", "learned")
+FLOW_NFE = 2
+
+
+def at_step(table: dict, method: str, step: int) -> dict[int, dict[int, float]]:
+    """``{nfe: {seed: score}}`` of an open-loop single-task series at ``step``."""
+    by_nfe = table.get((method, 0, ""), {}).get(step, {})
+    return {nfe: {seed: score for seed, (score, _) in seeds.items()} for nfe, seeds in by_nfe.items()}
+
+
+def best(by_nfe: dict[int, dict[int, float]]) -> tuple[int, dict[int, float]] | None:
+    if not by_nfe:
+        return None
+    nfe = max(by_nfe, key=lambda k: np.mean(list(by_nfe[k].values())))
+    return nfe, by_nfe[nfe]
+
+
+def prior_alone(table: dict, maze: str, prior: str, method: str, step: int) -> dict[int, float] | None:
+    """Per-seed score of the prior alone, tracked, on the same episodes (None for Gaussian noise)."""
+    if prior == "line":
+        seeds = table.get((method, 0, ""), {}).get(step, {}).get(FLOW_NFE, {})
+        return {seed: floor for seed, (_, floor) in seeds.items()} or None
+    if prior == "learned":
+        paths = sorted((HERE / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))
+        rows = [json.loads(p.read_text()) for p in paths]
+        return {r["seed"]: r["prior_only_learned"]["score"]["minari"]["mean"] for r in rows} or None
+    return None
+
+
+def diff(a: dict[int, float], b: dict[int, float]) -> tuple[float, float, int] | None:
+    seeds = sorted(set(a) & set(b))
+    if len(seeds) < 2:
+        return None
+    d = np.array([a[s] - b[s] for s in seeds])
+    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d))), len(seeds)
+
+
+def mean_se(by_seed: dict[int, float]) -> str:
+    v = np.array(list(by_seed.values()))
+    return f"{v.mean():.1f} ± {v.std(ddof=1) / np.sqrt(len(v)):.1f}" if len(v) > 1 else f"{v.mean():.1f}"
+
+
+def verdict(d, rule: str) -> str:
+    """reaches: yes (mean >= 0), "within noise" (below, by less than two standard errors) or no;
+    clears: yes (more than two standard errors above) or no."""
+    if d is None:
+        return "not measured"
+    mean, se, _ = d
+    if rule == "reaches":
+        word = "yes" if mean >= 0 else "within noise" if mean + 2 * se >= 0 else "no"
+    else:
+        word = "yes" if mean - 2 * se > 0 else "no"
+    return f"{word} ({mean:+.1f} ± {se:.1f})"
+
+
+def maze_table(maze: str) -> list[str]:
+    table = load(maze)
+    lines = [f"## {maze}", "",
+             "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
+             "(NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best | reaches the bridge's best "
+             "| clears its prior |", "|" + "---|" * 13]
+    ddpm_steps = table.get(("DDPM", 0, ""), {})
+    for prior in PRIORS:
+        flow_name, bridge_name = f"flow ({prior})", f"bridge ({prior})"
+        steps = sorted(set(table.get((flow_name, 0, ""), {})) & set(ddpm_steps))
+        for step in steps:
+            flow, bridge = at_step(table, flow_name, step), at_step(table, bridge_name, step)
+            if FLOW_NFE not in flow:
+                continue
+            ddpm_best, bridge_best = best(at_step(table, "DDPM", step)), best(bridge)
+            alone = prior_alone(table, maze, prior, flow_name, step)
+            full = flow[max(flow)]
+
+            def cell(by_nfe, nfe):
+                return mean_se(by_nfe[nfe]) if nfe in by_nfe else "-"
+
+            lines.append(" | ".join([
+                f"| {prior}", str(step), cell(flow, 1), f"**{mean_se(flow[FLOW_NFE])}**", mean_se(full),
+                cell(bridge, 1), cell(bridge, 2),
+                f"{mean_se(bridge_best[1])} ({bridge_best[0]})" if bridge_best else "-",
+                f"{mean_se(ddpm_best[1])} ({ddpm_best[0]})" if ddpm_best else "-",
+                mean_se(alone) if alone else "-",
+                verdict(diff(flow[FLOW_NFE], ddpm_best[1]) if ddpm_best else None, "reaches"),
+                verdict(diff(flow[FLOW_NFE], bridge_best[1]) if bridge_best else None, "reaches"),
+                verdict(diff(flow[FLOW_NFE], alone) if alone else None, "clears") if alone else "n/a (noise)",
+            ]) + " |")
+    return lines
+
+
+def main() -> int:
+    lines = ["# Flow matching from each prior across training (issue 15)", "",
+             "Made by `python docs/results/prior_curves.py` from docs/results/<maze>-v2-curves/results.csv (data "
+             "version 2, `cpu-small`, 200 episodes per evaluation, mean ± standard error over training seeds, "
+             "Minari convention). The goal's columns compare flow at NFE 2 with the best NFE of DDPM and of the "
+             "bridge from the same prior, picked on these episodes (which favours them), per seed; see the "
+             "script's docstring.", ""]
+    for maze in MAZES:
+        lines += [*maze_table(maze), ""]
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
