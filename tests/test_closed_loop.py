@@ -48,6 +48,28 @@ def test_open_loop_json_scores_are_todays(tiny_runs, tmp_path):
     assert saved["calls_per_episode"] == 2 and "decision_ms_batch1" not in saved
 
 
+def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny_runs, tmp_path):
+    """`--controller pursuit`: the same one plan per episode, executed by pursuit, scores and floors alike."""
+    out = tmp_path / "pursuit.json"
+    assert main(["eval", str(tiny_runs["bridge"]), "--episodes", "5", "--nfe", "2", "--device", "cpu",
+                 "--controller", "pursuit", "--lookahead", "0.7", "--out", str(out)]) == 0
+    saved = json.loads(out.read_text())
+    planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
+    tasks = make_tasks("umaze", 5, 0)
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, tasks.generator(planner.device))
+    pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states, controller="pursuit",
+                            lookahead=0.7)
+    expected = json.loads(json.dumps(score_returns("umaze", pursued.returns, pursued.success)))
+    assert {k: saved[k] for k in expected} == expected
+    line = planner.with_prior(make_prior("line", planner.normalizer, stride=planner.stride))
+    line_plan = line.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
+    line_pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, line_plan.states,
+                                 controller="pursuit", lookahead=0.7)
+    assert saved["floor_line"]["return"]["mean"] == pytest.approx(line_pursued.returns.mean())
+    assert saved["execution"]["controller"] == "pursuit" and saved["execution"]["lookahead"] == 0.7
+    assert saved["plans_per_episode"]["max"] == 1 and saved["calls_per_episode"] == 2
+
+
 def test_closed_loop_without_replanning_is_open_loop():
     """The closed-loop controller with neither K nor D plans once and moves exactly as execute_plans."""
     tasks = make_tasks("umaze", 4, 1)
@@ -86,7 +108,8 @@ def test_replan_every_makes_ceil_steps_over_k_plans(tiny_runs, monkeypatch, k):
     assert result["decision_ms_batch1"]["p50"] > 0 and result["decision_ms_per_batch"]["mean_batch"] == 3
     assert result["execution"] == {"mode": "closed_loop", "replan_every": k, "replan_tolerance": None,
                                    "candidates": 1, "select": None, "arrival": "truncate",
-                                   "first_prior": "learned", "replan_prior": "learned"}
+                                   "first_prior": "learned", "replan_prior": "learned", "controller": "track",
+                                   "lookahead": None}
 
 
 def test_tolerance_replans_only_the_drifted_episode():
@@ -392,6 +415,9 @@ def test_render_closed_loop(tiny_runs, tmp_path):
     ("bridge", ["--select", "best", "--candidates", "2"], "unknown --select"),
     ("bridge", ["--arrival", "soon"], "unknown --arrival"),
     ("bridge", ["--arrival", "keep"], "--arrival keep holds replans"),
+    ("bridge", ["--controller", "fast"], "unknown --controller"),
+    ("bridge", ["--controller", "pursuit", "--lookahead", "0"], "--lookahead must be > 0"),
+    ("ddpm", ["--lookahead", "0.5"], "--lookahead is the pursuit controller's"),
 ])
 @pytest.mark.parametrize("command", ["eval", "render"])
 def test_bad_closed_loop_input(tiny_runs, tmp_path, capsys, process, bad, message, command):

@@ -75,6 +75,19 @@ def test_prior_curves_has_each_prior_at_nfe_1_2_4_and_full():
     assert not experiment.last_snapshot_only
 
 
+def test_controllers_experiment_pairs_tracking_with_pursuit():
+    experiment = get_experiment("controllers", steps=6)
+    assert experiment.last_snapshot_only
+    tags = {(s.run.process.name, s.nfe, s.execution.tag(), s.multi_task) for s in experiment.series}
+    for process, full in (("ddpm", 6), ("bridge", 5)):
+        for multi in (False, True):
+            for nfe in (1, full):
+                assert {t for t in ("", "pursuit0.5", "pursuit1", "pursuit1.5")
+                        if (process, nfe, t, multi) in tags} == {"", "pursuit0.5", "pursuit1", "pursuit1.5"}
+    assert ("bridge", 1, "replan32-warm-pursuit1", True) in tags and ("ddpm", 1, "replan32-pursuit1", False) in tags
+    assert len(experiment.series) == 2 * 2 * 9
+
+
 @pytest.mark.parametrize("args, message", [
     (["nfe1", "--maze", "maze9"], "unknown maze"),
     (["priors", "--diffusion-steps", "4", "--fixed-nfe", "8"], "allows 1..3"),

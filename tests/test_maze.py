@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import planned_target, tracking_action, tracking_actions
+from bridgeplan.maze.controllers import Follower, planned_target, pursuit_waypoints, tracking_action, tracking_actions
 from bridgeplan.maze.expert import WaypointExpert, shortest_path, waypoints
 from bridgeplan.maze.layouts import GOAL_RADIUS, MAZE_NAMES, get_maze
 from bridgeplan.maze.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
@@ -151,6 +151,39 @@ def test_execute_plans_tracks_an_expert_trajectory():
     assert result.returns.min() > 100
     with pytest.raises(BridgeplanError, match="plans"):
         execute_plans(maze, starts, goals, demo.states[:, :, :2])
+
+
+def test_pursuit_waypoint_is_the_first_unpassed_position_a_lookahead_away():
+    xs = np.arange(13) * 0.25  # a straight plan along x, 0.25 apart
+    plan = np.stack([xs, np.zeros(13), np.zeros(13), np.zeros(13)], axis=1)[None]
+    at = lambda x: np.array([[x, 0.0]])  # noqa: E731
+    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.0), np.array([0]), 1.0), [4])  # x = 1.0
+    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.6), np.array([4]), 1.0), [7])  # x = 1.75 >= 1.6
+    # a passed position is never taken again, even when the point mass falls back behind it
+    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.0), np.array([9]), 1.0), [9])
+    # nothing far enough ahead: the plan's last position (the goal)
+    np.testing.assert_array_equal(pursuit_waypoints(plan, at(2.5), np.array([10]), 1.0), [12])
+    follower = Follower(1, "pursuit", lookahead=1.0)
+    # the expert's PD law toward x = 1.0 from rest at the origin: clip(10 * 1.0 - 0) = 1
+    np.testing.assert_allclose(follower.actions(np.zeros((1, 4)), plan, np.zeros(1, dtype=int)), [[1.0, 0.0]])
+    np.testing.assert_allclose(follower.drift(np.array([[1.0, 0.3, 0, 0]]), plan, np.zeros(1, dtype=int)), [0.3])
+
+
+def test_pursuit_runs_a_slowed_expert_path_at_the_expert_pace():
+    """A plan that follows the expert's path at a third of its pace: tracked, it arrives late; pursued, it scores
+    within a few steps of the expert itself (the path is the expert's, the pace the PD law's)."""
+    maze = get_maze("umaze")
+    starts, goals = sample_tasks(maze, 8, seed=1)
+    expert = WaypointExpert(maze)
+    expert.plan(starts, goals)
+    demo = rollout(maze, lambda t, obs: expert(obs), starts, goals, steps=300)
+    slow = np.repeat(demo.states, 3, axis=1)  # each state held for 3 steps
+    slow[..., 2:] /= 3
+    tracked, pursued = execute_plans(maze, starts, goals, slow), execute_plans(maze, starts, goals, slow,
+                                                                             controller="pursuit")
+    assert pursued.success.all()
+    assert (pursued.returns >= demo.returns - 5).all()
+    assert pursued.returns.mean() > tracked.returns.mean() + 50
 
 
 def test_normalized_score():

@@ -314,6 +314,12 @@ def _execution_flags(p) -> None:
                         "0.45 of the goal, then hold the goal) or keep (truncate, and replans hold the goal from "
                         "the step the previous plan arrived at); default truncate when replanning or with "
                         "candidates, else end")
+    g = p.add_argument_group("controller (how a plan is executed)")
+    g.add_argument("--controller", default="track",
+                   help="track (Diffuser's: the planned states in time; default) or pursuit (the plan's path at the "
+                        "expert's pace: toward the first planned position --lookahead away)")
+    g.add_argument("--lookahead", type=float, default=None, metavar="R",
+                   help="pursuit: distance to the planned position driven toward (maze units; default 1.0)")
 
 
 def _execution(args):
@@ -322,8 +328,12 @@ def _execution(args):
     if args.prior is not None and args.prior != "warm":
         raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
                               f"the run's own prior), got {args.prior!r}")
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    lookahead = {} if args.lookahead is None else {"lookahead": args.lookahead}
     return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
-                     select=args.select, warm=args.prior == "warm", arrival=args.arrival)
+                     select=args.select, warm=args.prior == "warm", arrival=args.arrival,
+                     controller=args.controller, **lookahead)
 
 
 def _cmd_eval(args) -> int:

@@ -87,21 +87,27 @@ def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> d
     return {"score": scores, "return": _mean_se(returns), "success_rate": _mean_se(success)}
 
 
-def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None) -> dict:
-    """The tasks executed from a prior's sample alone (no network): the planner's prior, or ``prior_name``."""
+def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None,
+               execution: Execution | None = None) -> dict:
+    """The tasks executed from a prior's sample alone (no network), open loop with ``execution``'s controller:
+    the planner's prior, or ``prior_name``."""
+    execution = execution or Execution()
     if prior_name is not None:
         planner = planner.with_prior(make_prior(prior_name, planner.normalizer, stride=planner.stride))
     plan = planner.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
-    result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states)
+    result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states,
+                           controller=execution.controller, lookahead=execution.lookahead)
     return {"prior": planner.prior.name, **score_returns(tasks.maze.name, result.returns, result.success)}
 
 
-def floors(planner: Planner, tasks: Tasks) -> dict[str, dict]:
-    """What the planner must beat on ``tasks``: the straight line tracked (``floor_line``) and, for a prior
-    that is neither noise nor the line, that prior's sample tracked (``prior_only_<name>``)."""
-    out = {"floor_line": prior_only(planner, tasks, "line")}
+def floors(planner: Planner, tasks: Tasks, execution: Execution | None = None) -> dict[str, dict]:
+    """What the planner must beat on ``tasks``: the straight line executed open loop with ``execution``'s
+    controller (``floor_line``) and, for a prior that is neither noise nor the line, that prior's sample
+    (``prior_only_<name>``). Executed as the planner's plans are: a controller that outruns the plan's timing
+    moves the floors too."""
+    out = {"floor_line": prior_only(planner, tasks, "line", execution)}
     if planner.prior.name not in ("gaussian", "line"):
-        out[f"prior_only_{planner.prior.name}"] = prior_only(planner, tasks)
+        out[f"prior_only_{planner.prior.name}"] = prior_only(planner, tasks, execution=execution)
     return out
 
 
@@ -216,7 +222,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         raise BridgeplanError(f"batch size must be positive, got {batch_size}")
     execution = execution or Execution()
     execution.validate(planner.process, tasks.maze.episode_steps)
-    if not execution.is_open_loop_default:
+    if not execution.plans_once:
         return _evaluate_closed_loop(planner, tasks, nfe, run, batch_size, compiled, precomputed_floors, execution)
     n = tasks.episodes
     batch = min(batch_size or n, n)
@@ -234,15 +240,16 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         plans.append(plan.states)
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds
-    result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans))
+    result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans), controller=execution.controller,
+                           lookahead=execution.lookahead)
     environment = _environment(planner)
     return EvalResult(
         planner=planner, tasks=tasks, nfe=nfe, run=run,
         scores=score_returns(tasks.maze.name, result.returns, result.success),
         per_start_cell=_per_start_cell(tasks.maze, tasks.starts_xy, result.returns),
-        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks),
+        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks, execution),
         plan_ms_per_plan=1000.0 * (prior_s + sample_s) / n, prior_ms_per_plan=1000.0 * prior_s / n,
-        batch_size=batch, compile_seconds=compile_s, environment=environment)
+        batch_size=batch, compile_seconds=compile_s, environment=environment, execution=execution)
 
 
 def _environment(planner: Planner) -> dict:
@@ -265,14 +272,16 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
         warm_up(tasks.start_states, goals, np.arange(n), 0)
         compile_s = time.perf_counter() - t0
     source = PlanSource(planner, execution, nfe, tasks.generator(planner.device), n, maze, batch_size)
-    result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance)
+    closed_loop = dict(replan_every=execution.replan_every, tolerance=execution.tolerance,
+                       controller=execution.controller, lookahead=execution.lookahead)
+    result = execute_closed_loop(maze, starts, goals, source, **closed_loop)
     # decision latency at batch 1: the first episode again, alone, after one untimed decision
     single = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(tasks.seed + 1),
                         1, maze)
     single(tasks.start_states[:1], goals[:1], np.zeros(1, dtype=np.int64), 0)
     single.decision_seconds.clear()
     single.reset()
-    execute_closed_loop(maze, starts[:1], goals[:1], single, execution.replan_every, execution.tolerance)
+    execute_closed_loop(maze, starts[:1], goals[:1], single, **closed_loop)
     per_batch = percentiles_ms(source.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(source.decision_batch)) * m
     decisions = {"decision_ms_batch1": percentiles_ms(single.decision_seconds),
@@ -281,7 +290,7 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
         planner=planner, tasks=tasks, nfe=nfe, run=run,
         scores=score_returns(maze.name, result.returns, result.success),
         per_start_cell=_per_start_cell(maze, starts, result.returns),
-        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks),
+        floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks, execution),
         plan_ms_per_plan=1000.0 * (source.prior_seconds + source.sample_seconds) / source.plans_sampled,
         prior_ms_per_plan=1000.0 * source.prior_seconds / source.plans_sampled,
         batch_size=min(batch_size or n * m, n * m), compile_seconds=compile_s, environment=_environment(planner),

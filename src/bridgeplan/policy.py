@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD
 from bridgeplan.maze.layouts import Maze, get_maze
 from bridgeplan.maze.rollout import ClosedLoopController
 from bridgeplan.replan import Execution, PlanSource
@@ -41,24 +42,27 @@ class PlannerPolicy:
         self.planner, self.maze, self.nfe, self.execution = planner, maze, nfe, execution
         self.source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed),
                                  1, maze)
-        self.controller = ClosedLoopController(self.source, 1, execution.replan_every, execution.tolerance)
+        self.controller = ClosedLoopController(self.source, 1, execution.replan_every, execution.tolerance,
+                                               execution.controller, execution.lookahead)
         self.reset()
 
     @classmethod
     def from_run(cls, run: str | Path, nfe: int = 1, replan_every: int | None = 8, tolerance: float | None = None,
                  candidates: int = 1, select: str = "arrival", warm: bool = False, arrival: str | None = None,
-                 device: str = "cpu", seed: int = 0, snapshot: int | None = None) -> PlannerPolicy:
+                 controller: str = "track", lookahead: float = DEFAULT_LOOKAHEAD, device: str = "cpu", seed: int = 0,
+                 snapshot: int | None = None) -> PlannerPolicy:
         """Load a trained run (EMA weights; ``snapshot``: that training step's) as a policy.
 
-        ``replan_every``/``tolerance``/``candidates``/``select``/``warm``/``arrival``: as ``bridgeplan eval``'s
-        flags (:class:`~bridgeplan.replan.Execution`); ``replan_every=None`` and no tolerance plans once per
-        episode (open loop). ``seed`` seeds the planning generator (the same episode, the same plans).
+        ``replan_every``/``tolerance``/``candidates``/``select``/``warm``/``arrival``/``controller``/
+        ``lookahead``: as ``bridgeplan eval``'s flags (:class:`~bridgeplan.replan.Execution`);
+        ``replan_every=None`` and no tolerance plans once per episode (open loop). ``seed`` seeds the planning
+        generator (the same episode, the same plans).
         """
         from bridgeplan.runs import load_planner
 
         planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
-                              warm=warm, arrival=arrival)
+                              warm=warm, arrival=arrival, controller=controller, lookahead=lookahead)
         return cls(planner, get_maze(info.config.maze), nfe=nfe, execution=execution, seed=seed)
 
     def reset(self) -> None:

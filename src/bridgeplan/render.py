@@ -108,9 +108,10 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
 
     execution = execution or Execution()
     execution.validate(planner.process, tasks.maze.episode_steps)
-    if execution.is_open_loop_default:
+    if execution.plans_once:
         plan_states = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen).states
-        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states)
+        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states, controller=execution.controller,
+                               lookahead=execution.lookahead)
     else:
         first: list[np.ndarray] = []
         source = PlanSource(planner, execution, nfe, gen, episodes, maze)
@@ -122,13 +123,14 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
             return planned
 
         result = execute_closed_loop(maze, tasks.starts_xy, tasks.goals_xy, plan_fn, execution.replan_every,
-                                     execution.tolerance)
+                                     execution.tolerance, controller=execution.controller,
+                                     lookahead=execution.lookahead)
         plan_states = first[0]
     tag = f"-{execution.tag()}" if execution.tag() else ""
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
     title = (f"{maze.name}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} step={info.step}, "
              f"{execution.tag() or 'open loop'}")
-    plot_trajectory_grid(maze, [(plan_states, "winter", "plan" if not tag else "first plan"),
+    plot_trajectory_grid(maze, [(plan_states, "winter", "plan" if execution.plans_once else "first plan"),
                                 (result.states, "autumn", "executed")],
                          base, title, goals=tasks.goals_xy)
     written = [base]

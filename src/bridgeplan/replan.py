@@ -48,6 +48,7 @@ import numpy as np
 import torch
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, check_controller
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.rollout import check_replanning
 from bridgeplan.priors import WarmPrior
@@ -67,6 +68,8 @@ class Execution:
     ``warm``: replans start from the previous plan (:class:`~bridgeplan.priors.WarmPrior`) instead of the
     run's prior; needs a process with a prior and replanning. ``arrival``: ``end``, ``truncate`` or ``keep``
     (see the module); None: ``truncate`` when replanning or sampling candidates, else ``end``.
+    ``controller``: ``track`` (Diffuser's) or ``pursuit`` (the plan's path at the expert's pace, toward the
+    first planned position ``lookahead`` away; :mod:`bridgeplan.maze.controllers`).
     """
 
     replan_every: int | None = None
@@ -75,6 +78,8 @@ class Execution:
     select: str = "arrival"
     warm: bool = False
     arrival: str | None = None
+    controller: str = "track"
+    lookahead: float = DEFAULT_LOOKAHEAD
 
     @property
     def replans(self) -> bool:
@@ -87,13 +92,14 @@ class Execution:
         return "truncate" if self.replans or self.candidates > 1 else "end"
 
     @property
-    def is_open_loop_default(self) -> bool:
-        """True when execution is today's protocol exactly (one plan, as sampled, tracked to the end)."""
+    def plans_once(self) -> bool:
+        """True when each episode is executed from one plan, as sampled (by either controller)."""
         return not self.replans and self.candidates == 1 and self.arrival_rule == "end"
 
     def validate(self, process, episode_steps: int) -> None:
         """Bad settings raise BridgeplanError (the CLI's one-line ``error:``)."""
         check_replanning(self.replan_every, self.tolerance, episode_steps)
+        check_controller(self.controller, self.lookahead)
         if self.candidates < 1:
             raise BridgeplanError(f"--candidates must be >= 1, got {self.candidates}")
         if self.select not in SELECTIONS:
@@ -115,7 +121,8 @@ class Execution:
                 "replan_tolerance": self.tolerance, "candidates": self.candidates,
                 "select": self.select if self.candidates > 1 else None, "arrival": self.arrival_rule,
                 "first_prior": run_prior, "replan_prior": ("warm" if self.warm else run_prior) if self.replans
-                else None}
+                else None, "controller": self.controller,
+                "lookahead": self.lookahead if self.controller == "pursuit" else None}
 
     def tag(self) -> str:
         """A file-name suffix for these settings ('' for the default)."""
@@ -130,6 +137,8 @@ class Execution:
             parts.append("warm")
         if self.arrival is not None:
             parts.append(f"arrival-{self.arrival}")
+        if self.controller != "track":
+            parts.append(f"{self.controller}{self.lookahead:g}")
         return "-".join(parts)
 
 

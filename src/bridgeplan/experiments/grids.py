@@ -94,6 +94,12 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
                    f"{REPLAN_EVERY} steps, single-task and Multi2D, at the final snapshot, N={steps}",
                    tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)
                          for s in closed_loop_series(r, multi)), last_snapshot_only=True),
+        Experiment("controllers", f"DDPM and {name} from the line prior, open loop at NFE 1 and full, tracked "
+                   f"(Diffuser's controller) and pursued (lookahead {', '.join(f'{r:g}' for r in LOOKAHEADS)}), and "
+                   f"replanned every {REPLAN_EVERY} steps pursued, single-task and Multi2D, at the final snapshot, "
+                   f"N={steps}",
+                   tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)
+                         for s in controller_series(r, multi)), last_snapshot_only=True),
     ]}
 
 
@@ -112,6 +118,22 @@ def closed_loop_series(run: RunSpec, multi_task: bool) -> list[Series]:
     return ([Series(f"{run.label()} NFE {k} open loop{task}", run, k, multi_task=multi_task)
              for k in sorted({1, run.process.max_nfe})]
             + [Series(f"{run.label()} NFE 1 {ex.tag()}{task}", run, 1, ex, multi_task) for ex in replans])
+
+
+LOOKAHEADS = (0.5, 1.0, 1.5)
+"""Pursuit lookaheads of the controllers experiment (maze units): one is chosen on validation episodes."""
+
+
+def controller_series(run: RunSpec, multi_task: bool) -> list[Series]:
+    """One run's series in the controllers experiment: open loop at NFE 1 and the most NFE with Diffuser's
+    tracking controller and with pursuit at each of :data:`LOOKAHEADS`; replanned every ``REPLAN_EVERY`` steps
+    at NFE 1 with pursuit (lookahead 1; processes with a prior from the warm prior)."""
+    task = " Multi2D" if multi_task else ""
+    open_loop = [Execution()] + [Execution(controller="pursuit", lookahead=r) for r in LOOKAHEADS]
+    replanned = Execution(replan_every=REPLAN_EVERY, warm=run.process.uses_prior, controller="pursuit")
+    return ([Series(f"{run.label()} NFE {k} {ex.tag() or 'track'}{task}", run, k, ex, multi_task)
+             for k in sorted({1, run.process.max_nfe}) for ex in open_loop]
+            + [Series(f"{run.label()} NFE 1 {replanned.tag()}{task}", run, 1, replanned, multi_task)])
 
 
 EXPERIMENTS = build_experiments()

@@ -76,7 +76,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
 
     Each snapshot is loaded once and evaluated for every series (NFE, execution, task set) missing from the
-    store; the floors are computed once per task set for the job.
+    store; the floors are computed once per task set and controller for the job.
     """
     from bridgeplan.device import configure_threads
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
@@ -96,7 +96,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     last_only = {exp.name + suffix for exp in experiments if exp.last_snapshot_only or settings.validation}
     task_seed = seed + VALIDATION_SEED_OFFSET if settings.validation else seed
     tasks = {multi: make_tasks(settings.maze, settings.episodes, task_seed, multi) for multi in (False, True)}
-    job_floors = {}  # per task set, computed once for the job (same prior, same tasks at every snapshot)
+    job_floors = {}  # per task set and controller, once for the job (same prior, same tasks at every snapshot)
     rows = []
     steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
     for step in steps:
@@ -110,10 +110,12 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
         for name, series in missing:
             task_set = tasks[series.multi_task]
-            if series.multi_task not in job_floors:
-                job_floors[series.multi_task] = floors(planner, task_set)
+            ex = series.execution
+            floors_key = (series.multi_task, ex.controller, ex.lookahead)
+            if floors_key not in job_floors:
+                job_floors[floors_key] = floors(planner, task_set, ex)
             row = evaluate_planner(planner, task_set, series.nfe, run=info, execution=series.execution,
-                                   precomputed_floors=job_floors[series.multi_task]).to_row(name)
+                                   precomputed_floors=job_floors[floors_key]).to_row(name)
             if store.add(row):  # a concurrent sweep may have added it meanwhile
                 rows.append(row)
     return rows

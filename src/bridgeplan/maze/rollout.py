@@ -1,12 +1,12 @@
-"""Batched episodes: a policy, or a batch of plans through the tracking controller, in lockstep.
+"""Batched episodes: a policy, or a batch of plans through a controller (:mod:`~bridgeplan.maze.controllers`),
+in lockstep.
 
 Evaluation is a continuing task: the goal stays for the whole episode and every step within 0.45
 of it earns reward 1, so reaching the goal fast and staying there earns more.
 
 Plans are executed open loop (:func:`execute_plans`: one plan per episode, tracked to the end) or closed
 loop (:func:`execute_closed_loop`, :class:`ClosedLoopController`: plan again from the current state every
-K steps and/or when the state has drifted from the plan; the controller tracks the newest plan, indexed
-from the step it was made at).
+K steps and/or when the state has drifted from the plan; the controller executes the newest plan).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import planned_targets, tracking_action, tracking_actions
+from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.sim import BatchedPointMaze
 
@@ -60,14 +60,17 @@ def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None =
     return RolloutResult(returns, (dist <= GOAL_RADIUS).any(axis=1), states, actions)
 
 
-def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None) -> RolloutResult:
-    """Execute planned states ``plans [N, H, 4]`` open loop with Diffuser's tracking controller
-    (:mod:`bridgeplan.maze.controllers`) for ``steps`` (default: the maze's episode length)."""
+def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None, controller: str = "track",
+                  lookahead: float = DEFAULT_LOOKAHEAD) -> RolloutResult:
+    """Execute planned states ``plans [N, H, 4]`` open loop for ``steps`` (default: the maze's episode length)
+    with ``controller`` (:mod:`bridgeplan.maze.controllers`; default Diffuser's tracking controller)."""
     plans = np.asarray(plans, dtype=np.float64)
     if plans.ndim != 3 or plans.shape[2] != 4 or len(plans) != len(np.asarray(starts_xy)):
         raise BridgeplanError(f"plans must have shape [N, H, 4] with N = {len(np.asarray(starts_xy))} "
                               f"episodes, got {list(plans.shape)}")
-    return rollout(maze, lambda t, obs: tracking_actions(obs, plans, t), starts_xy, goals_xy, steps)
+    follower = Follower(len(plans), controller, lookahead)
+    return rollout(maze, lambda t, obs: follower.actions(obs, plans, np.full(len(plans), t)), starts_xy, goals_xy,
+                   steps)
 
 
 PlanFn = Callable[[np.ndarray, np.ndarray, np.ndarray, int], np.ndarray]
@@ -87,8 +90,9 @@ def check_replanning(replan_every: int | None, tolerance: float | None, episode_
 class ClosedLoopController:
     """Receding-horizon execution for a batch of ``n`` episodes: plans with ``plan_fn`` at step 0, then again
     for every episode whose plan is ``replan_every`` steps old or whose position is more than ``tolerance``
-    from where its plan expected it to be now; tracks the newest plan with Diffuser's controller, indexed
-    relative to the step that plan was made at (past the plan's end: hold its last position).
+    from its plan (:meth:`Follower.drift`); executes the newest plan with ``follower`` (default Diffuser's
+    tracking controller, indexed relative to the step that plan was made at; past the plan's end it holds
+    the last position).
 
     All episodes due at a step are planned in one ``plan_fn`` call; episodes that are not due keep their plan.
     With a fixed ``replan_every`` and no tolerance every episode is due at the same steps (0, K, 2K, ...),
@@ -98,9 +102,11 @@ class ClosedLoopController:
     ``plan_fn`` calls and ``call_steps`` the steps they were made at.
     """
 
-    def __init__(self, plan_fn: PlanFn, n: int, replan_every: int | None = None, tolerance: float | None = None):
+    def __init__(self, plan_fn: PlanFn, n: int, replan_every: int | None = None, tolerance: float | None = None,
+                 controller: str = "track", lookahead: float = DEFAULT_LOOKAHEAD):
         self.plan_fn, self.n = plan_fn, int(n)
         self.replan_every, self.tolerance = replan_every, tolerance
+        self.follower = Follower(self.n, controller, lookahead)
         self.reset()
 
     def reset(self) -> None:
@@ -122,8 +128,7 @@ class ClosedLoopController:
         if self.replan_every is not None:
             due |= age >= self.replan_every
         if self.tolerance is not None:
-            expected = self.plans[np.arange(self.n), np.minimum(age, self.plans.shape[1] - 1), :2]
-            due |= np.linalg.norm(states[:, :2] - expected, axis=1) > self.tolerance
+            due |= self.follower.drift(states, self.plans, age) > self.tolerance
         return due
 
     def act(self, t: int, states: np.ndarray, goals: np.ndarray, due: np.ndarray | None = None) -> np.ndarray:
@@ -143,7 +148,8 @@ class ClosedLoopController:
             self.made_at[idx] = t
             self.plans_made[idx] += 1
             self.call_steps.append(t)
-        return tracking_action(states, planned_targets(self.plans, t - self.made_at))
+            self.follower.new_plans(idx)
+        return self.follower.actions(states, self.plans, t - self.made_at)
 
 
 @dataclass
@@ -155,13 +161,14 @@ class ClosedLoopResult(RolloutResult):
 
 
 def execute_closed_loop(maze: Maze, starts_xy, goals_xy, plan_fn: PlanFn, replan_every: int | None = None,
-                        tolerance: float | None = None, steps: int | None = None) -> ClosedLoopResult:
+                        tolerance: float | None = None, steps: int | None = None, controller: str = "track",
+                        lookahead: float = DEFAULT_LOOKAHEAD) -> ClosedLoopResult:
     """Run :class:`ClosedLoopController` over ``plan_fn`` for ``steps`` (default: the maze's episode length),
-    all episodes in lockstep."""
+    all episodes in lockstep, executing plans with ``controller``."""
     steps_ = maze.episode_steps if steps is None else int(steps)
     check_replanning(replan_every, tolerance, steps_)
     goals = np.asarray(goals_xy, dtype=np.float64)
-    controller = ClosedLoopController(plan_fn, len(goals), replan_every, tolerance)
+    controller = ClosedLoopController(plan_fn, len(goals), replan_every, tolerance, controller, lookahead)
     result = rollout(maze, lambda t, obs: controller.act(t, obs, goals), starts_xy, goals_xy, steps_)
     return ClosedLoopResult(result.returns, result.success, result.states, result.actions,
                             controller.plans_made.copy(), list(controller.call_steps))
