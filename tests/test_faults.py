@@ -409,3 +409,35 @@ def test_sweep_over_damaged_run(tiny_dataset, tmp_path, finished_sweep):
     assert str(ckpt) in error_line(*sweep_args("bridge-vs-ddpm", tiny_dataset, results))
     # opening the store may rewrite its header: its rows must be the same
     assert files(results, skip=("results.sqlite",)) == before and store_rows(results) == rows
+
+
+def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
+    """A checkout whose only changes are a campaign's own outputs (reports under docs/results) records its
+    commit; a change to the package or to a campaign script marks the version ``.dirty``."""
+    import bridgeplan
+
+    repo = tmp_path / "repo"
+    shutil.copytree(Path(bridgeplan.__file__).parent, repo / "src" / "bridgeplan",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    (repo / "docs" / "results" / "umaze").mkdir(parents=True)
+    (repo / "docs" / "results" / "umaze" / "report.md").write_text("old\n")
+    (repo / "docs" / "results" / "run_x.sh").write_text("echo\n")
+    git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "-A"], check=True)
+    subprocess.run([*git, "commit", "-qm", "c"], check=True)
+
+    def version() -> str:
+        code = "from bridgeplan.files import code_version; print(code_version())"
+        return subprocess.run([sys.executable, "-c", code], env={**os.environ, "PYTHONPATH": str(repo / "src")},
+                              capture_output=True, text=True, check=True).stdout.strip()
+
+    sha = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    assert version() == f"{bridgeplan.__version__}+{sha}"
+    (repo / "docs" / "results" / "umaze" / "report.md").write_text("new\n")
+    assert version() == f"{bridgeplan.__version__}+{sha}"
+    (repo / "docs" / "results" / "run_x.sh").write_text("echo changed\n")
+    assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
+    subprocess.run([*git, "checkout", "-q", "--", "docs/results/run_x.sh"], check=True)
+    (repo / "src" / "bridgeplan" / "files.py").write_text((repo / "src" / "bridgeplan" / "files.py").read_text() + "\n")
+    assert version() == f"{bridgeplan.__version__}+{sha}.dirty"

@@ -31,16 +31,25 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, lambda f: f.write(text.encode()))
 
 
+CODE_PATHS = ("src", "pyproject.toml", "scripts", ":(glob)docs/results/*.sh", ":(glob)docs/results/*.py")
+"""What makes a result, relative to the repository root: the package and the committed scripts that run it.
+Their outputs (reports, CSVs, figures under docs/results) are not code: a campaign that writes its report
+between two of its evaluations does not make the second one's code dirty."""
+
+
 def code_version() -> str:
-    """The git commit of the code (with ``.dirty`` for uncommitted changes), or the package version."""
+    """The git commit of the code (with ``.dirty`` for uncommitted changes to :data:`CODE_PATHS`), or the
+    package version."""
     from bridgeplan import __version__
 
     here = Path(__file__).resolve().parent
     try:
         sha = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True,
                              text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
+        root = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=here, capture_output=True,
+                              text=True, timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS],
+                               cwd=root, capture_output=True, text=True, timeout=5).stdout.strip()
         return f"{__version__}+{sha}{'.dirty' if dirty else ''}"
     except (OSError, subprocess.SubprocessError):
         return __version__
