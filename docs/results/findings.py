@@ -17,8 +17,10 @@ Usage: python docs/results/findings.py > docs/results/findings.md
 from __future__ import annotations
 
 import csv
+import json
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -28,7 +30,19 @@ from bridgeplan.report import method_label
 HERE = Path(__file__).resolve().parent
 MAZES = ("umaze", "medium", "large")
 FLOOR = "floor"
+
+
+class Eval(NamedTuple):
+    """One evaluation row (one training seed): Minari score, the line floor, success rate, calls per episode."""
+
+    score: float
+    floor: float
+    success: float
+    calls: float
+
 VALIDATION = "validation"
+PURSUIT = ("pursuit0.5", "pursuit1", "pursuit1.5")
+"""The open-loop pursuit executions of the controllers experiment: findings choose one on validation episodes."""
 
 # (finding, (method, nfe, execution), (method or FLOOR, nfe, execution), rule, step)
 FINDINGS = [
@@ -58,6 +72,14 @@ FINDINGS = [
      ("flow (line)", 2, ""), ("bridge (line)", "best", ""), "above", "last"),
     ("Ours: the consistent bridge beats I2SB (line prior, NFE 2)",
      ("bridge (line; consistent=True)", 2, ""), ("bridge (line)", 2, ""), "above", "last"),
+    ("Ours: pursuit (lookahead chosen on validation) beats Diffuser's tracking (bridge, line, NFE 1, open loop)",
+     ("bridge (line)", 1, PURSUIT), ("bridge (line)", 1, ""), "above", "last"),
+    ("Ours: pursuit (lookahead chosen on validation) beats Diffuser's tracking (DDPM, full NFE, open loop)",
+     ("DDPM", "full", PURSUIT), ("DDPM", "full", ""), "above", "last"),
+    ("Ours: pursued, the bridge at NFE 1 reaches DDPM at full NFE (line prior, open loop)",
+     ("bridge (line)", 1, PURSUIT), ("DDPM", "full", PURSUIT), "not below", "last"),
+    ("Ours: pursued, replanning every 32 steps beats open loop (bridge, line, NFE 1, warm, lookahead 1)",
+     ("bridge (line)", 1, "replan32-warm-pursuit1"), ("bridge (line)", 1, "pursuit1"), "above", "last"),
     ("Ours: replanning every 32 steps beats open loop (bridge, line, NFE 1, warm, arrival kept)",
      ("bridge (line)", 1, "replan32-warm-arrival-keep"), ("bridge (line)", 1, ""), "above", "last"),
     ("Loss ablation: an x0 output beats I2SB's scaled difference, same loss (line, NFE 1, first snapshot)",
@@ -84,7 +106,7 @@ FINDINGS = [
 
 
 def load(maze: str) -> dict:
-    """``{(method, multi, execution): {step: {nfe: {seed: (score, floor)}}}}`` from the maze's CSVs, test
+    """``{(method, multi, execution): {step: {nfe: {seed: Eval}}}}`` from the maze's CSVs, test
     episodes; the validation episodes' rows under the key ``VALIDATION``, in the same shape."""
     table: dict = {VALIDATION: {}}
     paths = [HERE / f"{maze}-v2-{store}" / "results.csv" for store in ("curves", "hold")]
@@ -92,47 +114,65 @@ def load(maze: str) -> dict:
         into = table[VALIDATION] if r["experiment"].endswith(VALIDATION_SUFFIX) else table
         key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
         cell = into.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
-        cell.setdefault(int(r["seed"]), (float(r["score_minari"]), float(r["floor_minari"])))
+        cell.setdefault(int(r["seed"]), Eval(float(r["score_minari"]), float(r["floor_minari"]),
+                                             float(r["success_rate"]), float(r["calls_per_episode"] or r["nfe"])))
     return table
 
 
-def best_nfe(table: dict, key, step: int) -> int | None:
-    """The NFE with the best mean score over seeds on the validation episodes (None: not evaluated there)."""
-    by_nfe = table[VALIDATION].get(key, {}).get(step)
-    return max(by_nfe, key=lambda k: np.mean([s for s, _ in by_nfe[k].values()])) if by_nfe else None
+def _mean(by_seed: dict) -> float:
+    return float(np.mean([e.score for e in by_seed.values()]))
+
+
+def choose(table: dict, spec, multi: int, step: int) -> tuple[int, str] | None:
+    """The (NFE, execution) ``spec`` = (method, nfe, execution) stands for at ``step``: ``nfe`` a number,
+    "full" (the most NFE evaluated) or "best"; ``execution`` a tag or a tuple of tags to choose among. A choice
+    ("best", a tuple) is, among the options evaluated on the validation episodes too, the one with the best
+    mean over seeds there; None when there is none."""
+    method, nfe, execution = spec
+    options = []
+    for ex in execution if isinstance(execution, tuple) else (execution,):
+        by_nfe = table.get((method, multi, ex), {}).get(step, {})
+        nfes = list(by_nfe) if nfe == "best" else [max(by_nfe)] if nfe == "full" and by_nfe else [nfe]
+        options += [(k, ex) for k in nfes if k in by_nfe]
+    if len(options) <= 1 and nfe != "best" and not isinstance(execution, tuple):
+        return options[0] if options else None
+    validated = [(o, table[VALIDATION].get((method, multi, o[1]), {}).get(step, {}).get(o[0])) for o in options]
+    validated = [(o, by_seed) for o, by_seed in validated if by_seed]
+    return max(validated, key=lambda o: _mean(o[1]))[0] if validated else None
 
 
 def series(table: dict, spec, multi: int, step: int) -> dict[int, float] | None:
     """Per-seed scores of ``spec`` = (method or FLOOR, nfe, execution) at ``step``, test episodes."""
-    method, nfe, execution = spec
-    if method == FLOOR:  # the floor of the other series' episodes: any open-loop series carries it
+    method = spec[0]
+    if method == FLOOR:  # the floor of the other series' episodes: any open-loop tracked series carries it
         for (m, mt, ex), steps in ((k, v) for k, v in table.items() if k != VALIDATION):
             if mt == multi and ex == "" and step in steps:
                 at = next(iter(steps[step].values()))
-                return {seed: floor for seed, (_, floor) in at.items()}
+                return {seed: e.floor for seed, e in at.items()}
         return None
-    by_nfe = table.get((method, multi, execution), {}).get(step)
-    if not by_nfe:
+    chosen = choose(table, spec, multi, step)
+    if chosen is None:
         return None
-    if nfe == "full":
-        nfe = max(by_nfe)
-    elif nfe == "best":
-        nfe = best_nfe(table, (method, multi, execution), step)
-    if nfe not in by_nfe:
-        return None
-    return {seed: score for seed, (score, _) in by_nfe[nfe].items()}
+    nfe, execution = chosen
+    return {seed: e.score for seed, e in table[(method, multi, execution)][step][nfe].items()}
+
+
+def _steps(table: dict, spec, multi: int) -> set[int]:
+    executions = spec[2] if isinstance(spec[2], tuple) else (spec[2],)
+    return {step for ex in executions for step in table.get((spec[0], multi, ex), {})}
 
 
 def cell(table: dict, finding, multi: int) -> str:
     _, a, b, rule, which = finding
-    steps_a = set(table.get((a[0], multi, a[2]), {}))
-    steps_b = set(table.get((b[0], multi, b[2]), {})) if b[0] != FLOOR else steps_a
+    steps_a = _steps(table, a, multi)
+    steps_b = _steps(table, b, multi) if b[0] != FLOOR else steps_a
     common = sorted(steps_a & steps_b)
     if not common:
         return "not measured"
     step = common[0] if which == "first" else common[-1]
-    chosen = {spec[0]: best_nfe(table, (spec[0], multi, spec[2]), step) for spec in (a, b) if spec[1] == "best"}
-    if None in chosen.values():
+    picks = {spec: choose(table, spec, multi, step) for spec in (a, b)
+             if spec[0] != FLOOR and (spec[1] == "best" or isinstance(spec[2], tuple))}
+    if None in picks.values():
         return "no validation episodes"
     sa, sb = series(table, a, multi, step), series(table, b, multi, step)
     seeds = sorted(set(sa or {}) & set(sb or {}))
@@ -144,8 +184,28 @@ def cell(table: dict, finding, multi: int) -> str:
         verdict = "holds" if mean - 2 * se > 0 else "does not" if mean + 2 * se < 0 else "not decidable"
     else:  # not below
         verdict = "holds" if mean + 2 * se >= 0 else "does not"
-    picked = "".join(f", {m} NFE {k}" for m, k in chosen.items())
+    picked = "".join(f", {spec[0]}: NFE {k}{' ' + ex if ex else ''}" for spec, (k, ex) in picks.items())
     return f"{verdict}: {mean:+.1f} ± {se:.1f} (step {step}, {len(seeds)} seeds{picked})"
+
+
+def goal_cell(table: dict, multi: int, expert: list[float]) -> str:
+    """Issue 13's goal: the best setting on the validation episodes (any method, NFE and execution evaluated
+    there, each at its final snapshot), its score on the test episodes (mean ± standard error over seeds),
+    success rate and network calls per episode, against 95 and the expert on the same test episodes."""
+    options = [(key, step, nfe, _mean(by_seed)) for key, steps in table[VALIDATION].items() if key[1] == multi
+               for step, by_nfe in steps.items() for nfe, by_seed in by_nfe.items()]
+    if not options:
+        return "no validation episodes"
+    (method, _, execution), step, nfe, _ = max(options, key=lambda o: o[3])
+    test = table.get((method, multi, execution), {}).get(step, {}).get(nfe)
+    if not test:
+        return "not measured on the test episodes"
+    scores = np.array([e.score for e in test.values()])
+    se = scores.std(ddof=1) / np.sqrt(len(scores)) if len(scores) > 1 else float("nan")
+    met = "met" if scores.mean() >= 95 else "not met"
+    return (f"{met}: {scores.mean():.1f} ± {se:.1f} ({method}, NFE {nfe}, {execution or 'open loop, track'}; "
+            f"success {np.mean([e.success for e in test.values()]):.2f}, "
+            f"{np.mean([e.calls for e in test.values()]):.0f} calls/episode; expert {np.mean(expert):.1f})")
 
 
 def main() -> int:
@@ -160,6 +220,17 @@ def main() -> int:
     for finding in FINDINGS:
         cells = [cell(tables[m], finding, 0) for m in MAZES] + [cell(tables[m], finding, 1) for m in MAZES]
         lines.append(f"| {finding[0]} | " + " | ".join(cells) + " |")
+    expert = json.loads((HERE / "expert-on-eval-tasks.json").read_text())["rows"]
+    lines += ["", "## Issue 13's goal: a Minari score of 95 or more", "",
+              "The setting (method, NFE, execution) with the best mean on the validation episodes "
+              "(`experiment --validation`: nfe-curves and controllers), scored on the test episodes; the expert "
+              "on the same test episodes from expert-on-eval-tasks.json.", "",
+              "| maze | single-task | Multi2D |", "|---|---|---|"]
+    for m in MAZES:
+        cells = [goal_cell(tables[m], multi, [r["score_minari"] for r in expert
+                                              if r["maze"] == m and r["multi_task"] == bool(multi)])
+                 for multi in (0, 1)]
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
     print("\n".join(lines))
     return 0
 

@@ -30,7 +30,7 @@ FLOW_NFE = 2
 def at_step(table: dict, method: str, step: int) -> dict[int, dict[int, float]]:
     """``{nfe: {seed: score}}`` of an open-loop single-task series at ``step``."""
     by_nfe = table.get((method, 0, ""), {}).get(step, {})
-    return {nfe: {seed: score for seed, (score, _) in seeds.items()} for nfe, seeds in by_nfe.items()}
+    return {nfe: {seed: e.score for seed, e in seeds.items()} for nfe, seeds in by_nfe.items()}
 
 
 def best(by_nfe: dict[int, dict[int, float]]) -> tuple[int, dict[int, float]] | None:
@@ -44,7 +44,7 @@ def prior_alone(table: dict, maze: str, prior: str, method: str, step: int) -> d
     """Per-seed score of the prior alone, tracked, on the same episodes (None for Gaussian noise)."""
     if prior == "line":
         seeds = table.get((method, 0, ""), {}).get(step, {}).get(FLOW_NFE, {})
-        return {seed: floor for seed, (_, floor) in seeds.items()} or None
+        return {seed: e.floor for seed, e in seeds.items()} or None
     if prior == "learned":
         paths = sorted((HERE / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))
         rows = [json.loads(p.read_text()) for p in paths]
