@@ -5,7 +5,9 @@
 #   the arrival kept.
 # hold: the runs trained on windows that wait (run_hold.sh), open loop next to replanned every 32 steps with the
 #   arrival kept: umaze's bridge (line prior, warm replans) on Multi2D tasks, medium's DDPM on its single task.
-# Usage: bash docs/results/run_renders.sh; PARTS picks among "curves hold" (default both).
+# controllers: medium's DDPM (run_maze_curves.sh, seed 0) at NFE 16, tracked (Diffuser's controller) next to
+#   pursued (lookahead 1.5; run_controllers.sh).
+# Usage: bash docs/results/run_renders.sh; PARTS picks among "curves hold controllers" (default all).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
@@ -42,9 +44,19 @@ hold() {
   done
 }
 
-for part in ${PARTS:-curves hold}; do
+controllers() {
+  local run=${RESULTS_ROOT:-results}/medium-v2-curves/runs/medium-ddpm-N16-H32k8-cpu-small-s0
+  local OUT=docs/results/medium-v2-curves/pictures
+  [ -d "$run" ] || { echo "skip controllers: no run $run"; return; }
+  mkdir -p "$OUT"
+  bridgeplan render "$run" --episodes 8 --nfe 16 --out "$OUT/ddpm-nfe16-track.png"
+  bridgeplan render "$run" --episodes 8 --nfe 16 --controller pursuit --lookahead 1.5 \
+    --out "$OUT/ddpm-nfe16-pursuit1.5.png"
+}
+
+for part in ${PARTS:-curves hold controllers}; do
   case $part in
-    curves|hold) "$part" ;;
-    *) echo "unknown part $part (choose from curves hold)" >&2; exit 2 ;;
+    curves|hold|controllers) "$part" ;;
+    *) echo "unknown part $part (choose from curves hold controllers)" >&2; exit 2 ;;
   esac
 done
