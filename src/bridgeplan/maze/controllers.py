@@ -24,7 +24,9 @@ from bridgeplan.maze.expert import pd_action
 
 CONTROLLERS = ("track", "pursuit")
 DEFAULT_LOOKAHEAD = 1.0
-"""Pursuit's default lookahead (maze units; a cell is 1): chosen on validation episodes, see docs/results."""
+"""Pursuit's default lookahead (maze units; a cell is 1): the middle of the measured 0.5-1.5; which is best
+depends on the planner and its NFE (noisier plans want a longer one): choose it on validation episodes
+(`experiment controllers --validation`; docs/results/README.md)."""
 
 
 def tracking_action(state: np.ndarray, planned_next_state: np.ndarray) -> np.ndarray:
