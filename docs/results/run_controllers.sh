@@ -5,8 +5,10 @@
 # with pursuit; single-task and Multi2D, 3 training seeds, 200 episodes (`experiment controllers`). Then the same on
 # validation episodes (`--validation`), where findings.py picks the lookahead it reports on the test episodes.
 # Evaluation only (the runs exist). Usage: MAZE=medium bash docs/results/run_controllers.sh (umaze: STEPS=4000
-# CHECKPOINT_EVERY=1000; large: STEPS=16000), with DATASET as the runs were trained.
+# CHECKPOINT_EVERY=1000; large: STEPS=16000), with DATASET as the runs were trained; PROCESS=flow for flow matching
+# from the line prior in place of the bridge (its DDPM rows are shared).
 source "$(dirname "$0")/maze_campaign.sh"
-bridgeplan experiment controllers "${common[@]}"
-bridgeplan experiment controllers "${common[@]}" --validation
+process=(--process "${PROCESS:-bridge}")
+bridgeplan experiment controllers "${common[@]}" "${process[@]}"
+bridgeplan experiment controllers "${common[@]}" "${process[@]}" --validation
 campaign_report
