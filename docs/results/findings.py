@@ -33,12 +33,17 @@ FLOOR = "floor"
 
 
 class Eval(NamedTuple):
-    """One evaluation row (one training seed): Minari score, the line floor, success rate, calls per episode."""
+    """One evaluation row (one training seed): Minari score, the line floor, success rate, network calls per
+    episode and timings."""
 
     score: float
     floor: float
     success: float
     calls: float
+    plan_ms: float
+    """Milliseconds per plan, planned in one batch with the other episodes."""
+    decision_ms: tuple[float, float] | None
+    """Closed loop: a decision's p50 and p95 milliseconds at batch 1 (None open loop)."""
 
 VALIDATION = "validation"
 PURSUIT = ("pursuit0.5", "pursuit1", "pursuit1.5")
@@ -114,8 +119,10 @@ def load(maze: str) -> dict:
         into = table[VALIDATION] if r["experiment"].endswith(VALIDATION_SUFFIX) else table
         key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
         cell = into.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
+        decision = (float(r["decision_ms_p50"]), float(r["decision_ms_p95"])) if r.get("decision_ms_p50") else None
         cell.setdefault(int(r["seed"]), Eval(float(r["score_minari"]), float(r["floor_minari"]),
-                                             float(r["success_rate"]), float(r["calls_per_episode"] or r["nfe"])))
+                                             float(r["success_rate"]), float(r["calls_per_episode"] or r["nfe"]),
+                                             float(r["plan_ms"]), decision))
     return table
 
 
@@ -191,7 +198,8 @@ def cell(table: dict, finding, multi: int) -> str:
 def goal_cell(table: dict, multi: int, expert: list[float]) -> str:
     """Issue 13's goal: the best setting on the validation episodes (any method, NFE and execution evaluated
     there, each at its final snapshot), its score on the test episodes (mean ± standard error over seeds),
-    success rate and network calls per episode, against 95 and the expert on the same test episodes."""
+    success rate, network calls per episode and timing (medians over seeds), against 95 and the expert on the
+    same test episodes."""
     options = [(key, step, nfe, _mean(by_seed)) for key, steps in table[VALIDATION].items() if key[1] == multi
                for step, by_nfe in steps.items() for nfe, by_seed in by_nfe.items()]
     if not options:
@@ -203,9 +211,14 @@ def goal_cell(table: dict, multi: int, expert: list[float]) -> str:
     scores = np.array([e.score for e in test.values()])
     se = scores.std(ddof=1) / np.sqrt(len(scores)) if len(scores) > 1 else float("nan")
     met = "met" if scores.mean() >= 95 else "not met"
+    decisions = [e.decision_ms for e in test.values() if e.decision_ms]
+    timing = (f"decision p50/p95 {np.median([d[0] for d in decisions]):.1f}/{np.median([d[1] for d in decisions]):.1f}"
+              f" ms at batch 1" if decisions else
+              f"{np.median([e.plan_ms for e in test.values()]):.2f} ms per plan in a batch of the episodes")
     return (f"{met}: {scores.mean():.1f} ± {se:.1f} ({method}, NFE {nfe}, {execution or 'open loop, track'}; "
             f"success {np.mean([e.success for e in test.values()]):.2f}, "
-            f"{np.mean([e.calls for e in test.values()]):.0f} calls/episode; expert {np.mean(expert):.1f})")
+            f"{np.mean([e.calls for e in test.values()]):.0f} calls/episode, {timing}; "
+            f"expert {np.mean(expert):.1f})")
 
 
 def main() -> int:
