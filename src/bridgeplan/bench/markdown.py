@@ -41,15 +41,13 @@ def format_bench(result: dict) -> str:
                   "Training steps per second with the machine quiet and with one core kept busy by another process "
                   "(a spinning Python), at one torch thread (bridgeplan's default on a CPU) and at one per core "
                   "(torch's own default). Target: busy / quiet >= 0.8 at the default.", ""]
-        for b in result["busy_core"]:
-            cores = b["cores"]
-            rates = b["steps_per_s"]
-            lines += table(["preset", "steps", "quiet, 1 thread", f"quiet, {cores} threads", "busy, 1 thread",
-                             f"busy, {cores} threads", "busy/quiet (1 thread)", f"busy {cores} threads/quiet 1"],
-                            [[b["preset"], b["steps"], *(f"{rates[k]:.1f}" for k in
-                              ("quiet_1thread", f"quiet_{cores}thread", "busy_1thread", f"busy_{cores}thread")),
-                              f"{b['busy_over_quiet_1thread']:.2f}",
-                              f"{b[f'busy_{cores}thread_over_quiet_1thread']:.2f}"]])
+        cores = result["busy_core"][0]["cores"]  # one machine: the same for every preset
+        lines += table(["preset", "steps", "quiet, 1 thread", f"quiet, {cores} threads", "busy, 1 thread",
+                        f"busy, {cores} threads", "busy/quiet (1 thread)", f"busy {cores} threads/quiet 1"],
+                       [[b["preset"], b["steps"], *(f"{b['steps_per_s'][k]:.1f}" for k in
+                         ("quiet_1thread", f"quiet_{cores}thread", "busy_1thread", f"busy_{cores}thread")),
+                         f"{b['busy_over_quiet_1thread']:.2f}", f"{b[f'busy_{cores}thread_over_quiet_1thread']:.2f}"]
+                        for b in result["busy_core"]])
     if result["compile"]:
         lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode), "
                   f"medians over {result['bench']['overhead_repeats']} interleaved rounds. The first call at each "
