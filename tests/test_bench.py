@@ -36,15 +36,16 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
 
     budget = result["score_per_budget"]
     evals = budget["evaluations"]
-    # the tiny runs at both snapshots, on validation and test tasks: DDPM with N=6 under both samplers,
-    # the bridge (N=6, NFE < N) at every K
+    # the tiny runs at both snapshots, on validation and test tasks, each under both its samplers: DDPM with N=6
+    # (ancestral, ddim), the bridge (N=6, NFE < N; posterior, mean) at every K
     splits = ("test", "validation")
     assert sorted((e["method"], e["step"], e["sampler"], e["nfe"], e["split"]) for e in evals
                   if e["method"] == "DDPM") == [
         ("DDPM", step, s, k, split) for step in (2, 3) for s in ("ancestral", "ddim") for k in (1, 2, 4)
         for split in splits]
-    assert sorted((e["step"], e["nfe"], e["split"]) for e in evals if e["method"] == "bridge (learned)") == [
-        (step, k, split) for step in (2, 3) for k in (1, 2, 4) for split in splits]
+    assert sorted((e["step"], e["sampler"], e["nfe"], e["split"]) for e in evals
+                  if e["method"] == "bridge (learned)") == [
+        (step, s, k, split) for step in (2, 3) for s in ("mean", "posterior") for k in (1, 2, 4) for split in splits]
     assert len(budget["best"]) == 2 * 2 * 3  # methods x training steps x budgets
 
     def score(best, split):

@@ -266,3 +266,27 @@ def test_training_reduces_the_loss(process):
         loss.backward()
         opt.step()
     assert loss_now() < 0.7 * before
+
+
+def test_bridge_mean_sampler_is_the_noise_free_chain():
+    """`sampler="mean"` samples a bridge trained with noise by its posterior means: the OT-ODE chain of the same
+    network, deterministic whatever the generator, and the same training (run name and loss untouched)."""
+    x1 = torch.randn((B, H, D), generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    cond = conditions_for(data())
+
+    def model(x, t):  # an untrained, arbitrary network
+        return torch.tanh(3 * x + t[:, None, None])
+
+    posterior, mean, ode = Bridge(8), Bridge(8, sampler="mean"), Bridge(8, ot_ode=True)
+
+    def sample(process, nfe, seed):
+        return process.sample(model, x1, cond, nfe, torch.Generator().manual_seed(seed))
+
+    assert torch.equal(sample(mean, 7, 0), sample(ode, 7, 0)) and torch.equal(sample(mean, 7, 0), sample(mean, 7, 1))
+    assert not torch.equal(sample(posterior, 7, 0), sample(posterior, 7, 1))
+    assert torch.equal(sample(mean, 1, 0), sample(posterior, 1, 1))  # one call: no posterior step to draw
+    assert mean.variant() == posterior.variant() == {} and posterior.with_sampler("mean") == mean
+    with pytest.raises(BridgeplanError, match="unknown sampler"):
+        Bridge(8, sampler="ode")
+    with pytest.raises(BridgeplanError, match="no eta"):
+        posterior.with_sampler("mean", eta=0.5)

@@ -268,7 +268,7 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
     p.add_argument("--sampler", default=None,
                    help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
-                        "flow euler (default) or stochastic")
+                        "flow euler (default) or stochastic; bridge posterior (default) or mean (no noise)")
     p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
     p.add_argument("--compile", action="store_true",
                    help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -15,6 +16,7 @@ from bridgeplan.trajectory import Conditions, apply_conditions
 
 PREDICTIONS = ("eps", "x0")
 WEIGHTINGS = ("i2sb", "uniform")
+SAMPLERS = ("posterior", "mean")
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,11 @@ class Bridge(Process):
     instead of I2SB's product of ``(std_fwd[n], std_bwd[n])``, whose variances count ``beta_n`` twice
     (harmless at N = 1000, not at N = 16), and only at the steps 1..N-1 where the chain calls the
     network; x_{N-1} is then x1 itself, where the chain starts. Sampling is the same either way.
+
+    ``sampler`` chooses how a trained bridge is sampled (no retraining): ``posterior`` is I2SB's chain, each step
+    a draw from the Gaussian posterior; ``mean`` takes each posterior's mean, no noise (I2SB's OT-ODE sampler on
+    a bridge trained with noise). Why ``mean``: at N = 16 the network does not remove the noise the posterior
+    steps put in, and the plans come out ragged from NFE 2 on (docs/results/plan-roughness.md).
     """
 
     steps: int = 16
@@ -45,8 +52,12 @@ class Bridge(Process):
     """What the network outputs: ``eps`` I2SB's ``(x_n - x0) / std_fwd[n]``, ``x0`` the clean trajectory."""
     weighting: str = "i2sb"
     """Per-step weight of the squared x0 error: ``i2sb`` ``1 / std_fwd[n]^2`` (I2SB), ``uniform`` 1 (Diffuser)."""
+    sampler: str = "posterior"
+    """``posterior`` (I2SB's chain, with noise) or ``mean`` (the posterior means, no noise); training ignores it."""
     name = "bridge"
     display_name = "bridge"
+    sampling_fields = ("sampler",)
+    samplers = SAMPLERS
 
     def __post_init__(self):
         if self.steps < 2:
@@ -57,6 +68,8 @@ class Bridge(Process):
             raise BridgeplanError(f"unknown prediction {self.predict!r}: choose from {', '.join(PREDICTIONS)}")
         if self.weighting not in WEIGHTINGS:
             raise BridgeplanError(f"unknown weighting {self.weighting!r}: choose from {', '.join(WEIGHTINGS)}")
+        if self.sampler not in SAMPLERS:
+            raise BridgeplanError(f"unknown sampler {self.sampler!r} for the bridge: choose from {', '.join(SAMPLERS)}")
 
     @cached_property
     def betas(self) -> torch.Tensor:
@@ -129,4 +142,10 @@ class Bridge(Process):
         """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls."""
         self.validate_nfe(nfe)
         return bridge_sample(lambda x, n: self.predict_x0(model, x, n), x_start, conditions,
-                             spaced_steps(self.steps, nfe), self.std_fwd, self.ot_ode, generator)
+                             spaced_steps(self.steps, nfe), self.std_fwd, self.ot_ode or self.sampler == "mean",
+                             generator)
+
+    def with_sampler(self, sampler: str, eta: float = 0.0) -> Bridge:
+        if eta != 0:
+            raise BridgeplanError(f"bridge samplers take no eta (it is DDIM's), got {eta}")
+        return dataclasses.replace(self, sampler=sampler)
