@@ -1,9 +1,9 @@
 """How smooth are the plans? Issue 15 (the I2SB bridge's score falls as NFE grows) and issue 13 (pursuit, which
 follows a plan's path, fails on ragged plans): the mean distance between consecutive planned positions, and the
 mean size of their second difference (|p[k+1] - 2 p[k] + p[k-1]|, zero on a straight line at constant speed),
-both in maze units per planned state, at each NFE; next to the same for the dataset's own windows (2000 drawn
-at random, at the runs' stride). The seed-s runs plan the 200 test tasks of seed s (single-task) at their final
-snapshot; mean ± standard error over seeds.
+both in maze units per planned state, at each NFE and with each of the process's samplers; next to the same
+for the dataset's own windows (2000 drawn at random, at the runs' stride). The seed-s runs plan the 200 test
+tasks of seed s (single-task) at their final snapshot; mean ± standard error over seeds.
 
 Usage: python docs/results/plan_roughness.py OUT.json RUN_DIR [RUN_DIR ...]
 """
@@ -38,12 +38,14 @@ def main(out: str, runs: list[str]) -> int:
         planner, info = load_planner(run, device="cpu")
         config = info.config
         tasks = make_tasks(config.maze, 200, config.seed)
-        for nfe in sorted({1, 2, 4, planner.process.max_nfe}):
-            states = planner.plan(tasks.start_states, tasks.goals_xy, nfe, tasks.generator(planner.device)).states
-            step, second = roughness(np.asarray(states)[:, ::config.stride, :2])
-            rows.append({"maze": config.maze, "method": planner.process.label(planner.prior.name), "run": run.name,
-                         "seed": config.seed, "step": info.step, "nfe": nfe, "mean_step": step,
-                         "mean_second_difference": second})
+        for sampler in planner.process.samplers or (None,):  # every way the trained network can be sampled
+            sampled = planner.with_sampler(sampler) if sampler else planner
+            method = planner.process.label(planner.prior.name) + (f" [{sampler}]" if sampler else "")
+            for nfe in sorted({1, 2, 4, planner.process.max_nfe}):
+                states = sampled.plan(tasks.start_states, tasks.goals_xy, nfe, tasks.generator(planner.device)).states
+                step, second = roughness(np.asarray(states)[:, ::config.stride, :2])
+                rows.append({"maze": config.maze, "method": method, "run": run.name, "seed": config.seed,
+                             "step": info.step, "nfe": nfe, "mean_step": step, "mean_second_difference": second})
         key = (config.maze, config.dataset, config.horizon, config.stride)
         if key not in data:
             windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
