@@ -242,6 +242,7 @@ def test_label_run_tag_and_with_sampler():
     assert other == Flow(steps=8, sigma=0.3, sampler="stochastic") and trained.sampler == "euler"
     assert other.run_tag("line") == trained.run_tag("line")  # the sampler does not change what was trained
     assert Flow.uses_prior and Flow.samplers == ("euler", "stochastic") and Flow.sampling_fields == ("sampler",)
+    assert Flow(sigma=0.1).usable_samplers() == ("euler", "stochastic") and Flow().usable_samplers() == ("euler",)
     assert parse_process_params("flow", ["sigma=0.1", "path=linear", "sampler=stochastic", "steps=8"]) == \
         {"sigma": 0.1, "path": "linear", "sampler": "stochastic", "steps": 8}
 

@@ -38,7 +38,7 @@ def main(out: str, runs: list[str]) -> int:
         planner, info = load_planner(run, device="cpu")
         config = info.config
         tasks = make_tasks(config.maze, 200, config.seed)
-        for sampler in planner.process.samplers or (None,):  # every way the trained network can be sampled
+        for sampler in planner.process.usable_samplers() or (None,):  # every way the trained network can be sampled
             sampled = planner.with_sampler(sampler) if sampler else planner
             method = planner.process.label(planner.prior.name) + (f" [{sampler}]" if sampler else "")
             for nfe in sorted({1, 2, 4, planner.process.max_nfe}):

@@ -233,7 +233,7 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
             run_floors = {split: floors(planner, t) for split, t in tasks.items()}
             method = planner.process.label(planner.prior.name)
             scored = {}
-            for sampler in planner.process.samplers or (None,):
+            for sampler in planner.process.usable_samplers() or (None,):
                 sampled = planner.with_sampler(sampler) if sampler else planner
                 for nfe in (k for k in budgets if k <= planner.process.max_nfe):
                     for split in tasks:

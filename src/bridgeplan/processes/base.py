@@ -74,6 +74,10 @@ class Process:
             return torch.mean(sq)
         return torch.mean(weight.to(sq.dtype)[:, None, None] * sq)
 
+    def usable_samplers(self) -> tuple[str, ...]:
+        """The :attr:`samplers` this process, with its parameters, can be sampled by (all of them by default)."""
+        return self.samplers
+
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Process:
         """The same trained process sampled another way; only processes with samplers to choose have it."""
-        raise BridgeplanError(f"--sampler applies to ddpm runs, not to {self.name}")
+        raise BridgeplanError(f"--sampler: {self.name} has one way to sample")

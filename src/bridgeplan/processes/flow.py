@@ -140,6 +140,10 @@ class Flow(Process):
         if not 1 <= nfe <= self.max_nfe:
             raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for flow with {self.steps} steps, got {nfe}")
 
+    def usable_samplers(self) -> tuple[str, ...]:
+        """``stochastic`` needs the path's noise (``sigma > 0``)."""
+        return SAMPLERS if self.sigma > 0 else ("euler",)
+
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Flow:
         if eta != 0:
             raise BridgeplanError(f"flow samplers take no eta (it is DDIM's), got {eta}")
