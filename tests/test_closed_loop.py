@@ -15,6 +15,7 @@ import torch
 from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import evaluate_planner, make_tasks, score_returns
+from bridgeplan.maze.controllers import Follower
 from bridgeplan.maze.expert import WaypointExpert
 from bridgeplan.maze.layouts import get_maze
 from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
@@ -57,14 +58,14 @@ def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny
     planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
     tasks = make_tasks("umaze", 5, 0)
     plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, tasks.generator(planner.device))
-    pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states, controller="pursuit",
-                            lookahead=0.7)
+    pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states,
+                            follower=Follower(5, "pursuit", 0.7))
     expected = json.loads(json.dumps(score_returns("umaze", pursued.returns, pursued.success)))
     assert {k: saved[k] for k in expected} == expected
     line = planner.with_prior(make_prior("line", planner.normalizer, stride=planner.stride))
     line_plan = line.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
     line_pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, line_plan.states,
-                                 controller="pursuit", lookahead=0.7)
+                                 follower=Follower(5, "pursuit", 0.7))
     assert saved["floor_line"]["return"]["mean"] == pytest.approx(line_pursued.returns.mean())
     assert saved["execution"]["controller"] == "pursuit" and saved["execution"]["lookahead"] == 0.7
     assert saved["plans_per_episode"]["max"] == 1 and saved["calls_per_episode"] == 2

@@ -179,8 +179,8 @@ def test_pursuit_runs_a_slowed_expert_path_at_the_expert_pace():
     demo = rollout(maze, lambda t, obs: expert(obs), starts, goals, steps=300)
     slow = np.repeat(demo.states, 3, axis=1)  # each state held for 3 steps
     slow[..., 2:] /= 3
-    tracked, pursued = execute_plans(maze, starts, goals, slow), execute_plans(maze, starts, goals, slow,
-                                                                             controller="pursuit")
+    tracked = execute_plans(maze, starts, goals, slow)
+    pursued = execute_plans(maze, starts, goals, slow, follower=Follower(len(slow), "pursuit"))
     assert pursued.success.all()
     assert (pursued.returns >= demo.returns - 5).all()
     assert pursued.returns.mean() > tracked.returns.mean() + 50

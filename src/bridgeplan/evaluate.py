@@ -96,7 +96,7 @@ def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None,
         planner = planner.with_prior(make_prior(prior_name, planner.normalizer, stride=planner.stride))
     plan = planner.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
     result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states,
-                           controller=execution.controller, lookahead=execution.lookahead)
+                           follower=execution.follower(tasks.episodes))
     return {"prior": planner.prior.name, **score_returns(tasks.maze.name, result.returns, result.success)}
 
 
@@ -240,8 +240,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         plans.append(plan.states)
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds
-    result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans), controller=execution.controller,
-                           lookahead=execution.lookahead)
+    result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans), follower=execution.follower(n))
     environment = _environment(planner)
     return EvalResult(
         planner=planner, tasks=tasks, nfe=nfe, run=run,
@@ -272,16 +271,16 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
         warm_up(tasks.start_states, goals, np.arange(n), 0)
         compile_s = time.perf_counter() - t0
     source = PlanSource(planner, execution, nfe, tasks.generator(planner.device), n, maze, batch_size)
-    closed_loop = dict(replan_every=execution.replan_every, tolerance=execution.tolerance,
-                       controller=execution.controller, lookahead=execution.lookahead)
-    result = execute_closed_loop(maze, starts, goals, source, **closed_loop)
+    result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
+                                 follower=execution.follower(n))
     # decision latency at batch 1: the first episode again, alone, after one untimed decision
     single = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(tasks.seed + 1),
                         1, maze)
     single(tasks.start_states[:1], goals[:1], np.zeros(1, dtype=np.int64), 0)
     single.decision_seconds.clear()
     single.reset()
-    execute_closed_loop(maze, starts[:1], goals[:1], single, **closed_loop)
+    execute_closed_loop(maze, starts[:1], goals[:1], single, execution.replan_every, execution.tolerance,
+                        follower=execution.follower(1))
     per_batch = percentiles_ms(source.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(source.decision_batch)) * m
     decisions = {"decision_ms_batch1": percentiles_ms(single.decision_seconds),

@@ -43,7 +43,7 @@ class PlannerPolicy:
         self.source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed),
                                  1, maze)
         self.controller = ClosedLoopController(self.source, 1, execution.replan_every, execution.tolerance,
-                                               execution.controller, execution.lookahead)
+                                               execution.follower(1))
         self.reset()
 
     @classmethod

@@ -110,8 +110,8 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     execution.validate(planner.process, tasks.maze.episode_steps)
     if execution.plans_once:
         plan_states = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen).states
-        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states, controller=execution.controller,
-                               lookahead=execution.lookahead)
+        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states,
+                               follower=execution.follower(episodes))
     else:
         first: list[np.ndarray] = []
         source = PlanSource(planner, execution, nfe, gen, episodes, maze)
@@ -123,8 +123,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
             return planned
 
         result = execute_closed_loop(maze, tasks.starts_xy, tasks.goals_xy, plan_fn, execution.replan_every,
-                                     execution.tolerance, controller=execution.controller,
-                                     lookahead=execution.lookahead)
+                                     execution.tolerance, follower=execution.follower(episodes))
         plan_states = first[0]
     tag = f"-{execution.tag()}" if execution.tag() else ""
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"

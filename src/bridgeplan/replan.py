@@ -48,7 +48,7 @@ import numpy as np
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, check_controller
+from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower, check_controller
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.rollout import check_replanning
 from bridgeplan.priors import WarmPrior
@@ -90,6 +90,10 @@ class Execution:
         if self.arrival is not None:
             return self.arrival
         return "truncate" if self.replans or self.candidates > 1 else "end"
+
+    def follower(self, n: int) -> Follower:
+        """The controllers that execute the plans of ``n`` episodes."""
+        return Follower(n, self.controller, self.lookahead)
 
     @property
     def plans_once(self) -> bool:

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower
+from bridgeplan.maze.controllers import Follower
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.sim import BatchedPointMaze
 
@@ -60,15 +60,15 @@ def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None =
     return RolloutResult(returns, (dist <= GOAL_RADIUS).any(axis=1), states, actions)
 
 
-def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None, controller: str = "track",
-                  lookahead: float = DEFAULT_LOOKAHEAD) -> RolloutResult:
+def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None,
+                  follower: Follower | None = None) -> RolloutResult:
     """Execute planned states ``plans [N, H, 4]`` open loop for ``steps`` (default: the maze's episode length)
-    with ``controller`` (:mod:`bridgeplan.maze.controllers`; default Diffuser's tracking controller)."""
+    with ``follower`` (:mod:`bridgeplan.maze.controllers`; default Diffuser's tracking controller)."""
     plans = np.asarray(plans, dtype=np.float64)
     if plans.ndim != 3 or plans.shape[2] != 4 or len(plans) != len(np.asarray(starts_xy)):
         raise BridgeplanError(f"plans must have shape [N, H, 4] with N = {len(np.asarray(starts_xy))} "
                               f"episodes, got {list(plans.shape)}")
-    follower = Follower(len(plans), controller, lookahead)
+    follower = follower or Follower(len(plans))
     return rollout(maze, lambda t, obs: follower.actions(obs, plans, np.full(len(plans), t)), starts_xy, goals_xy,
                    steps)
 
@@ -103,10 +103,10 @@ class ClosedLoopController:
     """
 
     def __init__(self, plan_fn: PlanFn, n: int, replan_every: int | None = None, tolerance: float | None = None,
-                 controller: str = "track", lookahead: float = DEFAULT_LOOKAHEAD):
+                 follower: Follower | None = None):
         self.plan_fn, self.n = plan_fn, int(n)
         self.replan_every, self.tolerance = replan_every, tolerance
-        self.follower = Follower(self.n, controller, lookahead)
+        self.follower = follower or Follower(self.n)
         self.reset()
 
     def reset(self) -> None:
@@ -161,14 +161,14 @@ class ClosedLoopResult(RolloutResult):
 
 
 def execute_closed_loop(maze: Maze, starts_xy, goals_xy, plan_fn: PlanFn, replan_every: int | None = None,
-                        tolerance: float | None = None, steps: int | None = None, controller: str = "track",
-                        lookahead: float = DEFAULT_LOOKAHEAD) -> ClosedLoopResult:
+                        tolerance: float | None = None, steps: int | None = None,
+                        follower: Follower | None = None) -> ClosedLoopResult:
     """Run :class:`ClosedLoopController` over ``plan_fn`` for ``steps`` (default: the maze's episode length),
-    all episodes in lockstep, executing plans with ``controller``."""
+    all episodes in lockstep, executing plans with ``follower`` (default: tracking)."""
     steps_ = maze.episode_steps if steps is None else int(steps)
     check_replanning(replan_every, tolerance, steps_)
     goals = np.asarray(goals_xy, dtype=np.float64)
-    controller = ClosedLoopController(plan_fn, len(goals), replan_every, tolerance, controller, lookahead)
+    controller = ClosedLoopController(plan_fn, len(goals), replan_every, tolerance, follower)
     result = rollout(maze, lambda t, obs: controller.act(t, obs, goals), starts_xy, goals_xy, steps_)
     return ClosedLoopResult(result.returns, result.success, result.states, result.actions,
                             controller.plans_made.copy(), list(controller.call_steps))
