@@ -1,15 +1,16 @@
-"""Issue 15's table: flow matching and the I2SB bridge from each prior across training, against DDPM, and
-the issue's goal checked at every snapshot (umaze and medium; the rows of `prior-curves` and `nfe-curves` in
-docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh and run_maze_curves.sh).
+"""Issue 15's table: flow matching, the I2SB bridge and the consistent bridge from each prior across training,
+against DDPM, and the issue's goal checked at every snapshot (umaze and medium; the rows of `prior-curves` and
+`nfe-curves` in docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh, run_maze_variants.sh
+PARTS=consistent-priors and run_maze_curves.sh).
 
 Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
-DDPM reaches at any NFE and the best the bridge reaches from the same prior, and clears the prior it starts
-from, tracked alone. "Best" is the NFE with the best mean over seeds on these same (test) episodes, which
-favours DDPM and the bridge: the bar flow has to reach is raised, not lowered. Per-seed differences (flow
-minus the other, Minari convention), mean ± standard error over seeds; "reaches": yes when the mean is not
-below, "within noise" when below by less than two standard errors; "clears": more than two above. The prior
-alone: the straight line's floor of each evaluation row, the learned prior's from
-docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
+DDPM reaches at any NFE and the best the bridge reaches from the same prior (I2SB or the consistent bridge,
+whichever is higher), and clears the prior it starts from, tracked alone. "Best" is the NFE with the best mean
+over seeds on these same (test) episodes, which favours DDPM and the bridges: the bar flow has to reach is
+raised, not lowered. Per-seed differences (flow minus the other, Minari convention), mean ± standard error over
+seeds; "reaches": yes when the mean is not below, "within noise" when below by less than two standard errors;
+"clears": more than two above. The prior alone: the straight line's floor of each evaluation row, the learned
+prior's from docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
 
 Usage: python docs/results/prior_curves.py > docs/results/prior-curves.md
 """
@@ -82,17 +83,20 @@ def maze_table(maze: str) -> list[str]:
     table = load(maze)
     lines = [f"## {maze}", "",
              "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
-             "(NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best | reaches the bridge's best "
-             "| clears its prior |", "|" + "---|" * 13]
+             "(NFE) | consistent bridge best (NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best "
+             "| reaches the bridges' best | clears its prior |", "|" + "---|" * 14]
     ddpm_steps = table.get(("DDPM", 0, ""), {})
     for prior in PRIORS:
         flow_name, bridge_name = f"flow ({prior})", f"bridge ({prior})"
         steps = sorted(set(table.get((flow_name, 0, ""), {})) & set(ddpm_steps))
         for step in steps:
             flow, bridge = at_step(table, flow_name, step), at_step(table, bridge_name, step)
+            consistent = at_step(table, f"bridge ({prior}; consistent=True)", step)
             if FLOW_NFE not in flow:
                 continue
-            ddpm_best, bridge_best = best(at_step(table, "DDPM", step)), best(bridge)
+            ddpm_best, bridge_best, consistent_best = best(at_step(table, "DDPM", step)), best(bridge), best(consistent)
+            either = [b for b in (bridge_best, consistent_best) if b]  # I2SB's best in either variant
+            bridges_best = max(either, key=lambda b: np.mean(list(b[1].values()))) if either else None
             alone = prior_alone(table, maze, prior, flow_name, step)
             full = flow[max(flow)]
 
@@ -103,10 +107,11 @@ def maze_table(maze: str) -> list[str]:
                 f"| {prior}", str(step), cell(flow, 1), f"**{mean_se(flow[FLOW_NFE])}**", mean_se(full),
                 cell(bridge, 1), cell(bridge, 2),
                 f"{mean_se(bridge_best[1])} ({bridge_best[0]})" if bridge_best else "-",
+                f"{mean_se(consistent_best[1])} ({consistent_best[0]})" if consistent_best else "-",
                 f"{mean_se(ddpm_best[1])} ({ddpm_best[0]})" if ddpm_best else "-",
                 mean_se(alone) if alone else "-",
                 verdict(diff(flow[FLOW_NFE], ddpm_best[1]) if ddpm_best else None, "reaches"),
-                verdict(diff(flow[FLOW_NFE], bridge_best[1]) if bridge_best else None, "reaches"),
+                verdict(diff(flow[FLOW_NFE], bridges_best[1]) if bridges_best else None, "reaches"),
                 verdict(diff(flow[FLOW_NFE], alone) if alone else None, "clears") if alone else "n/a (noise)",
             ]) + " |")
     return lines
