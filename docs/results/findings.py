@@ -1,6 +1,7 @@
 """The findings table (issue 12): each thesis finding, and ours, per maze and task set, from the committed
-results CSVs (docs/results/<maze>-v2-curves/results.csv and, for runs trained on windows that wait,
-docs/results/<maze>-v2-hold/results.csv; written by `bridgeplan report --csv`).
+results CSVs (docs/results/<maze>-v2-curves/results.csv; for runs trained on windows that wait,
+docs/results/<maze>-v2-hold/results.csv; for the consistent bridge from each prior,
+docs/results/<maze>-v2-consistent-priors/results.csv; written by `bridgeplan report --csv`).
 
 A finding compares two series on the same evaluation episodes, training seed by training seed: the cell is
 the mean ± standard error over seeds of the per-seed difference (first minus second, Minari convention) and
@@ -77,6 +78,10 @@ FINDINGS = [
      ("flow (line)", 2, ""), ("bridge (line)", "best", ""), "above", "last"),
     ("Ours: the consistent bridge beats I2SB (line prior, NFE 2)",
      ("bridge (line; consistent=True)", 2, ""), ("bridge (line)", 2, ""), "above", "last"),
+    ("Ours: the consistent bridge beats I2SB (Gaussian prior, NFE 2)",
+     ("bridge (gaussian; consistent=True)", 2, ""), ("bridge (gaussian)", 2, ""), "above", "last"),
+    ("Ours: the consistent bridge beats I2SB (learned prior, NFE 2)",
+     ("bridge (learned; consistent=True)", 2, ""), ("bridge (learned)", 2, ""), "above", "last"),
     ("Ours: pursuit (lookahead chosen on validation) beats Diffuser's tracking (bridge, line, NFE 1, open loop)",
      ("bridge (line)", 1, PURSUIT), ("bridge (line)", 1, ""), "above", "last"),
     ("Ours: pursuit (lookahead chosen on validation) beats Diffuser's tracking (DDPM, full NFE, open loop)",
@@ -110,12 +115,22 @@ FINDINGS = [
 ]
 
 
+STORES = ("curves", "hold", "consistent-priors")
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence: a row another store holds too
+(a run retrained in a store of its own) is taken from the first."""
+
+
+def rows(maze: str, stores=STORES):
+    """The maze's CSV rows, store by store."""
+    paths = [HERE / f"{maze}-v2-{store}" / "results.csv" for store in stores]
+    return (r for path in paths if path.exists() for r in csv.DictReader(path.open()))
+
+
 def load(maze: str) -> dict:
     """``{(method, multi, execution): {step: {nfe: {seed: Eval}}}}`` from the maze's CSVs, test
     episodes; the validation episodes' rows under the key ``VALIDATION``, in the same shape."""
     table: dict = {VALIDATION: {}}
-    paths = [HERE / f"{maze}-v2-{store}" / "results.csv" for store in ("curves", "hold")]
-    for r in (r for path in paths if path.exists() for r in csv.DictReader(path.open())):
+    for r in rows(maze):
         into = table[VALIDATION] if r["experiment"].endswith(VALIDATION_SUFFIX) else table
         key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
         cell = into.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})

@@ -4,20 +4,26 @@
 # run_umaze_v2_curves.sh) at its final snapshot, NFE 2, 4 and full, tracked (Diffuser's controller) and pursued
 # (lookahead 1, the default), 200 episodes of the training seed's test tasks. Writes one eval JSON per setting and
 # summary.md (mean ± standard error over seeds) under docs/results/$MAZE-v2-samplers.
-# Usage: MAZE=medium bash docs/results/run_bridge_sampler.sh (RESULTS: the store, default results/$MAZE-v2-curves)
+# Usage: MAZE=medium bash docs/results/run_bridge_sampler.sh (RESULTS: the store, default results/$MAZE-v2-curves;
+# RUNS: the runs' names, a glob, default the line-prior I2SB bridge's; OUT: where to write; CONTROLLERS: default
+# "track pursuit"). The consistent bridge from each prior, tracked: MAZE=medium
+# RESULTS=results/medium-v2-consistent-priors RUNS='medium-bridge-*-N16-consistent-*-s[0-9]' CONTROLLERS=track
+# OUT=docs/results/medium-v2-consistent-samplers bash docs/results/run_bridge_sampler.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
 MAZE=${MAZE:?set MAZE=umaze, medium or large}
 R=${RESULTS:-results/$MAZE-v2-curves}/runs
-OUT=docs/results/$MAZE-v2-samplers
+OUT=${OUT:-docs/results/$MAZE-v2-samplers}
 mkdir -p "$OUT"
-for run in "$R"/$MAZE-bridge-line-N16-H*-cpu-small-s[0-9]; do
+for run in "$R"/${RUNS:-$MAZE-bridge-line-N16-H*-cpu-small-s[0-9]}; do
+  [ -d "$run" ] || { echo "no run matches $run" >&2; exit 2; }
   seed=${run##*-s}
+  name=$(basename "$run"); prior=${name#"$MAZE"-bridge-}; prior=${prior%%-*}
   for sampler in posterior mean; do
     for nfe in 2 4 15; do
-      for controller in track pursuit; do
-        json="$OUT/s$seed-$sampler-nfe$nfe-$controller.json"
+      for controller in ${CONTROLLERS:-track pursuit}; do
+        json="$OUT/$(if [ "$prior" != line ]; then echo "$prior-"; fi)s$seed-$sampler-nfe$nfe-$controller.json"
         [ -f "$json" ] || bridgeplan eval "$run" --nfe "$nfe" --episodes 200 --seed "$seed" --sampler "$sampler" \
           --controller "$controller" --out "$json" > /dev/null
       done
@@ -30,16 +36,16 @@ from collections import defaultdict
 from pathlib import Path
 import numpy as np
 groups = defaultdict(list)
-for path in sorted(Path(sys.argv[1]).glob("s*.json")):
-    _, sampler, nfe, controller = path.stem.split("-")
-    groups[(controller, int(nfe[3:]), sampler)].append(json.loads(path.read_text()))
-print("| controller | NFE | sampler | seeds | score (minari) | success | code |")
-print("|---|---|---|---|---|---|---|")
-for (controller, nfe, sampler), rs in sorted(groups.items()):
+for path in sorted(Path(sys.argv[1]).glob("*.json")):
+    *prior, _, sampler, nfe, controller = path.stem.split("-")
+    groups[(prior[0] if prior else "line", controller, int(nfe[3:]), sampler)].append(json.loads(path.read_text()))
+print("| prior | controller | NFE | sampler | seeds | score (minari) | success | code |")
+print("|---|---|---|---|---|---|---|---|")
+for (prior, controller, nfe, sampler), rs in sorted(groups.items()):
     v = np.array([r["score"]["minari"]["mean"] for r in rs])
     se = v.std(ddof=1) / np.sqrt(len(v)) if len(v) > 1 else float("nan")
     code = sorted({r["environment"]["code_version"] for r in rs})
-    print(f"| {controller} | {nfe} | {sampler} | {len(v)} | {v.mean():.1f} ± {se:.1f} | "
+    print(f"| {prior} | {controller} | {nfe} | {sampler} | {len(v)} | {v.mean():.1f} ± {se:.1f} | "
           f"{np.mean([r['success_rate']['mean'] for r in rs]):.2f} | {', '.join(code)} |")
 PY
 cat "$OUT/summary.md"
