@@ -277,6 +277,19 @@ def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, f
     print(f"sweep: {kills} kills survived, {lost} rows lost, {redone} redone")
 
 
+def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_dataset, tmp_path, finished_sweep):
+    results = tmp_path / "results"
+    r = cli(*sweep_args("bridge-vs-ddpm", tiny_dataset, results), "--workers", "2")
+    assert r.returncode == 0, r.stderr
+    # workers killed by the pool instead of exiting leave semaphores the resource tracker warns about
+    assert "leaked" not in r.stderr and "Warning" not in r.stderr, r.stderr
+    rows, reference = store_rows(results), store_rows(finished_sweep)
+    assert rows.keys() == reference.keys() and len(rows) == SWEEP_ROWS
+    measured = ("score_minari", "success_rate", "floor_minari")
+    for key, row in rows.items():
+        assert {m: row[m] for m in measured} == {m: reference[key][m] for m in measured}, key
+
+
 def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
     results = tmp_path / "results"
     # the same grid twice: both want to train the learned prior and the same four runs, and to

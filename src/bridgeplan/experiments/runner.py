@@ -186,6 +186,10 @@ def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: 
     with mp.get_context("spawn").Pool(workers) as pool:
         results = pool.starmap(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads,
                                           False) for spec, seed in jobs])
+        # let the workers exit on their own: the block's terminate() would kill them before they release their
+        # semaphores (tqdm's lock), and the resource tracker then warns of leaked semaphores at shutdown
+        pool.close()
+        pool.join()
     return sum(len(r) for r in results)
 
 
