@@ -8,7 +8,10 @@
 # RUNS: the runs' names, a glob, default the line-prior I2SB bridge's; OUT: where to write; CONTROLLERS: default
 # "track pursuit"). The consistent bridge from each prior, tracked: MAZE=medium
 # RESULTS=results/medium-v2-consistent-priors RUNS='medium-bridge-*-N16-consistent-*-s[0-9]' CONTROLLERS=track
-# OUT=docs/results/medium-v2-consistent-samplers bash docs/results/run_bridge_sampler.sh
+# OUT=docs/results/medium-v2-consistent-samplers bash docs/results/run_bridge_sampler.sh. SNAPSHOT (a training step;
+# default the final snapshot), SAMPLERS (default "posterior mean") and NFES (default "2 4 15") narrow it, e.g. the
+# line prior's consistent runs by their means at NFE 2 across training: SNAPSHOT=2000 SAMPLERS=mean NFES=2
+# RUNS='medium-bridge-line-N16-consistent-*-s[0-9]' OUT=docs/results/medium-v2-consistent-samplers/step2000 ...
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export PATH="$PWD/.venv/bin:$PATH" PYTHONPATH="$PWD/src" MUJOCO_GL=${MUJOCO_GL:-egl}
@@ -20,12 +23,12 @@ for run in "$R"/${RUNS:-$MAZE-bridge-line-N16-H*-cpu-small-s[0-9]}; do
   [ -d "$run" ] || { echo "no run matches $run" >&2; exit 2; }
   seed=${run##*-s}
   name=$(basename "$run"); prior=${name#"$MAZE"-bridge-}; prior=${prior%%-*}
-  for sampler in posterior mean; do
-    for nfe in 2 4 15; do
+  for sampler in ${SAMPLERS:-posterior mean}; do
+    for nfe in ${NFES:-2 4 15}; do
       for controller in ${CONTROLLERS:-track pursuit}; do
         json="$OUT/$(if [ "$prior" != line ]; then echo "$prior-"; fi)s$seed-$sampler-nfe$nfe-$controller.json"
         [ -f "$json" ] || bridgeplan eval "$run" --nfe "$nfe" --episodes 200 --seed "$seed" --sampler "$sampler" \
-          --controller "$controller" --out "$json" > /dev/null
+          --controller "$controller" ${SNAPSHOT:+--snapshot "$SNAPSHOT"} --out "$json" > /dev/null
       done
     done
   done
