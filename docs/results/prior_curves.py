@@ -3,7 +3,8 @@ against DDPM, and the issue's goal checked at every snapshot (umaze and medium; 
 `nfe-curves` in docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh, run_maze_variants.sh
 PARTS=consistent and run_maze_curves.sh, and in docs/results/<maze>-v2-consistent-priors/results.csv, made by
 run_maze_variants.sh PARTS=consistent-priors in a store of its own). The line prior's consistent runs are in
-both: the table takes the first, and says how closely the retrained runs reproduce it.
+both: the table takes the first, and says how closely the retrained runs reproduce it. On medium, a last table
+checks the goal for the consistent bridge from the line sampled by its posterior means (run_bridge_sampler.sh).
 
 Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
 DDPM reaches at any NFE and the best the bridge reaches from the same prior (I2SB or the consistent bridge,
@@ -112,6 +113,29 @@ def reproduction(maze: str) -> str:
             f"The table takes the first store's rows.")
 
 
+def mean_sampler_table(maze: str) -> list[str]:
+    """The consistent bridge from the line sampled by its posterior means at NFE 2 (run_bridge_sampler.sh's eval
+    JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
+    DDPM's best NFE at each step, per seed, and against the line alone."""
+    here = HERE / f"{maze}-v2-consistent-samplers"
+    table, lines = load(maze), []
+    by_step: dict[int, list[dict]] = {}
+    for path in [*here.glob("step*/s[0-9]-mean-nfe2-track.json"), *here.glob("s[0-9]-mean-nfe2-track.json")]:
+        row = json.loads(path.read_text())
+        by_step.setdefault(row["step"], []).append(row)
+    for step, evals in sorted(by_step.items()):
+        ours = {r["seed"]: r["score"]["minari"]["mean"] for r in evals}
+        alone = {r["seed"]: r["floor_line"]["score"]["minari"]["mean"] for r in evals}
+        ddpm = best(at_step(table, "DDPM", step))
+        lines.append(f"| {step} | {mean_se(ours)} | {mean_se(ddpm[1])} ({ddpm[0]}) | "
+                     f"{verdict(diff(ours, ddpm[1]), 'reaches')} | {verdict(diff(ours, alone), 'clears')} |")
+    if not lines:
+        return []
+    return [f"### {maze}: the consistent bridge (line) by its posterior means at NFE 2", "",
+            "| step | consistent bridge, `--sampler mean`, NFE 2 | DDPM best (NFE) | reaches DDPM's best | clears the "
+            "line alone |", "|---|---|---|---|---|", *lines, ""]
+
+
 def maze_table(maze: str) -> list[str]:
     table = load(maze)
     lines = [f"## {maze}", "",
@@ -159,7 +183,7 @@ def main() -> int:
              "bridges (I2SB or consistent) from the same prior, picked on these episodes (which favours them), "
              "per seed; see the script's docstring.", ""]
     for maze in MAZES:
-        lines += [*maze_table(maze), "", reproduction(maze), ""]
+        lines += [*maze_table(maze), "", reproduction(maze), "", *mean_sampler_table(maze)]
     print("\n".join(lines))
     return 0
 
