@@ -113,12 +113,12 @@ def reproduction(maze: str) -> str:
             f"The table takes the first store's rows.")
 
 
-def mean_sampler_table(maze: str) -> list[str]:
+def mean_sampler_table(table: dict, maze: str) -> list[str]:
     """The consistent bridge from the line sampled by its posterior means at NFE 2 (run_bridge_sampler.sh's eval
     JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
     DDPM's best NFE at each step, per seed, and against the line alone."""
     here = HERE / f"{maze}-v2-consistent-samplers"
-    table, lines = load(maze), []
+    lines = []
     by_step: dict[int, list[dict]] = {}
     for path in [*here.glob("step*/s[0-9]-mean-nfe2-track.json"), *here.glob("s[0-9]-mean-nfe2-track.json")]:
         row = json.loads(path.read_text())
@@ -136,8 +136,7 @@ def mean_sampler_table(maze: str) -> list[str]:
             "line alone |", "|---|---|---|---|---|", *lines, ""]
 
 
-def maze_table(maze: str) -> list[str]:
-    table = load(maze)
+def maze_table(table: dict, maze: str) -> list[str]:
     lines = [f"## {maze}", "",
              "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
              "(NFE) | consistent bridge best (NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best "
@@ -183,7 +182,8 @@ def main() -> int:
              "bridges (I2SB or consistent) from the same prior, picked on these episodes (which favours them), "
              "per seed; see the script's docstring.", ""]
     for maze in MAZES:
-        lines += [*maze_table(maze), "", reproduction(maze), "", *mean_sampler_table(maze)]
+        table = load(maze)
+        lines += [*maze_table(table, maze), "", reproduction(maze), "", *mean_sampler_table(table, maze)]
     print("\n".join(lines))
     return 0
 
