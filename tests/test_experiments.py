@@ -75,6 +75,42 @@ def test_prior_curves_has_each_prior_at_nfe_1_2_4_and_full():
     assert not experiment.last_snapshot_only
 
 
+def test_samplers_sweep_keys_each_sampler_apart(tiny_dataset, tmp_path, capsys):
+    """The samplers experiment evaluates each run at NFE 2, 4 and full by every sampler of its process: the store
+    keys them apart by the sampler the evaluated planner used ('' as trained), a second sweep adds nothing, and
+    the report names the sampler of each series."""
+    results = tmp_path / "results"
+    args = ["experiment", "samplers", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    assert main(args) == 0
+    rows = ResultsStore(results / "results.sqlite").rows("samplers")
+    # per snapshot: DDPM at NFE 1, and 2, 4, 6 by ancestral and ddim; the bridge at 1, and 2, 4, 5 by posterior
+    # and mean
+    assert len(rows) == 2 * (1 + 3 * 2) * 2
+    assert {(r["process"], r["nfe"], r["sampler"]) for r in rows} == {
+        *((p, 1, "") for p in ("ddpm", "bridge")),
+        *(("ddpm", k, t) for k in (2, 4, 6) for t in ("", "ddim")),
+        *(("bridge", k, t) for k in (2, 4, 5) for t in ("", "mean"))}
+    capsys.readouterr()
+    assert main(args) == 0 and "0 new results" in capsys.readouterr().out
+    assert main(["report", "--results", str(results)]) == 0
+    report = (results / "report" / "report.md").read_text()
+    assert "| bridge (line) N=6 NFE=2 mean | 2 |" in report and "| DDPM N=6 NFE=4 ddim | 1 |" in report
+    assert "| bridge (line) N=6 NFE=2 | 2 |" in report
+
+
+def test_a_series_asks_only_a_sampler_its_process_has():
+    from bridgeplan.errors import BridgeplanError
+    from bridgeplan.experiments.grids import Experiment, RunSpec, Series
+    from bridgeplan.processes import DDPM
+
+    bad = Experiment("x", "x", (Series("DDPM", RunSpec(DDPM(6)), 2, sampler="mean"),))
+    with pytest.raises(BridgeplanError, match="asks sampler 'mean'.*ancestral, ddim"):
+        bad.validate()
+    flow = Experiment("x", "x", (Series("flow", RunSpec(Flow(6), "line"), 2, sampler="stochastic"),))
+    with pytest.raises(BridgeplanError, match="asks sampler 'stochastic'.*euler"):  # no noise on its path
+        flow.validate()
+
+
 def test_controllers_experiment_pairs_tracking_with_pursuit():
     experiment = get_experiment("controllers", steps=6)
     assert experiment.last_snapshot_only
@@ -163,7 +199,8 @@ def test_closed_loop_sweep(tiny_dataset, tmp_path, capsys):
 
 
 def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
-    """Version 1 had no execution / multi-task columns: its rows become open-loop, single-task rows."""
+    """Version 1 had no execution / multi-task / sampler columns: its rows become open-loop, single-task rows,
+    sampled as trained."""
     db = tmp_path / "results.sqlite"
     v1 = ["experiment", "run_name", "maze", "process", "prior", "diffusion_steps", "seed", "step", "nfe", "episodes",
           "eval_seed", "score_minari"]
@@ -176,9 +213,10 @@ def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
     store = ResultsStore(db)
     (row,) = store.rows()
     assert (row["score_minari"], row["execution"], row["multi_task"], row["step"]) == (42.5, "", 0, 1000)
-    assert store.has(experiment="nfe1", run_name="r", step=1000, nfe=1, execution="", multi_task=0, episodes=200,
-                     eval_seed=0)
+    assert row["sampler"] == ""  # as its process samples by default
+    assert store.has(experiment="nfe1", run_name="r", step=1000, nfe=1, sampler="", execution="", multi_task=0,
+                     episodes=200, eval_seed=0)
     with sqlite3.connect(db) as con:
-        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
+        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
     ResultsStore(db)  # opening it again changes nothing
     assert len(store.rows()) == 1

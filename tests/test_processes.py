@@ -290,3 +290,13 @@ def test_bridge_mean_sampler_is_the_noise_free_chain():
         Bridge(8, sampler="ode")
     with pytest.raises(BridgeplanError, match="no eta"):
         posterior.with_sampler("mean", eta=0.5)
+
+
+def test_sampling_tag_names_what_differs_from_the_trained_default():
+    """Results stores key evaluations by it: '' for a process sampled as it is by default."""
+    assert DDPM(8).sampling_tag() == "" and Bridge(8).sampling_tag() == ""
+    assert DDPM(8).with_sampler("ddim").sampling_tag() == "ddim"
+    assert DDPM(8).with_sampler("ddim", eta=0.5).sampling_tag() == "ddim eta=0.5"
+    assert Bridge(8, consistent=True).with_sampler("mean").sampling_tag() == "mean"
+    assert Bridge(8).with_sampler("mean").with_sampler("posterior").sampling_tag() == ""
+    assert Flow(8, sigma=0.5).with_sampler("stochastic").sampling_tag() == "stochastic"

@@ -126,13 +126,18 @@ def rows(maze: str, stores=STORES):
     return (r for path in paths if path.exists() for r in csv.DictReader(path.open()))
 
 
-def load(maze: str) -> dict:
+def method(row: dict) -> str:
+    """A row's method, with the sampler where it is not the process's default: ``bridge (line) by mean``."""
+    return method_label(row) + (f" by {row['sampler']}" if row.get("sampler") else "")
+
+
+def load(maze: str, stores=STORES) -> dict:
     """``{(method, multi, execution): {step: {nfe: {seed: Eval}}}}`` from the maze's CSVs, test
     episodes; the validation episodes' rows under the key ``VALIDATION``, in the same shape."""
     table: dict = {VALIDATION: {}}
-    for r in rows(maze):
+    for r in rows(maze, stores):
         into = table[VALIDATION] if r["experiment"].endswith(VALIDATION_SUFFIX) else table
-        key = (method_label(r), int(r.get("multi_task") or 0), r.get("execution") or "")
+        key = (method(r), int(r.get("multi_task") or 0), r.get("execution") or "")
         cell = into.setdefault(key, {}).setdefault(int(r["step"]), {}).setdefault(int(r["nfe"]), {})
         decision = (float(r["decision_ms_p50"]), float(r["decision_ms_p95"])) if r.get("decision_ms_p50") else None
         cell.setdefault(int(r["seed"]), Eval(float(r["score_minari"]), float(r["floor_minari"]),

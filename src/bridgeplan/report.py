@@ -22,12 +22,14 @@ def method_label(row: dict) -> str:
 
 
 def _series(rows: list[dict]) -> dict[str, list[dict]]:
-    """Rows grouped into the lines of a figure: one per (method, diffusion steps, NFE, execution, task set)."""
+    """Rows grouped into the lines of a figure: one per (method, diffusion steps, NFE, sampler, execution, task
+    set); the sampler is named where it is not the process's default."""
     groups: dict[str, list[dict]] = {}
     for r in sorted(rows, key=lambda r: (r["process"], r["prior"], r["diffusion_steps"], r["multi_task"], r["nfe"],
-                                         r["execution"], r["step"])):
-        label = " ".join([f"{method_label(r)} N={r['diffusion_steps']} NFE={r['nfe']}", r["execution"],
-                          "Multi2D" if r["multi_task"] else ""]).strip()
+                                         r["sampler"], r["execution"], r["step"])):
+        label = " ".join(part for part in [f"{method_label(r)} N={r['diffusion_steps']} NFE={r['nfe']}",
+                                           r["sampler"], r["execution"], "Multi2D" if r["multi_task"] else ""]
+                         if part)
         groups.setdefault(label, []).append(r)
     return groups
 
@@ -58,7 +60,7 @@ def _aggregate(rows: list[dict]) -> list[tuple[int, float, float, int]]:
 
 def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
     """Score vs training steps with standard-error bands, one line per series (a colour per method, a
-    line style per NFE); False if no data."""
+    line style and marker per NFE and sampler); False if no data."""
     rows = store.rows(name)
     if not rows:
         return False
@@ -69,15 +71,16 @@ def plot_experiment(store: ResultsStore, name: str, path: Path) -> bool:
         return f"{method_label(r)} N={r['diffusion_steps']}"
 
     methods = list(dict.fromkeys(method(r) for r in sorted(rows, key=lambda r: (r["process"], r["prior"]))))
-    nfes = {m: sorted({r["nfe"] for r in rows if method(r) == m}) for m in methods}
-    styles = ["-", "--", ":", "-."]
+    samplings = {m: sorted({(r["nfe"], r["sampler"]) for r in rows if method(r) == m}) for m in methods}
+    styles, markers = ["-", "--", ":", "-."], ["o", "s", "^", "D"]
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     for label, srows in _series(rows).items():
         steps, mean, se = (np.array(v) for v in list(zip(*_aggregate(srows)))[:3])
         m = method(srows[0])
         color = plt.cm.tab10(methods.index(m) % 10)
-        ax.plot(steps, mean, marker="o", ms=3, color=color, ls=styles[nfes[m].index(srows[0]["nfe"]) % len(styles)],
-                label=label)
+        k = samplings[m].index((srows[0]["nfe"], srows[0]["sampler"]))
+        ax.plot(steps, mean, marker=markers[k // len(styles) % len(markers)], ms=3, color=color,
+                ls=styles[k % len(styles)], label=label)
         ax.fill_between(steps, mean - se, mean + se, color=color, alpha=0.12)
     floors = [r["floor_minari"] for r in rows if r["floor_minari"] is not None]
     if floors:

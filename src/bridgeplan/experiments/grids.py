@@ -1,9 +1,9 @@
 """The thesis's experiments as declared grids (thesis, chapter "Experiments"; its five figures), and ours.
 
 An experiment is a set of series, each one line in its figure: a trained run (a process with its
-parameters, and a prior) sampled at one NFE and executed one way (open loop, or replanned) on single- or
-multi-task episodes, scored at every training-step snapshot (or the last one). Two experiments that name
-the same run share its training.
+parameters, and a prior) sampled at one NFE by one of its samplers and executed one way (open loop, or
+replanned) on single- or multi-task episodes, scored at every training-step snapshot (or the last one). Two
+experiments that name the same run share its training.
 """
 
 from __future__ import annotations
@@ -40,6 +40,13 @@ class Series:
     """How its plans are executed (default: open loop, one plan per episode)."""
     multi_task: bool = False
     """Multi2D tasks (random goals) instead of the maze's single evaluation goal."""
+    sampler: str | None = None
+    """One of the run's process's samplers (``Process.with_sampler``); None: the one it was trained with."""
+
+    @property
+    def process(self) -> Process:
+        """The run's process as this series samples it."""
+        return self.run.process if self.sampler is None else self.run.process.with_sampler(self.sampler)
 
 
 @dataclass(frozen=True)
@@ -55,6 +62,9 @@ class Experiment:
 
     def validate(self) -> None:
         for s in self.series:
+            if s.sampler is not None and s.sampler not in s.run.process.usable_samplers():
+                raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks sampler {s.sampler!r}, but "
+                                      f"{s.run.label()} has {', '.join(s.run.process.usable_samplers()) or 'one'}")
             if not 1 <= s.nfe <= s.run.process.max_nfe:
                 raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks NFE {s.nfe}, but "
                                       f"{s.run.label()} with {s.run.process.steps} steps allows "
@@ -90,6 +100,9 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
         Experiment("prior-curves", f"{name} from each prior at NFE 1, 2, 4 and full, N={steps}",
                    tuple(Series(f"{r.label()} NFE {k}", r, k) for r in runs.values()
                          for k in sorted({1, 2, 4, r.process.max_nfe}) if k <= r.process.max_nfe)),
+        Experiment("samplers", f"DDPM and {name} from the line prior at NFE 1, and at 2, 4 and full by each "
+                   f"of their samplers, N={steps}",
+                   tuple(s for r in (ddpm, runs["line"]) for s in sampler_series(r))),
         Experiment("closed-loop", f"DDPM and {name} from the line prior, open loop and replanned every "
                    f"{REPLAN_EVERY} steps, single-task and Multi2D, at the final snapshot, N={steps}",
                    tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)
@@ -101,6 +114,16 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
                    tuple(s for r in (ddpm, runs["line"]) for multi in (False, True)
                          for s in controller_series(r, multi)), last_snapshot_only=True),
     ]}
+
+
+def sampler_series(run: RunSpec) -> list[Series]:
+    """One run's series in the samplers experiment: NFE 1 as trained (one call: every sampler lands on the
+    network's x0 prediction), and NFE 2, 4 and full by each sampler the process has."""
+    process = run.process
+    return ([Series(f"{run.label()} NFE 1", run, 1)]
+            + [Series(f"{run.label()} NFE {k} {sampler}", run, k, sampler=sampler)
+               for k in sorted({2, 4, process.max_nfe}) if k <= process.max_nfe
+               for sampler in process.usable_samplers() or (None,)])
 
 
 REPLAN_EVERY = 32

@@ -4,7 +4,7 @@ WAL journaling and a busy timeout let two sweeps write at once; every insert is 
 so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the schema
 version: a database from a newer bridgeplan is refused, untouched; one from an older one is upgraded in
 place, in one transaction (version 1 had no execution or multi-task columns: its rows were open loop,
-single-task).
+single-task; version 2 had no sampler column: its rows were sampled as their processes are by default).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Iterator
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 COLUMNS = {
     "experiment": "TEXT NOT NULL",
@@ -46,6 +46,7 @@ COLUMNS = {
     "floor_minari": "REAL",
     "execution": "TEXT NOT NULL DEFAULT ''",
     "multi_task": "INTEGER NOT NULL DEFAULT 0",
+    "sampler": "TEXT NOT NULL DEFAULT ''",
     "calls_per_episode": "REAL",
     "decision_ms_p50": "REAL",
     "decision_ms_p95": "REAL",
@@ -53,8 +54,9 @@ COLUMNS = {
     "code_version": "TEXT",
     "created": "REAL",
 }
-KEY = ("experiment", "run_name", "step", "nfe", "execution", "multi_task", "episodes", "eval_seed")
-"""What makes an evaluation: ``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1."""
+KEY = ("experiment", "run_name", "step", "nfe", "sampler", "execution", "multi_task", "episodes", "eval_seed")
+"""What makes an evaluation: ``sampler`` is ``Process.sampling_tag()`` ('' as the process samples by default),
+``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1."""
 
 
 def _table_columns() -> str:
@@ -132,7 +134,7 @@ class ResultsStore:
         with self._connect() as db:
             db.row_factory = sqlite3.Row
             query = "SELECT * FROM results" + (" WHERE experiment = ?" if experiment else "")
-            query += " ORDER BY experiment, run_name, nfe, execution, multi_task, step"
+            query += " ORDER BY experiment, run_name, nfe, sampler, execution, multi_task, step"
             return [dict(r) for r in db.execute(query, [experiment] if experiment else [])]
 
     def experiments(self) -> list[str]:
