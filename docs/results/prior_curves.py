@@ -3,8 +3,9 @@ against DDPM, and the issue's goal checked at every snapshot (umaze and medium; 
 `nfe-curves` in docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh, run_maze_variants.sh
 PARTS=consistent and run_maze_curves.sh, and in docs/results/<maze>-v2-consistent-priors/results.csv, made by
 run_maze_variants.sh PARTS=consistent-priors in a store of its own). The line prior's consistent runs are in
-both: the table takes the first, and says how closely the retrained runs reproduce it. On medium, a last table
-checks the goal for the consistent bridge from the line sampled by its posterior means (run_bridge_sampler.sh).
+both: the table takes the first, and says how closely the retrained runs reproduce it. On medium, a table checks
+the goal for the consistent bridge from the line sampled by its posterior means (run_bridge_sampler.sh), and a
+last one checks it with 5 seeds and the bridge's setting declared in advance (:func:`declared_table`).
 
 Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
 DDPM reaches at any NFE and the best the bridge reaches from the same prior (I2SB or the consistent bridge,
@@ -24,7 +25,7 @@ import json
 import sys
 
 import numpy as np
-from findings import HERE, STORES, load, rows
+from findings import HERE, STORES, VALIDATION, load, rows
 
 from bridgeplan.experiments.runner import VALIDATION_SUFFIX
 from bridgeplan.report import method_label
@@ -32,6 +33,9 @@ from bridgeplan.report import method_label
 MAZES = ("umaze", "medium")
 PRIORS = ("gaussian", "line", "learned")
 FLOW_NFE = 2
+CONSISTENT = "bridge (line; consistent=True)"
+SWEEP = "sampler-sweep"
+"""The store of run_sampler_sweep.sh (docs/results/<maze>-v2-sampler-sweep): the samplers experiment, 5 seeds."""
 
 
 def at_step(table: dict, method: str, step: int) -> dict[int, dict[int, float]]:
@@ -136,6 +140,54 @@ def mean_sampler_table(table: dict, maze: str) -> list[str]:
             "line alone |", "|---|---|---|---|---|", *lines, ""]
 
 
+def declared_table(maze: str) -> list[str]:
+    """The goal with the candidate's setting declared before the test episodes are read: the consistent bridge
+    from the line at NFE 1 or 2, by posterior draws or by posterior means, whichever has the best mean over seeds
+    on the validation episodes (final snapshot; run_sampler_sweep.sh), scored on the test episodes at every
+    snapshot against DDPM's best sampler and NFE at that snapshot (picked on the test episodes: favours DDPM),
+    the I2SB bridge's best NFE from the line (docs/results/<maze>-v2-curves, seeds 0-2, paired by seed) and
+    the line alone; per-seed differences over the sweep's 5 seeds."""
+    table = load(maze, (SWEEP,))
+    def final(method: str) -> dict:  # {nfe: {seed: Eval}} on the validation episodes, final snapshot
+        by_step = table[VALIDATION].get((method, 0, ""), {})
+        return by_step[max(by_step)] if by_step else {}
+
+    def validated(option) -> float:
+        return float(np.mean([e.score for e in final(option[0])[option[1]].values()]))
+
+    candidates = [(m, k) for m in (CONSISTENT, f"{CONSISTENT} by mean") for k in (1, 2) if k in final(m)]
+    if not candidates:
+        return []
+
+    method, nfe = max(candidates, key=validated)
+    i2sb = load(maze, ("curves",))
+    lines = []
+    for step in sorted(table.get((method, 0, ""), {})):
+        evals = table[(method, 0, "")][step].get(nfe, {})
+        ours = {seed: e.score for seed, e in evals.items()}
+        alone = {seed: e.floor for seed, e in evals.items()}
+        ddpm = {(m, k): by_seed for m in ("DDPM", "DDPM by ddim") for k, by_seed in at_step(table, m, step).items()}
+        (ddpm_method, ddpm_nfe), ddpm_best = max(ddpm.items(), key=lambda o: np.mean(list(o[1].values())))
+        i2sb_best = best(at_step(i2sb, "bridge (line)", step))
+        lines.append(" | ".join([
+            f"| {step}", mean_se(ours), f"{mean_se(ddpm_best)} ({ddpm_method.replace('DDPM by ', '')}, NFE {ddpm_nfe})",
+            f"{mean_se(i2sb_best[1])} (NFE {i2sb_best[0]})" if i2sb_best else "-", mean_se(alone),
+            verdict(diff(ours, ddpm_best), "reaches"),
+            verdict(diff(ours, i2sb_best[1]) if i2sb_best else None, "reaches"), verdict(diff(ours, alone), "clears"),
+        ]) + " |")
+    chosen = f"{'posterior means' if method.endswith('by mean') else 'posterior draws'}, NFE {nfe}"
+    options = ", ".join(f"{'means' if m.endswith('by mean') else 'draws'} NFE {k}: {validated((m, k)):.1f}"
+                        for m, k in candidates)
+    return [f"### {maze}: the goal with the bridge's setting declared on validation episodes (5 seeds)", "",
+            f"The consistent bridge from the line at NFE <= 2, its sampler and NFE chosen on the validation "
+            f"episodes at the final snapshot ({options}): **{chosen}**, then scored on the test episodes at every "
+            f"snapshot. DDPM's best over its samplers (ancestral, DDIM) and NFE (1, 2, 4, 16) is picked on the "
+            f"test episodes at each snapshot, which favours DDPM. I2SB's best from the line: seeds 0-2 of "
+            f"{maze}-v2-curves, paired by seed. (docs/results/{maze}-v2-{SWEEP}, run_sampler_sweep.sh.)", "",
+            f"| step | consistent bridge ({chosen}) | DDPM best (sampler, NFE) | I2SB best (line) | line alone | "
+            "reaches DDPM's best | reaches I2SB's best | clears the line alone |", "|" + "---|" * 8, *lines, ""]
+
+
 def maze_table(table: dict, maze: str) -> list[str]:
     lines = [f"## {maze}", "",
              "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
@@ -183,7 +235,8 @@ def main() -> int:
              "per seed; see the script's docstring.", ""]
     for maze in MAZES:
         table = load(maze)
-        lines += [*maze_table(table, maze), "", reproduction(maze), "", *mean_sampler_table(table, maze)]
+        lines += [*maze_table(table, maze), "", reproduction(maze), "", *mean_sampler_table(table, maze),
+                  *declared_table(maze)]
     print("\n".join(lines))
     return 0
 
