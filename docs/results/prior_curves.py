@@ -159,10 +159,15 @@ def declared_table(maze: str) -> list[str]:
     if not candidates:
         return []
 
+    def named(option) -> str:  # at NFE 1 both samplers make the one call to x0 the same way
+        sampler = "posterior means" if option[0].endswith("by mean") else "posterior draws"
+        return "NFE 1, one call" if option[1] == 1 else f"{sampler}, NFE {option[1]}"
+
     method, nfe = max(candidates, key=validated)
     i2sb = load(maze, ("curves",))
+    steps = sorted(table.get((method, 0, ""), {}))
     lines = []
-    for step in sorted(table.get((method, 0, ""), {})):
+    for step in steps:
         evals = table[(method, 0, "")][step].get(nfe, {})
         ours = {seed: e.score for seed, e in evals.items()}
         alone = {seed: e.floor for seed, e in evals.items()}
@@ -170,14 +175,17 @@ def declared_table(maze: str) -> list[str]:
         (ddpm_method, ddpm_nfe), ddpm_best = max(ddpm.items(), key=lambda o: np.mean(list(o[1].values())))
         i2sb_best = best(at_step(i2sb, "bridge (line)", step))
         lines.append(" | ".join([
-            f"| {step}", mean_se(ours), f"{mean_se(ddpm_best)} ({ddpm_method.replace('DDPM by ', '')}, NFE {ddpm_nfe})",
+            f"| {step}", mean_se(ours),
+            f"{mean_se(ddpm_best)} ({'DDIM' if ddpm_method.endswith('ddim') else 'ancestral'}, NFE {ddpm_nfe})",
             f"{mean_se(i2sb_best[1])} (NFE {i2sb_best[0]})" if i2sb_best else "-", mean_se(alone),
             verdict(diff(ours, ddpm_best), "reaches"),
             verdict(diff(ours, i2sb_best[1]) if i2sb_best else None, "reaches"), verdict(diff(ours, alone), "clears"),
         ]) + " |")
-    chosen = f"{'posterior means' if method.endswith('by mean') else 'posterior draws'}, NFE {nfe}"
-    options = ", ".join(f"{'means' if m.endswith('by mean') else 'draws'} NFE {k}: {validated((m, k)):.1f}"
-                        for m, k in candidates)
+    chosen = named((method, nfe))
+    options = "; ".join(f"{named(o)}: {validated(o):.1f}" for o in candidates)
+    on_test = [f"| {named(o)} | " + " | ".join(
+        mean_se({seed: e.score for seed, e in by_seed.items()}) if (by_seed := table[(o[0], 0, "")][step].get(o[1]))
+        else "-" for step in steps) + " |" for o in candidates]
     return [f"### {maze}: the goal with the bridge's setting declared on validation episodes (5 seeds)", "",
             f"The consistent bridge from the line at NFE <= 2, its sampler and NFE chosen on the validation "
             f"episodes at the final snapshot ({options}): **{chosen}**, then scored on the test episodes at every "
@@ -185,7 +193,10 @@ def declared_table(maze: str) -> list[str]:
             f"test episodes at each snapshot, which favours DDPM. I2SB's best from the line: seeds 0-2 of "
             f"{maze}-v2-curves, paired by seed. (docs/results/{maze}-v2-{SWEEP}, run_sampler_sweep.sh.)", "",
             f"| step | consistent bridge ({chosen}) | DDPM best (sampler, NFE) | I2SB best (line) | line alone | "
-            "reaches DDPM's best | reaches I2SB's best | clears the line alone |", "|" + "---|" * 8, *lines, ""]
+            "reaches DDPM's best | reaches I2SB's best | clears the line alone |", "|" + "---|" * 8, *lines, "",
+            "Every candidate on the test episodes, for reference (not a choice: picking here would favour the bridge):",
+            "", "| sampled by | " + " | ".join(f"step {step}" for step in steps) + " |",
+            "|" + "---|" * (len(steps) + 1), *on_test, ""]
 
 
 def maze_table(table: dict, maze: str) -> list[str]:
