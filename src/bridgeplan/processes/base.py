@@ -75,9 +75,8 @@ class Process:
         return torch.mean(weight.to(sq.dtype)[:, None, None] * sq)
 
     def sampling_tag(self) -> str:
-        """How this process is sampled, where that is not as trained by default ('' when it is): the sampling
-        fields that differ from their defaults, e.g. ``mean`` or ``ddim eta=0.5`` (the sampler by its name, others
-        as ``field=value``). Results stores key evaluations by it."""
+        """The sampling fields that differ from their defaults ('' when none do), e.g. ``mean`` or ``ddim eta=0.5``:
+        the sampler by its name, others as ``field=value``. Results stores key evaluations by it."""
         changed = [(f.name, getattr(self, f.name)) for f in dataclasses.fields(self)
                    if f.name in self.sampling_fields and getattr(self, f.name) != f.default]
         return " ".join(str(v) if k == "sampler" else f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
