@@ -5,7 +5,8 @@
 # evaluation at every snapshot, then the final snapshots on validation episodes (other task seeds), where
 # prior_curves.py chooses the bridge's sampler and NFE (<= 2) before reading the test episodes.
 # Usage: MAZE=medium bash docs/results/run_sampler_sweep.sh (RESULTS default results/$MAZE-v2-sampler-sweep, OUT
-# default docs/results/$MAZE-v2-sampler-sweep; STEPS, CHECKPOINT_EVERY, DATASET as in maze_campaign.sh).
+# default docs/results/$MAZE-v2-sampler-sweep; STEPS, CHECKPOINT_EVERY, DATASET as in maze_campaign.sh). The
+# committed medium rows: this, then again with STEPS=16000 CHECKPOINT_EVERY=4000 (the runs resume from step 8000).
 MAZE=${MAZE:?set MAZE=umaze, medium or large}
 RESULTS=${RESULTS:-results/$MAZE-v2-sampler-sweep} OUT=${OUT:-docs/results/$MAZE-v2-sampler-sweep}
 source "$(dirname "$0")/maze_campaign.sh"
