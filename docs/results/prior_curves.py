@@ -171,9 +171,9 @@ def declared_table(maze: str) -> list[str]:
     steps = sorted(table[(chosen[0], 0, "")])
     ddpm_best = {}  # step -> (sampler, nfe, {seed: score}): the best mean over DDPM's samplers and NFE
     for step in steps:
-        options = [(m, k, by_seed) for m in ("DDPM", "DDPM by ddim") for k, by_seed in at_step(table, m, step).items()]
-        m, k, by_seed = max(options, key=lambda o: np.mean(list(o[2].values())))
-        ddpm_best[step] = ("DDIM" if m.endswith("ddim") else "ancestral", k, by_seed)
+        per_sampler = [(name, *b) for name, m in (("ancestral", "DDPM"), ("DDIM", "DDPM by ddim"))
+                       if (b := best(at_step(table, m, step)))]
+        ddpm_best[step] = max(per_sampler, key=lambda o: np.mean(list(o[2].values())))
     i2sb = load(maze, ("curves",))
     lines = []
     for step in steps:
