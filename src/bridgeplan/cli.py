@@ -130,6 +130,10 @@ def _add_train_commands(sub) -> None:
     p.add_argument("--ema-every", type=int, default=None)
     p.add_argument("--ema-start", type=int, default=None)
     _hold_share_flag(p)
+    p.add_argument("--precision", default=None,
+                   help="bf16: forward and backward under bfloat16 autocast (refused where the device lacks it)")
+    p.add_argument("--compile", action="store_true", default=None,
+                   help="train through the torch.compile'd network (compiles at the first step)")
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
@@ -191,7 +195,7 @@ def _cmd_train(args) -> int:
 
     base = cfg.preset_config(args.maze, args.preset)
     over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
-                                       "hold_share"))
+                                       "hold_share", "precision", "compile"))
     process = _process_params(args, args.process or base.process.name)
     if args.process is not None:
         process["name"] = args.process

@@ -10,6 +10,7 @@ process config: one definition that training, evaluation, sweeps and reports ask
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,9 +89,11 @@ class TrainConfig:
     minutes: float = 0.0
     """Wall-clock budget in minutes; training stops at whichever of ``steps``/``minutes`` comes first (0: none)."""
     batch_size: int = 32
+    """Windows per gradient (per accumulation step)."""
     grad_accum: int = 2
     """Gradient accumulation steps per optimizer step (Diffuser: 2)."""
     lr: float = 2e-4
+    """Adam's learning rate (a positive, finite number)."""
     ema_decay: float = 0.995
     ema_every: int = 10
     """Update the EMA weights every this many optimizer steps."""
@@ -108,13 +111,27 @@ class TrainConfig:
     """Share of training windows that wait still from a random index on (``data.windows.hold_tails``): the
     expert's windows never stop, so plans conditioned to end at the goal at H - 1 spend the whole horizon
     getting there; trained with some windows that arrive early and wait, a plan may too (0: Diffuser's)."""
+    precision: str = "fp32"
+    """``fp32``, or ``bf16``: the network's forward and backward passes under bfloat16 autocast (weights,
+    optimizer and loss stay float32); refused on a device without bfloat16 kernels."""
+    compile: bool = False
+    """Train through ``torch.compile``'d network (compiles at the first step; may be changed on resume)."""
 
     def __post_init__(self):
         maze_horizon(self.maze)
         _check_horizon(self.maze, self.horizon, self.stride)
         check_prior(self.process, self.prior)
+        check_optimization(self)
         if not 0 <= self.hold_share <= 1:
             raise BridgeplanError(f"hold_share must be in [0, 1], got {self.hold_share}")
+        if self.grad_accum < 1:
+            raise BridgeplanError(f"grad_accum must be >= 1, got {self.grad_accum}")
+        if not 0 <= self.ema_decay <= 1:
+            raise BridgeplanError(f"ema_decay must be in [0, 1], got {self.ema_decay}")
+        if self.ema_every < 1 or self.ema_start < 0:
+            raise BridgeplanError(f"ema_every must be >= 1 and ema_start >= 0, got {self.ema_every}, {self.ema_start}")
+        if self.precision not in PRECISIONS:
+            raise BridgeplanError(f"unknown precision {self.precision!r}: choose from {', '.join(PRECISIONS)}")
 
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
@@ -126,6 +143,20 @@ class TrainConfig:
     def label(self) -> str:
         """The method's name in tables and figures, e.g. ``bridge (line)``, ``DDPM, hold 0.5``."""
         return method_label(self.process, self.prior, self.hold_share)
+
+
+PRECISIONS = ("fp32", "bf16")
+
+
+def check_optimization(config) -> None:
+    """The fields every training config shares, checked before anything is built or written."""
+    for name in ("steps", "batch_size", "checkpoint_every", "log_every"):
+        if getattr(config, name) <= 0:
+            raise BridgeplanError(f"{name} must be positive, got {getattr(config, name)}")
+    if not (math.isfinite(config.lr) and config.lr > 0):
+        raise BridgeplanError(f"lr must be a positive, finite number, got {config.lr}")
+    if not (math.isfinite(config.minutes) and config.minutes >= 0):
+        raise BridgeplanError(f"minutes must be >= 0, got {config.minutes}")
 
 
 def method_label(process: Process, prior: str, hold_share: float = 0.0) -> str:
@@ -169,6 +200,7 @@ class PriorTrainConfig:
     threads: int = 0
 
     def __post_init__(self):
+        check_optimization(self)
         horizon, stride = plan_shape(self.maze, self.preset)
         if self.horizon == 0:
             object.__setattr__(self, "horizon", horizon)

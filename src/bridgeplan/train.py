@@ -34,7 +34,7 @@ from bridgeplan.runs import build_model, build_prior, build_prior_net, load_wind
 from bridgeplan.trajectory import TRANSITION_DIM, window_conditions
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
-_RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every"}
+_RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every", "compile"}
 
 
 @dataclass
@@ -49,15 +49,16 @@ class TrainJob:
     grad_accum: int = 1
     ema: tuple[float, int, int] | None = None  # (decay, every, start)
 
-    def accumulate_gradients(self, windows, gen: torch.Generator, device: torch.device) -> float:
-        """Draw ``grad_accum`` batches of windows, backpropagate their loss; returns the summed loss."""
-        total = 0.0
+    def accumulate_gradients(self, windows, gen: torch.Generator, device: torch.device) -> torch.Tensor:
+        """Draw ``grad_accum`` batches of windows, backpropagate their loss; returns the summed loss as a tensor
+        on ``device`` (reading it would make the host wait for the device: the loop checks it every few steps)."""
+        total = torch.zeros((), device=device)
         for _ in range(self.grad_accum):
             idx = torch.randint(len(windows), (self.config.batch_size,), generator=gen, device=device)
-            x0 = windows.batch(idx.cpu()).to(device)
-            loss = self.loss(x0, gen) / self.grad_accum
+            with autocast(device, self.config):
+                loss = self.loss(windows.batch(idx), gen) / self.grad_accum
             loss.backward()
-            total += loss.item()
+            total += loss.detach()
         return total
 
     def apply_gradients(self, optimizer: torch.optim.Optimizer, ema: torch.nn.Module | None, step: int) -> None:
@@ -75,7 +76,17 @@ class TrainJob:
 
 
 def make_optimizer(model: torch.nn.Module, lr: float) -> torch.optim.Optimizer:
-    return torch.optim.Adam(model.parameters(), lr=lr)
+    """Adam, fused (one kernel for all parameters) where torch has it for the device: on the small networks
+    the per-parameter loop of the plain implementation costs ~10% of a step."""
+    device = next(model.parameters()).device
+    fused = device.type in ("cpu", "cuda")
+    return torch.optim.Adam(model.parameters(), lr=lr, fused=fused)
+
+
+def autocast(device: torch.device, config):
+    """The precision ``config`` trains in: bfloat16 autocast for ``bf16``, nothing for ``fp32``."""
+    bf16 = getattr(config, "precision", "fp32") == "bf16"
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16)
 
 
 def make_ema(model: torch.nn.Module) -> torch.nn.Module:
@@ -87,12 +98,13 @@ def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress
     """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
-    return _fit(planner_job(config, normalizer, device), windows, run_dir, resume, device, progress)
+    return _fit(planner_job(config, normalizer, device), windows.to(device), run_dir, resume, device, progress)
 
 
 def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> TrainJob:
     """The planner's network (fresh, on ``device``), its loss and EMA settings."""
     model = build_model(config).to(device)
+    net = torch.compile(model) if config.compile else model  # shares model's parameters
     process = config.process
     prior = build_prior(config, normalizer, device)
     rest = torch.as_tensor(normalizer.normalize(np.zeros(TRANSITION_DIM)), dtype=torch.float32, device=device)
@@ -102,7 +114,7 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
             x0 = hold_tails(x0, config.hold_share, rest, gen)
         conditions = window_conditions(x0)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
-        return process.training_loss(model, x0, x1, conditions, generator=gen)
+        return process.training_loss(net, x0, x1, conditions, generator=gen)
 
     return TrainJob("planner", config, model, loss, normalizer.to_dict(), config.grad_accum,
                     (config.ema_decay, config.ema_every, config.ema_start))
@@ -115,19 +127,47 @@ def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = Fals
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     net = build_prior_net(config.horizon).to(device)
     job = TrainJob("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
-    return _fit(job, windows, run_dir, resume, device, progress)
+    return _fit(job, windows.to(device), run_dir, resume, device, progress)
 
 
 def _setup(config) -> torch.device:
-    for name in ("steps", "batch_size"):
-        if getattr(config, name) <= 0:
-            raise BridgeplanError(f"{name} must be positive, got {getattr(config, name)}")
-    if config.minutes < 0:
-        raise BridgeplanError(f"minutes must be >= 0, got {config.minutes}")
+    """The device, its threads and the seed; refuses what the device cannot do before anything is written."""
     device = resolve_device(config.device)
     configure_threads(config.threads, device)
+    if getattr(config, "precision", "fp32") == "bf16" and not bf16_supported(device):
+        raise BridgeplanError(f"precision bf16 asked for, but {device} has no bfloat16 kernels here "
+                              "(train in fp32)")
+    if getattr(config, "compile", False):
+        check_compiler(device)
     torch.manual_seed(config.seed)  # the network's initial weights
     return device
+
+
+def bf16_supported(device: torch.device) -> bool:
+    """Whether ``device`` runs bfloat16 convolutions natively (on a CPU: oneDNN with AVX-512 BF16 or AMX)."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    if device.type == "cpu":
+        return torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported()
+    return False
+
+
+def check_compiler(device: torch.device) -> None:
+    """:class:`BridgeplanError` unless ``torch.compile`` can build kernels for ``device`` here."""
+    import shutil
+
+    import torch._dynamo
+
+    if not torch._dynamo.is_dynamo_supported():
+        raise BridgeplanError("--compile: torch.compile is not supported on this Python / torch build")
+    if device.type == "cpu" and not (shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")):
+        raise BridgeplanError("--compile: torch.compile needs a C++ compiler for CPU kernels; none is on PATH")
+    if device.type == "cuda":
+        try:
+            import triton  # noqa: F401
+        except ImportError:
+            raise BridgeplanError("--compile: torch.compile needs triton for CUDA kernels; it is not installed"
+                                  ) from None
 
 
 def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> None:
@@ -235,31 +275,48 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
                unit="step", dynamic_ncols=True)
     model.train()
     last_saved = step
+    # Losses are read back every check_every steps (and before every checkpoint), not every step: on a GPU each
+    # read makes the host wait for the device. On a CPU reading is free, so every step is checked at once.
+    check_every = 1 if device.type == "cpu" else config.log_every
+    unchecked: list[torch.Tensor] = []
+
+    def check_losses() -> float:
+        """The unchecked steps' losses, read back at once; the first non-finite one stops training."""
+        values = torch.stack(unchecked).tolist()
+        unchecked.clear()
+        for at, value in enumerate(values, start=step - len(values) + 1):
+            if not math.isfinite(value):
+                raise BridgeplanError(
+                    f"loss became {value} at step {at}; stopped. The last good checkpoint "
+                    f"(step {last_saved}) is kept in {ckpt_path}" if last_saved else
+                    f"loss became {value} at step {at}; stopped before any checkpoint was written")
+        return values[-1]
+
     t_start, t_log, step_log = time.perf_counter(), time.perf_counter(), step
     elapsed0 = elapsed
     try:
         while step < config.steps and elapsed < budget:
-            total = job.accumulate_gradients(windows, gen, device)
-            if not math.isfinite(total):
-                raise BridgeplanError(
-                    f"loss became {total} at step {step + 1}; stopped. The last good checkpoint "
-                    f"(step {last_saved}) is kept in {ckpt_path}" if last_saved else
-                    f"loss became {total} at step {step + 1}; stopped before any checkpoint was written")
+            unchecked.append(job.accumulate_gradients(windows, gen, device))
             step += 1
             job.apply_gradients(optimizer, ema, step)
             elapsed = elapsed0 + time.perf_counter() - t_start
             bar.update(1)
-            if step % config.log_every == 0:
+            log_due, save_due = step % config.log_every == 0, step % config.checkpoint_every == 0
+            if len(unchecked) >= check_every or log_due or save_due:
+                loss = check_losses()  # before any checkpoint: a non-finite step is never saved
+            if log_due:
                 now = time.perf_counter()
                 rate = (step - step_log) / max(now - t_log, 1e-9)
                 t_log, step_log = now, step
-                bar.set_postfix(loss=f"{total:.4f}", steps_per_s=f"{rate:.1f}")
+                bar.set_postfix(loss=f"{loss:.4f}", steps_per_s=f"{rate:.1f}")
                 if writer is not None:
-                    writer.add_scalar("loss", total, step)
+                    writer.add_scalar("loss", loss, step)
                     writer.add_scalar("steps_per_s", rate, step)
-            if step % config.checkpoint_every == 0:
+            if save_due:
                 save()
                 last_saved = step
+        if unchecked:
+            check_losses()
         if step != last_saved:
             save()
     finally:

@@ -48,8 +48,14 @@ class WindowDataset(torch.utils.data.Dataset):
         return self.data[int(self.starts[i]) + self._offsets]
 
     def batch(self, indices: torch.Tensor) -> torch.Tensor:
-        """Windows ``[len(indices), horizon, 6]`` in one gather."""
-        return self.data[self.starts[torch.as_tensor(indices)][:, None] + self._offsets]
+        """Windows ``[len(indices), horizon, 6]`` in one gather (on the device the data is on)."""
+        return self.data[self.starts[torch.as_tensor(indices, device=self.data.device)][:, None] + self._offsets]
+
+    def to(self, device: torch.device | str) -> "WindowDataset":
+        """Moves the windows' data to ``device`` (in place; returns ``self``): training gathers its batches there,
+        so no batch crosses from host to device."""
+        self.starts, self.data, self._offsets = (t.to(device) for t in (self.starts, self.data, self._offsets))
+        return self
 
 
 def hold_tails(x: torch.Tensor, share: float, rest: torch.Tensor, generator: torch.Generator | None = None
