@@ -3,6 +3,7 @@ store, and damaged files. Every command is the real CLI in a subprocess, with ti
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import random
@@ -321,9 +322,10 @@ def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
     assert sum(added) == len(rows), outs
     runs = sorted((results / "runs").iterdir())
     assert len(runs) == 5  # the prior and four planners
+    logged = importlib.util.find_spec("tensorboard") is not None  # an optional extra: without it, no logs
     for run in runs:
         # one TensorBoard log per training: each run was trained by one sweep, once
-        assert len(list((run / "tensorboard").iterdir())) == 1, run
+        assert len(list((run / "tensorboard").iterdir())) == 1 if logged else not (run / "tensorboard").exists(), run
         assert sorted(p.name for p in (run / "snapshots").iterdir())[-1] == "step_00000002.pt"
 
 
