@@ -23,9 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.analysis import (BEST, FULL, OPEN_LOOP, Choice, Results, best, finding_verdict, fmt_diff,
-                                 fmt_mean_se, label, load_csvs, mean_se, method, paired, resolve, table)
+from bridgeplan.analysis.keys import OPEN_LOOP, label, method
+from bridgeplan.analysis.load import Results, load_csvs
+from bridgeplan.analysis.select import BEST, FULL, Choice, best, resolve
 from bridgeplan.analysis.select import steps as choice_steps
+from bridgeplan.analysis.stats import finding_verdict, mean_se, paired
+from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.replan import Execution
 
 HERE = Path(__file__).resolve().parent

@@ -102,8 +102,9 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
             if column in r and r[column] != value:
                 raise BridgeplanError(f"{where}: column {column} is {r[column]!r}, its config says {value!r}")
         sampler = r["sampler"] if "sampler" in r else None  # None: the config's process's sampling tag
-        key = key_of(process, prior, hold_share=hold, sampler=sampler,
-                     execution=parse_execution(r.get("execution") or ""), multi_task=bool(int(r.get("multi_task") or 0)))
+        execution = parse_execution(r.get("execution") or "")
+        key = key_of(process, prior, hold_share=hold, sampler=sampler, execution=execution,
+                     multi_task=bool(int(r.get("multi_task") or 0)))
         p50, p95 = _float(r.get("decision_ms_p50")), _float(r.get("decision_ms_p95"))
         return Row(key=key, split=split_of(r["experiment"]), seed=int(r["seed"]), step=int(r["step"]),
                    nfe=int(r["nfe"]), score=float(r["score_minari"]), score_se=float(r["score_minari_se"]),
