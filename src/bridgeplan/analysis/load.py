@@ -113,6 +113,8 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
                    decision_ms=(p50, p95) if p50 is not None else None, maze=r["maze"], experiment=r["experiment"],
                    run_name=r["run_name"], episodes=int(r["episodes"]), eval_seed=int(r["eval_seed"]),
                    code_version=r.get("code_version", ""), score_d4rl=_float(r.get("score_d4rl")), source=source)
+    except BridgeplanError as e:
+        raise BridgeplanError(str(e) if str(e).startswith(where) else f"{where}: {e}") from None
     except (KeyError, ValueError, json.JSONDecodeError) as e:
         raise BridgeplanError(f"{where}: {type(e).__name__}: {e}") from None
 
