@@ -142,6 +142,13 @@ def test_fixed_and_full_nfe_need_no_validation():
     assert resolve(results, Choice(LINE, BEST), 2000) is None  # nothing at that step
 
 
+def test_a_choice_of_one_candidate_still_needs_validation():
+    results = Results([row(LINE, "test", 1, 0, 90.0)])
+    assert resolve(results, Choice(LINE, 1), 1000) == Point(LINE, 1000, 1)
+    assert resolve(results, Choice(LINE, BEST), 1000) is None  # "best" on validation: there is none
+    assert resolve(results, Choice(LINE, 1, among=(OPEN_LOOP,)), 1000) is None
+
+
 def test_choice_among_executions():
     # pursuit 0.5: validation 60, test 95; pursuit 1: validation 70, test 75. Validation picks pursuit 1.
     rows = [row(LINE.replace(execution=PURSUIT[0]), "validation", 1, 0, 60),
@@ -207,8 +214,9 @@ def test_keys_of_samplers_holds_executions_and_version_1_rows():
                               multi_task=hold.key.multi_task)
     assert label(hold.key) == "DDPM, hold 0.5"
     assert describe(hold.key).startswith("DDPM, hold 0.5, N=16, replan32-arrival-keep, ")
-    v1 = row_from_csv(first("umaze-cpu-small/results.csv", process="bridge", prior="line"))
-    assert v1.key.execution == OPEN_LOOP and not v1.key.multi_task and v1.calls == v1.nfe and v1.decision_ms is None
+    v1 = row_from_csv(first("umaze-cpu-small/results.csv", process="bridge", prior="line", nfe="4"))
+    assert v1.key.execution == OPEN_LOOP and not v1.key.multi_task and v1.decision_ms is None
+    assert v1.calls == v1.nfe == 4  # version 1 has no calls column: one call per NFE
     assert label(v1.key) == "bridge (line; beta_max=0.3)"
     with pytest.raises(BridgeplanError):
         method("bridge", "line", steps=16, beta=0.3)
