@@ -273,3 +273,7 @@ def script(name: str):
 
 def test_findings_md_regenerates_from_the_committed_csvs():
     assert script("findings").render() + "\n" == (RESULTS / "findings.md").read_text()
+
+
+def test_prior_curves_md_regenerates_from_the_committed_results():
+    assert script("prior_curves").render() + "\n" == (RESULTS / "prior-curves.md").read_text()
