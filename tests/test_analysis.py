@@ -277,3 +277,7 @@ def test_findings_md_regenerates_from_the_committed_csvs():
 
 def test_prior_curves_md_regenerates_from_the_committed_results():
     assert script("prior_curves").render() + "\n" == (RESULTS / "prior-curves.md").read_text()
+
+
+def test_controllers_md_regenerates_from_the_committed_csvs():
+    assert script("controllers_table").render() + "\n" == (RESULTS / "controllers.md").read_text()
