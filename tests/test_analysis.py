@@ -11,7 +11,7 @@ import pytest
 
 from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, describe, execution_from_dict, label, method, parse_execution
 from bridgeplan.analysis.load import Point, Results, Row, read_csv, read_eval_json, row_from_csv
-from bridgeplan.analysis.select import BEST, FULL, Choice, best, resolve
+from bridgeplan.analysis.selection import BEST, FULL, Choice, best, resolve
 from bridgeplan.analysis.stats import compare, finding_verdict, goal_verdict, mean_se, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.errors import BridgeplanError

@@ -16,7 +16,7 @@ import numpy as np
 
 from bridgeplan.analysis.keys import OPEN_LOOP, label
 from bridgeplan.analysis.load import Point, Results, Row, load_csvs
-from bridgeplan.analysis.select import Choice, resolve
+from bridgeplan.analysis.selection import Choice, resolve
 from bridgeplan.analysis.tables import bold, fmt_mean_se
 from bridgeplan.replan import Execution
 

@@ -25,8 +25,8 @@ import numpy as np
 
 from bridgeplan.analysis.keys import OPEN_LOOP, label, method
 from bridgeplan.analysis.load import Results, load_csvs
-from bridgeplan.analysis.select import BEST, FULL, Choice, best, resolve
-from bridgeplan.analysis.select import steps as choice_steps
+from bridgeplan.analysis.selection import BEST, FULL, Choice, best, resolve
+from bridgeplan.analysis.selection import steps as choice_steps
 from bridgeplan.analysis.stats import finding_verdict, mean_se, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.replan import Execution

@@ -28,7 +28,7 @@ import numpy as np
 
 from bridgeplan.analysis.keys import MethodKey, label, method
 from bridgeplan.analysis.load import Point, Results, load_csvs, read_csv, read_eval_json
-from bridgeplan.analysis.select import best, split_mean
+from bridgeplan.analysis.selection import best, split_mean
 from bridgeplan.analysis.stats import Paired, goal_verdict, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, rule
 
