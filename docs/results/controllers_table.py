@@ -10,21 +10,61 @@ Usage: python docs/results/controllers_table.py > docs/results/controllers.md
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
-from findings import MAZES, PURSUIT, choose, load
 
-COLUMNS = ("", *PURSUIT)
+from bridgeplan.analysis.keys import OPEN_LOOP, label
+from bridgeplan.analysis.load import Point, Results, Row, load_csvs
+from bridgeplan.analysis.selection import Choice, resolve
+from bridgeplan.analysis.tables import bold, fmt_mean_se
+from bridgeplan.replan import Execution
+
+HERE = Path(__file__).resolve().parent
+MAZES = ("umaze", "medium", "large")
+STORES = ("curves", "hold", "consistent-priors")
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
+PURSUIT = tuple(Execution(controller="pursuit", lookahead=r) for r in (0.5, 1, 1.5))
+"""The open-loop pursuit executions of the controllers experiment; the validation episodes pick one."""
+COLUMNS = (OPEN_LOOP, *PURSUIT)
+REPLAN = 32
 
 
-def cell(by_seed: dict, bold: bool) -> str:
-    scores = np.array([e.score for e in by_seed.values()])
-    se = scores.std(ddof=1) / np.sqrt(len(scores)) if len(scores) > 1 else float("nan")
-    text = f"{scores.mean():.1f} ± {se:.1f}"
-    return (f"**{text}**" if bold else text) + f" ({np.mean([e.success for e in by_seed.values()]):.2f})"
+def cell(rows: dict[int, Row], chosen: bool) -> str:
+    text = fmt_mean_se([e.score for e in rows.values()])
+    return (bold(text) if chosen else text) + f" ({np.mean([e.success for e in rows.values()]):.2f})"
 
 
-def main() -> int:
+def replanned(execution: Execution) -> bool:
+    """Replanned every 32 steps and pursued at lookahead 1 (from the warm prior or not)."""
+    return execution.replan_every == REPLAN and execution.controller == "pursuit" and execution.lookahead == 1
+
+
+def maze_rows(results: Results, maze: str, multi: int) -> list[str]:
+    pursued = [key for key in results.keys() if key.multi_task == bool(multi) and key.execution in PURSUIT
+               and not key.hold_share]
+    methods = sorted({key.replace(execution=OPEN_LOOP) for key in pursued}, key=label)
+    lines = []
+    for method in methods:
+        pursuit1 = method.replace(execution=PURSUIT[1])
+        step = results.steps(pursuit1)[-1]
+        for nfe in sorted(results.nfes(pursuit1, step)):
+            picked = resolve(results, Choice(method, nfe, among=PURSUIT), step)
+            cells = []
+            for ex in COLUMNS:
+                point = Point(method.replace(execution=ex), step, nfe)
+                rows = results.rows(point)
+                cells.append(cell(rows, picked == point) if rows else "-")
+            replan = [key for key in results.keys() if key.replace(execution=OPEN_LOOP) == method
+                      and replanned(key.execution)]
+            rows = results.rows(Point(replan[0], step, nfe)) if replan else {}
+            cells.append(cell(rows, False) if rows else "-")
+            lines.append(f"| {maze} | {label(method)} | {nfe} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def render() -> str:
+    """controllers.md's text."""
     lines = ["# Executing plans: tracking against pursuit (issue 13)", "",
              "Made by `python docs/results/controllers_table.py` from the `controllers` rows of "
              "docs/results/<maze>-v2-curves/results.csv (run_controllers.sh): each run's final snapshot, 3 training "
@@ -32,30 +72,19 @@ def main() -> int:
              "Diffuser's controller; `pursuit R`: the plan's path at the expert's pace, toward the first planned "
              "position R away; bold: the lookahead the validation episodes pick; `replan32 pursuit 1`: a new plan "
              "every 32 steps (bridge and flow from the warm prior).", ""]
+    results = {maze: load_csvs(HERE / f"{maze}-v2-{store}" / "results.csv" for store in STORES) for maze in MAZES}
     for multi in (0, 1):
         lines += [f"## {'Multi2D' if multi else 'single-task'}", "",
                   "| maze | method | NFE | track | pursuit 0.5 | pursuit 1 | pursuit 1.5 | replan32 pursuit 1 |",
                   "|---|---|---|---|---|---|---|---|"]
         for maze in MAZES:
-            table = load(maze)
-            methods = sorted({key[0] for key in table if key != "validation" and key[1] == multi
-                              and key[2] in PURSUIT and "hold" not in key[0]})
-            for method in methods:
-                by_step = table[(method, multi, "pursuit1")]
-                step = max(by_step)
-                for nfe in sorted(by_step[step]):
-                    picked = choose(table, (method, nfe, PURSUIT), multi, step)
-                    cells = []
-                    for ex in COLUMNS:
-                        by_seed = table.get((method, multi, ex), {}).get(step, {}).get(nfe)
-                        cells.append(cell(by_seed, picked == (nfe, ex)) if by_seed else "-")
-                    replan = [k for k in table if k[0] == method and k[1] == multi and k[2].startswith("replan32")
-                              and k[2].endswith("pursuit1")]
-                    by_seed = table[replan[0]].get(step, {}).get(nfe) if replan else None
-                    cells.append(cell(by_seed, False) if by_seed else "-")
-                    lines.append(f"| {maze} | {method} | {nfe} | " + " | ".join(cells) + " |")
+            lines += maze_rows(results[maze], maze, multi)
         lines.append("")
-    print("\n".join(lines))
+    return "\n".join(lines)
+
+
+def main() -> int:
+    print(render())
     return 0
 
 

@@ -21,92 +21,89 @@ Usage: python docs/results/prior_curves.py > docs/results/prior-curves.md
 
 from __future__ import annotations
 
-import json
 import sys
+from pathlib import Path
 
 import numpy as np
-from findings import HERE, STORES, VALIDATION, Eval, load, rows
 
-from bridgeplan.experiments.runner import VALIDATION_SUFFIX
-from bridgeplan.report import method_label
+from bridgeplan.analysis.keys import MethodKey, label, method
+from bridgeplan.analysis.load import Point, Results, load_csvs, read_csv, read_eval_json
+from bridgeplan.analysis.selection import best, split_mean
+from bridgeplan.analysis.stats import Paired, goal_verdict, paired
+from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, rule
 
+HERE = Path(__file__).resolve().parent
+STORES = ("curves", "hold", "consistent-priors")
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
 MAZES = ("umaze", "medium")
 PRIORS = ("gaussian", "line", "learned")
 FLOW_NFE = 2
-CONSISTENT = "bridge (line; consistent=True)"
+N = 16
+"""Diffusion steps of every run in these stores."""
+DDPM = method("ddpm", steps=N)
+CONSISTENT = method("bridge", "line", steps=N, consistent=True)
 SWEEP = "sampler-sweep"
 """The store of run_sampler_sweep.sh (docs/results/<maze>-v2-sampler-sweep): the samplers experiment, 5 seeds."""
 
 
-def at_step(table: dict, method: str, step: int) -> dict[int, dict[int, float]]:
-    """``{nfe: {seed: score}}`` of an open-loop single-task series at ``step``."""
-    by_nfe = table.get((method, 0, ""), {}).get(step, {})
-    return {nfe: {seed: e.score for seed, e in seeds.items()} for nfe, seeds in by_nfe.items()}
+def load(maze: str, stores=STORES) -> Results:
+    return load_csvs(HERE / f"{maze}-v2-{store}" / "results.csv" for store in stores)
 
 
-def best(by_nfe: dict[int, dict[int, float]]) -> tuple[int, dict[int, float]] | None:
-    if not by_nfe:
-        return None
-    nfe = max(by_nfe, key=lambda k: np.mean(list(by_nfe[k].values())))
-    return nfe, by_nfe[nfe]
+def scores(results: Results, point: Point | None) -> dict[int, float]:
+    return results.values(point) if point else {}
 
 
-def prior_alone(table: dict, maze: str, prior: str, method: str, step: int) -> dict[int, float] | None:
+def best_nfe(results: Results, key: MethodKey, step: int) -> Point | None:
+    """The NFE of ``key`` with the best mean over seeds on the test episodes at ``step``."""
+    return best(results, results.points(key, step), split="test")
+
+
+def prior_alone(results: Results, maze: str, prior: str, key: MethodKey, step: int) -> dict[int, float] | None:
     """Per-seed score of the prior alone, tracked, on the same episodes (None for Gaussian noise)."""
     if prior == "line":
-        seeds = table.get((method, 0, ""), {}).get(step, {}).get(FLOW_NFE, {})
-        return {seed: e.floor for seed, e in seeds.items()} or None
+        return results.values(Point(key, step, FLOW_NFE), field="floor") or None
     if prior == "learned":
-        paths = sorted((HERE / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))
-        rows = [json.loads(p.read_text()) for p in paths]
-        return {r["seed"]: r["prior_only_learned"]["score"]["minari"]["mean"] for r in rows} or None
+        rows = [read_eval_json(p) for p in sorted((HERE / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))]
+        return {r.seed: r.floor_learned for r in rows} or None
     return None
 
 
-def diff(a: dict[int, float], b: dict[int, float]) -> tuple[float, float, int] | None:
-    seeds = sorted(set(a) & set(b))
-    if len(seeds) < 2:
-        return None
-    d = np.array([a[s] - b[s] for s in seeds])
-    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d))), len(seeds)
+def diff(a: dict[int, float], b: dict[int, float]) -> Paired | None:
+    """Per-seed differences over the seeds both have; None under two."""
+    return paired(a, b, seeds="common") if len(set(a) & set(b)) >= 2 else None
 
 
 def mean_se(by_seed: dict[int, float]) -> str:
-    v = np.array(list(by_seed.values()))
-    return f"{v.mean():.1f} ± {v.std(ddof=1) / np.sqrt(len(v)):.1f}" if len(v) > 1 else f"{v.mean():.1f}"
+    return fmt_mean_se(by_seed, one_seed="mean")
 
 
-def verdict(d, rule: str) -> str:
+def verdict(d: Paired | None, rule: str) -> str:
     """reaches: yes (mean >= 0), "within noise" (below, by less than two standard errors) or no;
     clears: yes (more than two standard errors above) or no."""
-    if d is None:
-        return "not measured"
-    mean, se, _ = d
-    if rule == "reaches":
-        word = "yes" if mean >= 0 else "within noise" if mean + 2 * se >= 0 else "no"
-    else:
-        word = "yes" if mean - 2 * se > 0 else "no"
-    return f"{word} ({mean:+.1f} ± {se:.1f})"
+    return "not measured" if d is None else f"{goal_verdict(d, rule)} ({fmt_diff(d)})"
+
+
+def best_cell(results: Results, point: Point | None, name=lambda p: str(p.nfe)) -> str:
+    return f"{mean_se(scores(results, point))} ({name(point)})" if point else "-"
 
 
 def reproduction(maze: str) -> str:
     """How closely the consistent-priors store's retrained runs reproduce the rows the other stores hold."""
-    def scores(stores):
-        return {(method_label(r), r.get("multi_task"), r.get("execution"), r["experiment"].endswith(VALIDATION_SUFFIX),
-                 r["step"], r["nfe"], r["seed"]): (float(r["score_minari"]), float(r["score_minari_se"]),
-                                                  float(r["floor_minari"]), r["code_version"])
-                for r in rows(maze, stores)}
+    def evaluations(stores):  # the last row of each evaluation
+        return {(r.key, r.split, r.step, r.nfe, r.seed): r for store in stores
+                for path in [HERE / f"{maze}-v2-{store}" / "results.csv"] if path.exists() for r in read_csv(path)}
 
-    retrained, held = scores(STORES[-1:]), scores(STORES[:-1])
-    both = sorted(set(retrained) & set(held))
+    retrained, held = evaluations(STORES[-1:]), evaluations(STORES[:-1])
+    both = sorted(set(retrained) & set(held), key=lambda k: (label(k[0]), k[0].multi_task, k[0].tag, *k[1:]))
     if not both:
         return ""
-    gaps = np.array([retrained[k][0] - held[k][0] for k in both])
-    episode_se = np.mean([held[k][1] for k in both])
-    floors_equal = all(retrained[k][2] == held[k][2] for k in both)
-    versions = sorted({v[3] for v in [*map(retrained.get, both), *map(held.get, both)]})
-    return (f"**Reproduction.** {', '.join(sorted({k[0] for k in both}))}: the {len(both)} rows the other store "
-            f"holds were retrained and re-evaluated here (codes {', '.join(versions)}, another machine): "
+    gaps = np.array([retrained[k].score - held[k].score for k in both])
+    episode_se = np.mean([held[k].score_se for k in both])
+    floors_equal = all(retrained[k].floor == held[k].floor for k in both)
+    versions = sorted({r.code_version for k in both for r in (retrained[k], held[k])})
+    return (f"**Reproduction.** {', '.join(sorted({label(k[0]) for k in both}))}: the {len(both)} rows the other "
+            f"store holds were retrained and re-evaluated here (codes {', '.join(versions)}, another machine): "
             f"difference {gaps.mean():+.2f} on average, {np.abs(gaps).mean():.2f} in absolute value, at most "
             f"{np.abs(gaps).max():.2f}, against a standard error of {episode_se:.2f} over each row's 200 "
             f"episodes; {int((gaps == 0).sum())} identical. The straight-line floors on the same episodes are "
@@ -117,22 +114,22 @@ def reproduction(maze: str) -> str:
             f"The table takes the first store's rows.")
 
 
-def mean_sampler_table(table: dict, maze: str) -> list[str]:
+def mean_sampler_table(results: Results, maze: str) -> list[str]:
     """The consistent bridge from the line sampled by its posterior means at NFE 2 (run_bridge_sampler.sh's eval
     JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
     DDPM's best NFE at each step, per seed, and against the line alone."""
     here = HERE / f"{maze}-v2-consistent-samplers"
     lines = []
-    by_step: dict[int, list[dict]] = {}
+    by_step: dict[int, list] = {}
     for path in [*here.glob("step*/s[0-9]-mean-nfe2-track.json"), *here.glob("s[0-9]-mean-nfe2-track.json")]:
-        row = json.loads(path.read_text())
-        by_step.setdefault(row["step"], []).append(row)
+        row = read_eval_json(path)
+        by_step.setdefault(row.step, []).append(row)
     for step, evals in sorted(by_step.items()):
-        ours = {r["seed"]: r["score"]["minari"]["mean"] for r in evals}
-        alone = {r["seed"]: r["floor_line"]["score"]["minari"]["mean"] for r in evals}
-        ddpm = best(at_step(table, "DDPM", step))
-        lines.append(f"| {step} | {mean_se(ours)} | {mean_se(ddpm[1])} ({ddpm[0]}) | "
-                     f"{verdict(diff(ours, ddpm[1]), 'reaches')} | {verdict(diff(ours, alone), 'clears')} |")
+        ours = {r.seed: r.score for r in evals}
+        alone = {r.seed: r.floor for r in evals}
+        ddpm = best_nfe(results, DDPM, step)
+        reaches, clears = verdict(diff(ours, scores(results, ddpm)), "reaches"), verdict(diff(ours, alone), "clears")
+        lines.append(f"| {step} | {mean_se(ours)} | {best_cell(results, ddpm)} | {reaches} | {clears} |")
     if not lines:
         return []
     return [f"### {maze}: the consistent bridge (line) by its posterior means at NFE 2", "",
@@ -148,53 +145,51 @@ def declared_table(maze: str) -> list[str]:
     the I2SB bridge's best NFE from the line (docs/results/<maze>-v2-curves, seeds 0-2, paired by seed) and
     the line alone; per-seed differences over the sweep's 5 seeds. A second table gives every candidate on the
     test episodes against DDPM's best, for reference."""
-    table = load(maze, (SWEEP,))
+    results = load(maze, (SWEEP,))
 
-    def final(method: str) -> dict:  # {nfe: {seed: Eval}} on the validation episodes, final snapshot
-        by_step = table[VALIDATION].get((method, 0, ""), {})
-        return by_step[max(by_step)] if by_step else {}
+    def final(key: MethodKey) -> list[Point]:  # the validation episodes' points at the final snapshot
+        steps = results.steps(key, "validation")
+        return results.points(key, steps[-1], "validation") if steps else []
 
-    def validated(option) -> float:
-        return float(np.mean([e.score for e in final(option[0])[option[1]].values()]))
+    def named(point: Point) -> str:  # at NFE 1 both samplers make the one call to x0 the same way
+        sampler = "posterior means" if point.key.sampler == "mean" else "posterior draws"
+        return "NFE 1, one call" if point.nfe == 1 else f"{sampler}, NFE {point.nfe}"
 
-    def named(option) -> str:  # at NFE 1 both samplers make the one call to x0 the same way
-        sampler = "posterior means" if option[0].endswith("by mean") else "posterior draws"
-        return "NFE 1, one call" if option[1] == 1 else f"{sampler}, NFE {option[1]}"
-
-    def test(option, step: int) -> dict[int, Eval]:
-        return table.get((option[0], 0, ""), {}).get(step, {}).get(option[1], {})
-
-    candidates = [(m, k) for m in (CONSISTENT, f"{CONSISTENT} by mean") for k in (1, 2) if k in final(m)]
-    if not candidates:
+    candidates = [p for key in (CONSISTENT, CONSISTENT.replace(sampler="mean")) for k in (1, 2)
+                  for p in final(key) if p.nfe == k]
+    chosen = best(results, candidates, "validation")
+    if chosen is None:
         return []
-    chosen = max(candidates, key=validated)
-    steps = sorted(table[(chosen[0], 0, "")])
-    ddpm_best = {}  # step -> (sampler, nfe, {seed: score}): the best mean over DDPM's samplers and NFE
+    steps = results.steps(chosen.key)
+    ddpm_best = {}  # step -> the best point over DDPM's samplers and NFE on the test episodes
     for step in steps:
-        per_sampler = [(name, *b) for name, m in (("ancestral", "DDPM"), ("DDIM", "DDPM by ddim"))
-                       if (b := best(at_step(table, m, step)))]
-        ddpm_best[step] = max(per_sampler, key=lambda o: np.mean(list(o[2].values())))
+        ddpm_best[step] = best(results, [p for key in (DDPM, DDPM.replace(sampler="ddim"))
+                                         for p in results.points(key, step)], "test")
     i2sb = load(maze, ("curves",))
+    i2sb_line = method("bridge", "line", steps=N)
     lines = []
     for step in steps:
-        evals = test(chosen, step)
-        ours, alone = {seed: e.score for seed, e in evals.items()}, {seed: e.floor for seed, e in evals.items()}
-        sampler, k, ddpm = ddpm_best[step]
-        i2sb_best = best(at_step(i2sb, "bridge (line)", step))
+        test = Point(chosen.key, step, chosen.nfe)
+        ours, alone = results.values(test), results.values(test, field="floor")
+        ddpm = ddpm_best[step]
+        i2sb_best = best_nfe(i2sb, i2sb_line, step)
+        i2sb_scores = scores(i2sb, i2sb_best)
         lines.append(" | ".join([
-            f"| {step}", mean_se(ours), f"{mean_se(ddpm)} ({sampler}, NFE {k})",
-            f"{mean_se(i2sb_best[1])} (NFE {i2sb_best[0]})" if i2sb_best else "-", mean_se(alone),
-            verdict(diff(ours, ddpm), "reaches"), verdict(diff(ours, i2sb_best[1]) if i2sb_best else None, "reaches"),
+            f"| {step}", mean_se(ours),
+            best_cell(results, ddpm, lambda p: f"{'DDIM' if p.key.sampler == 'ddim' else 'ancestral'}, NFE {p.nfe}"),
+            best_cell(i2sb, i2sb_best, lambda p: f"NFE {p.nfe}"), mean_se(alone),
+            verdict(diff(ours, scores(results, ddpm)), "reaches"),
+            verdict(diff(ours, i2sb_scores) if i2sb_best else None, "reaches"),
             verdict(diff(ours, alone), "clears")]) + " |")
     on_test = []
     for option in candidates:
         cells = []
         for step in steps:
-            scores = {seed: e.score for seed, e in test(option, step).items()}
-            reaches = verdict(diff(scores, ddpm_best[step][2]), "reaches")
-            cells.append(f"{mean_se(scores)}; {reaches}" if scores else "-")
+            by_seed = results.values(Point(option.key, step, option.nfe))
+            reaches = verdict(diff(by_seed, scores(results, ddpm_best[step])), "reaches")
+            cells.append(f"{mean_se(by_seed)}; {reaches}" if by_seed else "-")
         on_test.append(f"| {named(option)} | " + " | ".join(cells) + " |")
-    validation = "; ".join(f"{named(o)}: {validated(o):.1f}" for o in candidates)
+    validation = "; ".join(f"{named(o)}: {split_mean(results, o, 'validation'):.1f}" for o in candidates)
     return [f"### {maze}: the goal with the bridge's setting declared on validation episodes (5 seeds)", "",
             f"The consistent bridge from the line at NFE <= 2, its sampler and NFE chosen on the validation "
             f"episodes at the final snapshot ({validation}): **{named(chosen)}**, then scored on the test episodes "
@@ -202,51 +197,49 @@ def declared_table(maze: str) -> list[str]:
             f"the test episodes at each snapshot, which favours DDPM. I2SB's best from the line: seeds 0-2 of "
             f"{maze}-v2-curves, paired by seed. (docs/results/{maze}-v2-{SWEEP}, run_sampler_sweep.sh.)", "",
             f"| step | consistent bridge ({named(chosen)}) | DDPM best (sampler, NFE) | I2SB best (line) | line alone "
-            "| reaches DDPM's best | reaches I2SB's best | clears the line alone |", "|" + "---|" * 8, *lines, "",
+            "| reaches DDPM's best | reaches I2SB's best | clears the line alone |", rule(8), *lines, "",
             "Every candidate on the test episodes and whether it reaches DDPM's best there, for reference (not a "
             "choice: picking here would favour the bridge):", "",
             "| consistent bridge (line) | " + " | ".join(f"step {step}" for step in steps) + " |",
-            "|" + "---|" * (len(steps) + 1), *on_test, ""]
+            rule(len(steps) + 1), *on_test, ""]
 
 
-def maze_table(table: dict, maze: str) -> list[str]:
+def maze_table(results: Results, maze: str) -> list[str]:
     lines = [f"## {maze}", "",
              "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
              "(NFE) | consistent bridge best (NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best "
-             "| reaches the bridges' best | clears its prior |", "|" + "---|" * 14]
-    ddpm_steps = table.get(("DDPM", 0, ""), {})
+             "| reaches the bridges' best | clears its prior |", rule(14)]
     for prior in PRIORS:
-        flow_name, bridge_name = f"flow ({prior})", f"bridge ({prior})"
-        steps = sorted(set(table.get((flow_name, 0, ""), {})) & set(ddpm_steps))
-        for step in steps:
-            flow, bridge = at_step(table, flow_name, step), at_step(table, bridge_name, step)
-            consistent = at_step(table, f"bridge ({prior}; consistent=True)", step)
-            if FLOW_NFE not in flow:
+        flow, bridge = method("flow", prior, steps=N), method("bridge", prior, steps=N)
+        consistent = method("bridge", prior, steps=N, consistent=True)
+        for step in sorted(set(results.steps(flow)) & set(results.steps(DDPM))):
+            flow_nfes = results.nfes(flow, step)
+            if FLOW_NFE not in flow_nfes:
                 continue
-            ddpm_best, bridge_best, consistent_best = best(at_step(table, "DDPM", step)), best(bridge), best(consistent)
+            ddpm_best, bridge_best = best_nfe(results, DDPM, step), best_nfe(results, bridge, step)
+            consistent_best = best_nfe(results, consistent, step)
             either = [b for b in (bridge_best, consistent_best) if b]  # I2SB's best in either variant
-            bridges_best = max(either, key=lambda b: np.mean(list(b[1].values()))) if either else None
-            alone = prior_alone(table, maze, prior, flow_name, step)
-            full = flow[max(flow)]
+            bridges_best = max(either, key=lambda p: split_mean(results, p, "test")) if either else None
+            alone = prior_alone(results, maze, prior, flow, step)
+            ours = results.values(Point(flow, step, FLOW_NFE))
 
-            def cell(by_nfe, nfe):
-                return mean_se(by_nfe[nfe]) if nfe in by_nfe else "-"
+            def cell(key, nfe):
+                by_seed = results.values(Point(key, step, nfe))
+                return mean_se(by_seed) if by_seed else "-"
 
             lines.append(" | ".join([
-                f"| {prior}", str(step), cell(flow, 1), f"**{mean_se(flow[FLOW_NFE])}**", mean_se(full),
-                cell(bridge, 1), cell(bridge, 2),
-                f"{mean_se(bridge_best[1])} ({bridge_best[0]})" if bridge_best else "-",
-                f"{mean_se(consistent_best[1])} ({consistent_best[0]})" if consistent_best else "-",
-                f"{mean_se(ddpm_best[1])} ({ddpm_best[0]})" if ddpm_best else "-",
-                mean_se(alone) if alone else "-",
-                verdict(diff(flow[FLOW_NFE], ddpm_best[1]) if ddpm_best else None, "reaches"),
-                verdict(diff(flow[FLOW_NFE], bridges_best[1]) if bridges_best else None, "reaches"),
-                verdict(diff(flow[FLOW_NFE], alone) if alone else None, "clears") if alone else "n/a (noise)",
+                f"| {prior}", str(step), cell(flow, 1), f"**{mean_se(ours)}**", cell(flow, max(flow_nfes)),
+                cell(bridge, 1), cell(bridge, 2), best_cell(results, bridge_best), best_cell(results, consistent_best),
+                best_cell(results, ddpm_best), mean_se(alone) if alone else "-",
+                verdict(diff(ours, scores(results, ddpm_best)) if ddpm_best else None, "reaches"),
+                verdict(diff(ours, scores(results, bridges_best)) if bridges_best else None, "reaches"),
+                verdict(diff(ours, alone) if alone else None, "clears") if alone else "n/a (noise)",
             ]) + " |")
     return lines
 
 
-def main() -> int:
+def render() -> str:
+    """prior-curves.md's text."""
     lines = ["# Flow matching from each prior across training (issue 15)", "",
              "Made by `python docs/results/prior_curves.py` from docs/results/<maze>-v2-{curves,consistent-priors}/"
              "results.csv (data "
@@ -255,10 +248,14 @@ def main() -> int:
              "bridges (I2SB or consistent) from the same prior, picked on these episodes (which favours them), "
              "per seed; see the script's docstring.", ""]
     for maze in MAZES:
-        table = load(maze)
-        lines += [*maze_table(table, maze), "", reproduction(maze), "", *mean_sampler_table(table, maze),
+        results = load(maze)
+        lines += [*maze_table(results, maze), "", reproduction(maze), "", *mean_sampler_table(results, maze),
                   *declared_table(maze)]
-    print("\n".join(lines))
+    return "\n".join(lines)
+
+
+def main() -> int:
+    print(render())
     return 0
 
 
