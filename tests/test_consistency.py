@@ -252,6 +252,18 @@ def test_a_process_that_does_not_predict_x0_refuses_a_correction():
         _planner(NoX0(steps=6)).with_correction(Correction((("dynamics", 0.1),)))
 
 
+@pytest.mark.parametrize("steps, form, message", [
+    ((("smoothness", 0.1),), "x0", "unknown residual 'smoothness'"),
+    ((("dynamics", -1.0),), "deep", "must be a finite number >= 0"),
+    ((), "x0", "needs at least one residual"),
+    ((("conditions", 0.1),), "x0", "use --correction-form deep"),
+])
+def test_a_correction_is_checked_when_it_is_made(steps, form, message):
+    """Before any run is loaded or plan sampled."""
+    with pytest.raises(BridgeplanError, match=message):
+        Correction(steps, form)
+
+
 def test_correction_costs_and_tags():
     deep, cheap = Correction((("kinematics", 1e-3), ("dynamics", 0.01)), "deep"), Correction((("dynamics", 0.01),))
     assert deep.tag() == "cddb-deep dynamics=0.01 kinematics=0.001"
