@@ -12,7 +12,8 @@ residual ``R`` (``[B]``, one value per plan, in physical units; the plans of a b
   so this moves x_m by ``-a alpha grad_{x_n} R``: DPS's update of x_m, its step scaled by the posterior's weight
   ``a`` on x0_hat (CDDB-deep puts it on x_m directly; the wrapper keeps the samplers untouched).
 
-Both act on every prediction, the last one (the plan) included; ``clip`` keeps the predictor's [-1, 1] contract.
+Both act on every prediction, the last one (the plan) included; ``clip`` keeps the predictor's [-1, 1] contract
+(and the deep gradient passes through ``predict_x0``'s own clip, zero where it clips).
 
 Residuals (``R = 1/2 sum e^2`` over the error ``e`` below, per plan, physical units from the run's normalizer):
 
@@ -32,6 +33,11 @@ Residuals (``R = 1/2 sum e^2`` over the error ``e`` below, per plan, physical un
   the position part divided by ``k h`` (so both parts are m/s). Exact at stride 1 in free space (walls push);
   at stride k > 1 it holds row i's action for the k steps (zero-order hold): the data do not (their actions change
   every step, with noise), so there a data-like plan has a residual of its own; ``kinematics`` has no actions.
+
+**Step sizes.** alpha is in R's units (m/s squared) against normalized x0: the position parts, divided by k h, make
+R stiff there, and one gradient step on them is stable only for ``alpha < (k h)^2 / (2 s_p^2)`` or so (``s_p`` the
+normalizer's half-range of a position column): about 1e-4 at stride 2 on umaze's ranges, 4e-4 at stride 8 on
+medium's; the velocity parts alone allow about 100 times more. Choose alpha on validation episodes.
 
 :class:`Correction` is the sampling option (``Planner.with_correction``; ``bridgeplan eval --correction``); its
 cost is one extra backward pass per network call with the deep form, counted as two forward passes
