@@ -274,6 +274,7 @@ def _add_eval_commands(sub) -> None:
                    help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
                         "flow euler (default) or stochastic; bridge posterior (default) or mean (no noise)")
     p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
+    _correction_flags(p)
     p.add_argument("--compile", action="store_true",
                    help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
     p.add_argument("--device", default="auto")
@@ -296,6 +297,27 @@ def _add_eval_commands(sub) -> None:
     _execution_flags(p)
     _threads_flag(p)
     p.set_defaults(func=_cmd_render)
+
+
+def _correction_flags(p) -> None:
+    g = p.add_argument_group("consistency correction of every x0 prediction (CDDB; default: none)")
+    g.add_argument("--correction", action="append", metavar="RESIDUAL=STEP",
+                   help="move each x0 prediction down the gradient of a residual, STEP (>= 0) its step size "
+                        "(repeatable, one per residual): dynamics (PointMaze's point mass), kinematics (positions "
+                        "integrate velocities) or conditions (start/goal, deep form only)")
+    g.add_argument("--correction-form", default=None, metavar="FORM",
+                   help="x0 (CDDB: the gradient in x0 space; default) or deep (CDDB-deep: the gradient w.r.t. the "
+                        "network's input, one backward pass per call)")
+
+
+def _correction(args):
+    from bridgeplan.consistency import Correction
+
+    if not args.correction:
+        if args.correction_form is not None:
+            raise BridgeplanError("--correction-form needs --correction RESIDUAL=STEP")
+        return None
+    return Correction.parse(args.correction, args.correction_form or "x0")
 
 
 def _execution_flags(p) -> None:
@@ -346,13 +368,15 @@ def _cmd_eval(args) -> int:
     from bridgeplan.runs import run_dir_of
 
     execution = _execution(args)
+    correction = _correction(args)
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
                       device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile,
-                      execution=execution).to_dict()
+                      execution=execution, correction=correction).to_dict()
     name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
         "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
-        "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "")
+        "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "") + (
+        f"-{correction.file_tag()}" if correction else "")
     out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
     write_result(result, out)
     if args.json:

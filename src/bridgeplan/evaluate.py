@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from bridgeplan import config as cfg
+from bridgeplan.consistency import Correction
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, code_version
 from bridgeplan.maze.layouts import Maze, get_maze
@@ -134,6 +135,8 @@ class EvalResult:
     """``[episodes]`` plans (decisions) made per episode; None: one each (open loop)."""
     decisions: dict = field(default_factory=dict)
     """Closed-loop / candidate runs: decision latency at batch 1 and per batch (``decision_ms_*``)."""
+    plan_residuals: dict | None = None
+    """Open loop: mean and standard error over the plans of ``Plan.residuals`` (m/s); None closed loop."""
 
     @property
     def prior(self) -> str:
@@ -141,6 +144,19 @@ class EvalResult:
 
     def score(self, convention: str = "minari") -> dict:
         return self.scores["score"][convention]
+
+    def sampling_tag(self) -> str:
+        """The process's :meth:`~bridgeplan.processes.Process.sampling_tag` and the correction's, if any."""
+        correction = self.planner.correction
+        return " ".join(t for t in (self.planner.process.sampling_tag(), correction and correction.tag()) if t)
+
+    def cost_fields(self) -> dict:
+        """``correction`` (its settings and passes per plan; None: uncorrected) and
+        ``network_call_equivalents_per_plan`` (NFE, plus 2 per backward pass of a deep correction)."""
+        c = self.planner.correction
+        return {"correction": None if c is None else c.to_dict(self.nfe),
+                "network_call_equivalents_per_plan": self.nfe if c is None else c.network_call_equivalents(self.nfe),
+                "plan_residuals": self.plan_residuals}
 
     def to_dict(self) -> dict:
         """The JSON that ``bridgeplan eval`` writes (fields: README, "Evaluation output")."""
@@ -159,7 +175,7 @@ class EvalResult:
             "batch_size": self.batch_size, "compiled": self.compile_seconds is not None,
             "compile_seconds": self.compile_seconds or 0.0,
             "per_start_cell": self.per_start_cell, **self.floors, "environment": self.environment,
-            **self.execution_fields(),
+            **self.execution_fields(), **self.cost_fields(),
         }
         out["config"] = run.config_dict if run else None
         return out
@@ -193,7 +209,7 @@ class EvalResult:
             "score_d4rl": self.score("d4rl")["mean"], "score_d4rl_se": self.score("d4rl")["se"],
             "success_rate": self.scores["success_rate"]["mean"], "plan_ms": self.plan_ms_per_plan,
             "prior_ms": self.prior_ms_per_plan, "floor_minari": self.floors["floor_line"]["score"]["minari"]["mean"],
-            "sampler": self.planner.process.sampling_tag(), "execution": self.execution.tag(),
+            "sampler": self.sampling_tag(), "execution": self.execution.tag(),
             "multi_task": int(self.tasks.multi_task),
             "calls_per_episode": self.execution_fields()["calls_per_episode"],
             "decision_ms_p50": latency.get("p50"), "decision_ms_p95": latency.get("p95"),
@@ -235,10 +251,12 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
             planner.plan(starts[:size], goals[:size], nfe, torch.Generator(device=planner.device).manual_seed(0))
         compile_s = time.perf_counter() - t0
     gen = tasks.generator(planner.device)
-    plans, prior_s, sample_s = [], 0.0, 0.0
+    plans, prior_s, sample_s, residuals = [], 0.0, 0.0, defaultdict(list)
     for lo in range(0, n, batch):
         plan = planner.plan(starts[lo:lo + batch], goals[lo:lo + batch], nfe, gen)
         plans.append(plan.states)
+        for key, values in plan.residuals.items():
+            residuals[key].append(values)
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds
     result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans), follower=execution.follower(n))
@@ -249,7 +267,8 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         per_start_cell=_per_start_cell(tasks.maze, tasks.starts_xy, result.returns),
         floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks, execution),
         plan_ms_per_plan=1000.0 * (prior_s + sample_s) / n, prior_ms_per_plan=1000.0 * prior_s / n,
-        batch_size=batch, compile_seconds=compile_s, environment=environment, execution=execution)
+        batch_size=batch, compile_seconds=compile_s, environment=environment, execution=execution,
+        plan_residuals={k: _mean_se(np.concatenate(v)) for k, v in residuals.items()})
 
 
 def _environment(planner: Planner) -> dict:
@@ -300,12 +319,14 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
              multi_task: bool = False, batch_size: int | None = None, snapshot: int | None = None,
              device: str = "auto", sampler: str | None = None, eta: float = 0.0, compile: bool = False,
-             execution: Execution | None = None) -> EvalResult:
+             execution: Execution | None = None, correction: Correction | None = None) -> EvalResult:
     """Load a trained run (or one of its snapshots) and :func:`evaluate_planner` it on seeded tasks
-    (``execution``: closed loop, candidates, arrival; default open loop)."""
+    (``execution``: closed loop, candidates, arrival; default open loop; ``correction``: a consistency
+    correction of the x0 predictions, ``consistency.Correction``)."""
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
+    planner = planner.with_correction(correction)
     if multi_task:
         check_multi_task_data(info.config.maze, info.config.dataset)
     tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
@@ -364,6 +385,15 @@ def format_table(result: dict) -> str:
         f"(prior {result['prior_ms_per_plan']:.2f} ms; batch {result['batch_size']}"
         + (f"; compiled in {result['compile_seconds']:.0f} s, untimed)" if result["compiled"] else ")"),
     ]
+    c = result.get("correction")
+    if c is not None:
+        lines.append(f"  correction:                {c['tag']}: {c['network_call_equivalents_per_plan']} "
+                     f"network-call equivalents per plan ({c['forward_passes_per_plan']} forward, "
+                     f"{c['backward_passes_per_plan']} backward passes)")
+    if result.get("plan_residuals"):
+        r = result["plan_residuals"]
+        lines.append(f"  plan residuals (rms, m/s): kinematics {r['kinematics_rms']['mean']:.3f}, "
+                     f"dynamics {r['dynamics_rms']['mean']:.3f}")
     ex = result.get("execution")
     if ex is not None and (ex["mode"] == "closed_loop" or ex["candidates"] > 1 or ex["arrival"] != "end"):
         b1, pb = result["decision_ms_batch1"], result["decision_ms_per_batch"]

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
+from bridgeplan.consistency import Correction, plan_residuals
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import Prior
 from bridgeplan.processes import Process
@@ -27,7 +29,9 @@ class Plan:
     prior_seconds: float
     """Wall time to sample the prior for the whole batch."""
     sample_seconds: float
-    """Wall time of the sampler (the network calls) for the whole batch."""
+    """Wall time of the sampler (the network calls, and the correction's work) for the whole batch."""
+    residuals: dict[str, np.ndarray] = field(default_factory=dict)
+    """``kinematics_rms``, ``dynamics_rms`` ``[N]`` (m/s) of the plans as sampled (``consistency.plan_residuals``)."""
 
 
 @dataclass
@@ -40,10 +44,20 @@ class Planner:
     device: torch.device
     stride: int = 1
     """Environment steps between planned states (``TrainConfig.stride``)."""
+    correction: Correction | None = None
+    """A consistency correction of every x0 prediction (CDDB, ``consistency.py``); None: the process as trained."""
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Planner:
         """The same network sampled another way (no reload): ``process.with_sampler``."""
         return dataclasses.replace(self, process=self.process.with_sampler(sampler, eta))
+
+    def with_correction(self, correction: Correction | None) -> Planner:
+        """The same network with every x0 prediction corrected (None: uncorrected); needs a process that samples
+        through x0 predictions."""
+        if correction is not None and not self.process.predicts_x0:
+            raise BridgeplanError(f"--correction corrects x0 predictions, and {self.process.name} does not sample "
+                                  f"through them")
+        return dataclasses.replace(self, correction=correction)
 
     def with_prior(self, prior: Prior) -> Planner:
         return dataclasses.replace(self, prior=prior)
@@ -83,10 +97,13 @@ class Planner:
         x = self.prior.sample(conditions, self.horizon, len(starts), generator=generator)
         t1 = _now(self.device)
         if not prior_only:
-            x = self.process.sample(self.model, x, conditions, nfe, generator=generator)
+            extra = ({} if self.correction is None
+                     else {"correct": self.correction.wrap(conditions, self.normalizer, self.stride)})
+            x = self.process.sample(self.model, x, conditions, nfe, generator=generator, **extra)
         t2 = _now(self.device)
         states, actions = self.unnormalize(x)
-        return Plan(densify(states, self.stride), densify(actions, self.stride), t1 - t0, t2 - t1)
+        return Plan(densify(states, self.stride), densify(actions, self.stride), t1 - t0, t2 - t1,
+                    plan_residuals(x, self.normalizer, self.stride))
 
 
 def _now(device: torch.device) -> float:

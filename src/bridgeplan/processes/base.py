@@ -4,12 +4,16 @@ fields only change how it is sampled (not what is trained)."""
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import torch
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.processes.samplers import X0Predictor
 from bridgeplan.trajectory import Conditions
+
+Correct = Callable[[X0Predictor], X0Predictor]
+"""A transform of the sampler's x0 predictor (``consistency.Correction.wrap``): ``sample(..., correct=...)``."""
 
 
 class Process:
@@ -25,6 +29,9 @@ class Process:
     """Fields that choose how a trained model is sampled; changing them needs no retraining."""
     samplers: ClassVar[tuple[str, ...]] = ()
     """Samplers ``with_sampler`` accepts (empty: the process has one way to sample)."""
+    predicts_x0: ClassVar[bool] = True
+    """True: every sampler step goes through :meth:`predict_x0`, so a correction of x0 (``sample``'s ``correct``)
+    applies; a process whose sampler does not (none so far) sets False and corrections refuse it."""
 
     def to_dict(self) -> dict:
         """JSON-ready fields plus ``name``; inverted by ``processes.process_from_dict``."""
@@ -54,6 +61,13 @@ class Process:
         network predicts x0 itself (Diffuser's parametrization; a process with another one overrides this and
         :meth:`training_target` together)."""
         return self.network(model, x_n, n).clamp(-1, 1)
+
+    def x0_predictor(self, model, correct: Correct | None = None) -> X0Predictor:
+        """``predict_x0(x_n, n)`` of ``model`` for the samplers, transformed by ``correct`` when given."""
+        def predict(x_n: torch.Tensor, n: int) -> torch.Tensor:
+            return self.predict_x0(model, x_n, n)
+
+        return predict if correct is None else correct(predict)
 
     def training_target(self, x0: torch.Tensor, x_n: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
         """The regression label at ``(x_n, n)``: the inverse of :meth:`predict_x0` (here x0 itself)."""

@@ -9,7 +9,7 @@ from functools import cached_property
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.processes.base import Process
+from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import bridge_sample
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
 from bridgeplan.trajectory import Conditions, apply_conditions
@@ -138,10 +138,11 @@ class Bridge(Process):
         return x_n, n, self.training_target(x0, x_n, n)
 
     def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,
-               generator: torch.Generator | None = None) -> torch.Tensor:
-        """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls."""
+               generator: torch.Generator | None = None, correct: Correct | None = None) -> torch.Tensor:
+        """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls (x0 predictions transformed
+        by ``correct``, e.g. a consistency correction)."""
         self.validate_nfe(nfe)
-        return bridge_sample(lambda x, n: self.predict_x0(model, x, n), x_start, conditions,
+        return bridge_sample(self.x0_predictor(model, correct), x_start, conditions,
                              spaced_steps(self.steps, nfe), self.std_fwd, self.ot_ode or self.sampler == "mean",
                              generator)
 

@@ -9,7 +9,7 @@ from functools import cached_property
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.processes.base import Process
+from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import ddim, ddpm_ancestral
 from bridgeplan.processes.schedules import cosine_betas
 from bridgeplan.trajectory import Conditions, apply_conditions
@@ -78,13 +78,11 @@ class DDPM(Process):
         return sorted({round(i * (self.steps - 1) / (nfe - 1)) for i in range(nfe)}, reverse=True)
 
     def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,
-               generator: torch.Generator | None = None) -> torch.Tensor:
-        """From noise ``x_start`` to a trajectory in ``nfe`` network calls."""
+               generator: torch.Generator | None = None, correct: Correct | None = None) -> torch.Tensor:
+        """From noise ``x_start`` to a trajectory in ``nfe`` network calls (x0 predictions transformed by
+        ``correct``, e.g. a consistency correction)."""
         steps = self.sample_steps(nfe)
-
-        def predict(x, t):
-            return self.predict_x0(model, x, t)
-
+        predict = self.x0_predictor(model, correct)
         if self.sampler == "ddim":
             return ddim(predict, x_start, conditions, steps, self.alpha_bar, self.eta, generator)
         return ddpm_ancestral(predict, x_start, conditions, steps, self.alpha_bar, generator)

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.processes.base import Process
+from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import X0Predictor
 from bridgeplan.processes.schedules import spaced_steps
 from bridgeplan.trajectory import Conditions, apply_conditions
@@ -172,7 +172,8 @@ class Flow(Process):
         return [j - 1 for j in spaced_steps(self.steps + 1, nfe)[:-1]]
 
     def sample(self, model, x_start: torch.Tensor, conditions: Conditions, nfe: int,
-               generator: torch.Generator | None = None) -> torch.Tensor:
-        """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls."""
-        return flow_sample(lambda x, n: self.predict_x0(model, x, n), x_start, conditions, self.sample_steps(nfe),
+               generator: torch.Generator | None = None, correct: Correct | None = None) -> torch.Tensor:
+        """From the prior sample ``x_start`` to a trajectory in ``nfe`` network calls (x0 predictions transformed
+        by ``correct``, e.g. a consistency correction)."""
+        return flow_sample(self.x0_predictor(model, correct), x_start, conditions, self.sample_steps(nfe),
                            self.steps, self.sigma, self.sampler == "stochastic", generator)
