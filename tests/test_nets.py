@@ -83,3 +83,19 @@ def test_prior_mlp_shape_and_size():
     out = net(torch.randn(5, OBS_DIM), torch.randn(5, OBS_DIM))
     assert out.shape == (5, horizon, TRANSITION_DIM)
     assert isinstance(net.net[1], torch.nn.LeakyReLU) and net.net[1].negative_slope == 0.1
+
+
+def test_mish_equals_torchs_mish_and_its_gradient():
+    from bridgeplan.nets.unet import Mish
+
+    # both tails (the clamp at 20, e^x underflowing) and the middle
+    x = torch.cat([torch.linspace(-60, 60, 2001), torch.tensor([-1e4, -88.0, 19.99, 20.0, 20.01, 1e4])])
+    x64 = x.double().requires_grad_()
+    torch.nn.functional.mish(x64).sum().backward()
+    mine = x.clone().requires_grad_()
+    y = Mish()(mine)
+    y.sum().backward()
+    torch.testing.assert_close(y.double(), torch.nn.functional.mish(x.double()), rtol=2e-6, atol=1e-6)
+    torch.testing.assert_close(mine.grad.double(), x64.grad, rtol=2e-6, atol=1e-6)
+    # the backward is the derivative of the forward: float64 finite differences
+    assert torch.autograd.gradcheck(Mish(), (torch.linspace(-8, 8, 41, dtype=torch.float64).requires_grad_(),))

@@ -64,19 +64,46 @@ class SinusoidalEmbedding(nn.Module):
         return torch.cat([args.sin(), args.cos()], dim=-1)
 
 
+class _MishFunction(torch.autograd.Function):
+    """Mish with one exponential: ``tanh(softplus(x)) = n / (n + 2)`` with ``n = e^x (e^x + 2)``, and its
+    derivative ``t + x (1 - t^2) sigmoid(x)`` from the same ``e^x``. torch's own kernel evaluates exp, log1p and
+    tanh forward and again backward: on the small networks it took a quarter of a training step at batch 256."""
+
+    @staticmethod
+    def forward(ctx, x):
+        e = x.clamp(max=20.0).exp_()  # beyond 20, t is 1 in float32 (and e^2x would overflow near 44)
+        n = (e + 2).mul_(e)
+        t = n.div_(n + 2)
+        ctx.save_for_backward(x, t, e)
+        return x * t
+
+    @staticmethod
+    def backward(ctx, grad):
+        x, t, e = ctx.saved_tensors
+        sigmoid = e.div(e + 1)
+        return (t * t).neg_().add_(1).mul_(sigmoid).mul_(x).add_(t).mul_(grad)
+
+
+class Mish(nn.Module):
+    """``x * tanh(softplus(x))``, as ``nn.Mish`` (equal to float32 rounding), in fewer operations."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return _MishFunction.apply(x)
+
+
 class ConvBlock(nn.Sequential):
     """Conv1d -> GroupNorm -> Mish."""
 
     def __init__(self, c_in: int, c_out: int, kernel: int = 5, groups: int = 8):
         super().__init__(nn.Conv1d(c_in, c_out, kernel, padding=kernel // 2), nn.GroupNorm(groups, c_out),
-                         nn.Mish())
+                         Mish())
 
 
 class ResidualTemporalBlock(nn.Module):
     def __init__(self, c_in: int, c_out: int, embed_dim: int, kernel: int = 5):
         super().__init__()
         self.blocks = nn.ModuleList([ConvBlock(c_in, c_out, kernel), ConvBlock(c_out, c_out, kernel)])
-        self.time_mlp = nn.Sequential(nn.Mish(), nn.Linear(embed_dim, c_out))
+        self.time_mlp = nn.Sequential(Mish(), nn.Linear(embed_dim, c_out))
         self.skip = nn.Conv1d(c_in, c_out, 1) if c_in != c_out else nn.Identity()
 
     def forward(self, x: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
@@ -102,7 +129,7 @@ class TemporalUNet(nn.Module):
         dim, dim_mults = self.config.dim, self.config.dim_mults
         dims = [transition_dim, *(dim * m for m in dim_mults)]
         pairs = list(zip(dims[:-1], dims[1:]))
-        self.time_mlp = nn.Sequential(SinusoidalEmbedding(dim), nn.Linear(dim, dim * 4), nn.Mish(),
+        self.time_mlp = nn.Sequential(SinusoidalEmbedding(dim), nn.Linear(dim, dim * 4), Mish(),
                                       nn.Linear(dim * 4, dim))
         self.downs = nn.ModuleList()
         for k, (c_in, c_out) in enumerate(pairs):
