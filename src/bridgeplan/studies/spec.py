@@ -249,6 +249,15 @@ def _process_params(file, key: str, process: str, params) -> tuple[tuple[str, An
     return tuple(sorted(params.items()))
 
 
+def _frozen(value):
+    """TOML lists as tuples (``dim_mults = [1, 2]``), inside tables too, as the configs hold them."""
+    if isinstance(value, list):
+        return tuple(_frozen(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _frozen(v) for k, v in value.items()}
+    return value
+
+
 def _training(file, raw: dict) -> Training:
     from bridgeplan import config as cfg
 
@@ -265,7 +274,7 @@ def _training(file, raw: dict) -> Training:
         if not isinstance(stages, list) or any(not isinstance(s, list) or len(s) != 2 for s in stages):
             raise StudyError(file, "training.stages", f"expected a list of [steps, checkpoint_every], got {stages!r}")
         values["stages"] = tuple(tuple(_ints(file, "training.stages", s, minimum=1)) for s in stages)
-    overrides = tuple(sorted((k, v) for k, v in raw.items() if k in train_fields))
+    overrides = tuple(sorted((k, _frozen(v)) for k, v in raw.items() if k in train_fields))
     return Training(**values, overrides=overrides)
 
 
