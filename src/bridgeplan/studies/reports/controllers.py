@@ -4,7 +4,7 @@ docs/results/<maze>-v2-curves/results.csv (run_controllers.sh). Each cell: Minar
 training seeds, and the success rate; in bold the lookahead the validation episodes (`controllers-validation`)
 pick for that method and NFE, the one findings.md reports.
 
-Usage: python docs/results/controllers_table.py > docs/results/controllers.md
+Made by `bridgeplan study report controllers` (studies/controllers.toml) into docs/results/controllers.md.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from bridgeplan.replan import Execution
 
 MAZES = ("umaze", "medium", "large")
 STORES = ("curves", "hold", "consistent-priors")
-"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
 PURSUIT = tuple(Execution(controller="pursuit", lookahead=r) for r in (0.5, 1, 1.5))
 """The open-loop pursuit executions of the controllers experiment; the validation episodes pick one."""
 COLUMNS = (OPEN_LOOP, *PURSUIT)
@@ -67,7 +67,7 @@ def maze_rows(results: Results, maze: str, multi: int) -> list[str]:
 def render(root: Path) -> str:
     """controllers.md's text, from the committed results under ``root`` (docs/results)."""
     lines = ["# Executing plans: tracking against pursuit (issue 13)", "",
-             "Made by `python docs/results/controllers_table.py` from the `controllers` rows of "
+             "Made by `bridgeplan study report controllers` from the `controllers` rows of "
              "docs/results/<maze>-v2-curves/results.csv (run_controllers.sh): each run's final snapshot, 3 training "
              "seeds x 200 test episodes, Minari score mean ± standard error over seeds (success rate). `track`: "
              "Diffuser's controller; `pursuit R`: the plan's path at the expert's pace, toward the first planned "

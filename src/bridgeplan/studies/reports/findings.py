@@ -12,7 +12,7 @@ both have (or the first, where the finding says so); "full" is each method's mos
 the best mean over seeds on the validation episodes (rows of `<experiment>-validation`, made by `experiment
 --validation`: other tasks than the reported ones), whose score on the reported (test) episodes the cell uses.
 
-Usage: python docs/results/findings.py > docs/results/findings.md
+Made by `bridgeplan study report findings` (studies/findings.toml) into docs/results/findings.md.
 """
 
 from __future__ import annotations
@@ -209,10 +209,11 @@ def render(root: Path) -> str:
     results = {maze: load(root, maze) for maze in MAZES}
     header = ["finding", *MAZES, *(f"{m} Multi2D" for m in MAZES)]
     lines = ["# Findings per maze", "",
-             "Made by `python docs/results/findings.py` from docs/results/<maze>-v2-curves/results.csv "
+             "Made by `bridgeplan study report findings` from docs/results/<maze>-v2-curves/results.csv "
              "(data version 2, `cpu-small`; umaze 128 states x 1, medium 32 x 8, large 48 x 8). Each cell: the "
              "per-seed difference, first series minus second, mean ± standard error over training seeds "
-             "(Minari convention), and the verdict at two standard errors (see the script's docstring).", "",
+             "(Minari convention), and the verdict at two standard errors (see "
+             "bridgeplan/studies/reports/findings.py).", "",
              *table(header, [[finding[0], *(cell(results[m], finding, multi) for multi in (0, 1) for m in MAZES)]
                              for finding in FINDINGS])]
     expert = json.loads((root / "expert-on-eval-tasks.json").read_text())["rows"]

@@ -16,7 +16,7 @@ seeds; "reaches": yes when the mean is not below, "within noise" when below by l
 "clears": more than two above. The prior alone: the straight line's floor of each evaluation row, the learned
 prior's from docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
 
-Usage: python docs/results/prior_curves.py > docs/results/prior-curves.md
+Made by `bridgeplan study report prior-curves` (studies/prior-curves.toml) into docs/results/prior-curves.md.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from bridgeplan.analysis.stats import Paired, goal_verdict, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, rule
 
 STORES = ("curves", "hold", "consistent-priors")
-"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
 MAZES = ("umaze", "medium")
 PRIORS = ("gaussian", "line", "learned")
 FLOW_NFE = 2
@@ -243,12 +243,12 @@ def maze_table(root: Path, results: Results, maze: str) -> list[str]:
 def render(root: Path) -> str:
     """prior-curves.md's text, from the committed results under ``root`` (docs/results)."""
     lines = ["# Flow matching from each prior across training (issue 15)", "",
-             "Made by `python docs/results/prior_curves.py` from docs/results/<maze>-v2-{curves,consistent-priors}/"
+             "Made by `bridgeplan study report prior-curves` from docs/results/<maze>-v2-{curves,consistent-priors}/"
              "results.csv (data "
              "version 2, `cpu-small`, 200 episodes per evaluation, mean ± standard error over training seeds, "
              "Minari convention). The goal's columns compare flow at NFE 2 with the best NFE of DDPM and of the "
              "bridges (I2SB or consistent) from the same prior, picked on these episodes (which favours them), "
-             "per seed; see the script's docstring.", ""]
+             "per seed; see bridgeplan/studies/reports/prior_curves.py.", ""]
     for maze in MAZES:
         results = load(root, maze)
         lines += [*maze_table(root, results, maze), "", reproduction(root, maze), "",
