@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
 import math
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.replan import Execution
 from bridgeplan.report import method_label
+from bridgeplan.studies.reports import controllers, findings, prior_curves
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 CSVS = sorted(RESULTS.glob("*/results.csv"))
@@ -264,20 +264,13 @@ def test_markdown_table():
         table(["a", "b"], [["x"]])
 
 
-def script(name: str):
-    spec = importlib.util.spec_from_file_location(f"docs_results_{name}", RESULTS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_findings_md_regenerates_from_the_committed_csvs():
-    assert script("findings").render() + "\n" == (RESULTS / "findings.md").read_text()
+    assert findings.render(RESULTS) + "\n" == (RESULTS / "findings.md").read_text()
 
 
 def test_prior_curves_md_regenerates_from_the_committed_results():
-    assert script("prior_curves").render() + "\n" == (RESULTS / "prior-curves.md").read_text()
+    assert prior_curves.render(RESULTS) + "\n" == (RESULTS / "prior-curves.md").read_text()
 
 
 def test_controllers_md_regenerates_from_the_committed_csvs():
-    assert script("controllers_table").render() + "\n" == (RESULTS / "controllers.md").read_text()
+    assert controllers.render(RESULTS) + "\n" == (RESULTS / "controllers.md").read_text()

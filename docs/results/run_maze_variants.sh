@@ -9,7 +9,7 @@
 # MAZE=large STEPS=16000 DATASET=/path/to/large-1000000-v2 PARTS=beta-max bash docs/results/run_maze_variants.sh.
 # The committed consistent-priors rows were made in a store of their own: PARTS=consistent-priors
 # RESULTS=results/$MAZE-v2-consistent-priors OUT=docs/results/$MAZE-v2-consistent-priors (umaze: STEPS=4000
-# CHECKPOINT_EVERY=1000); prior_curves.py reads both.
+# CHECKPOINT_EVERY=1000); the prior-curves report reads both.
 source "$(dirname "$0")/maze_campaign.sh"
 PARTS=${PARTS:-beta-max consistent consistent-priors ddpm-steps}
 for part in $PARTS; do

@@ -570,6 +570,100 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _add_study_commands(sub) -> None:
+    p = sub.add_parser("study", help="run a study file (studies/NAME.toml) and regenerate its reports",
+                       description="Studies: one declarative file per campaign, at the repository root's studies/. "
+                                   "--root: the repository root (default: the git top-level of the current "
+                                   "directory, else the current directory).")
+    study = p.add_subparsers(dest="study_command", required=True)
+    ls = study.add_parser("list", help="each study: its file, what it trains, the reports it makes and what they feed")
+    r = study.add_parser("report", help="regenerate the studies' reports from the committed results (trains nothing)")
+    r.add_argument("names", nargs="*", metavar="NAME", help="studies (names or files; default: all)")
+    r.add_argument("--check", action="store_true",
+                   help="write nothing; exit 2 when a committed report differs from what its study generates")
+    run = study.add_parser("run", help="train and evaluate what the study's store is missing (resumable)")
+    run.add_argument("file", help="the study file (or a study's name)")
+    run.add_argument("--dry-run", action="store_true", help="list what would be trained and evaluated, and its cost")
+    run.add_argument("--quick", action="store_true",
+                     help="a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
+                          "not the committed scale")
+    run.add_argument("--backend", default="local", help="local or ray")
+    run.add_argument("--workers", type=int, default=None, help="local backend: parallel jobs (default: the study's)")
+    run.add_argument("--ray-address", default=None)
+    run.add_argument("--no-progress", action="store_true")
+    for q in (ls, r, run):
+        q.add_argument("--root", default=None, help="the repository root (holds studies/ and docs/results/)")
+    ls.set_defaults(func=_cmd_study_list)
+    r.set_defaults(func=_cmd_study_report)
+    run.set_defaults(func=_cmd_study_run)
+
+
+def _cmd_study_list(args) -> int:
+    from bridgeplan.studies import find_root, load_studies
+    from bridgeplan.studies.reports import GENERATORS
+
+    for s in load_studies(find_root(args.root)).values():
+        makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
+                 ] if s.experiments else [f"uses {', '.join(s.uses)}"]
+        makes += [f"docs/results/{r.output} (feeds {', '.join(GENERATORS[r.generator].feeds)})" for r in s.reports]
+        print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
+    return 0
+
+
+def _cmd_study_report(args) -> int:
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies.reports import GENERATORS
+
+    root = find_root(args.root)
+    studies = load_studies(root)
+    chosen = select(studies, args.names, root)
+    texts = {}
+    for s in chosen:  # every report first: nothing is written unless all of them render
+        for r in s.reports:
+            texts[(s.name, r.output)] = GENERATORS[r.generator].render(root / "docs" / "results")
+    differ = 0
+    for (name, output), text in texts.items():
+        path = root / "docs" / "results" / output
+        if args.check:
+            if not path.exists() or path.read_text() != text:
+                print(f"error: docs/results/{output} differs from what {name} generates "
+                      f"(run bridgeplan study report {name})", file=sys.stderr)
+                differ += 1
+        elif not path.exists() or path.read_text() != text:
+            atomic_write_text(path, text)
+            print(f"wrote docs/results/{output}")
+    if args.check and not differ:
+        print(f"{len(texts)} reports match their studies")
+    return 2 if differ else 0
+
+
+def _cmd_study_run(args) -> int:
+    from bridgeplan.studies import find_root, load_studies, parse_study, select
+    from bridgeplan.studies.plan import QUICK_NOTE, Scale, check_reports, describe_missing, results_dir, run_study
+
+    root = find_root(args.root)
+    studies = load_studies(root)
+    if Path(args.file).is_file() and not any((root / s.file).resolve() == Path(args.file).resolve()
+                                              for s in studies.values()):
+        study = parse_study(args.file)
+        check_reports(study, studies)
+    else:
+        study = select(studies, [args.file], root)[0]
+    scale = Scale("quick" if args.quick else "committed")
+    if args.workers is not None:
+        _positive("--workers", args.workers)
+    if args.dry_run:
+        print("\n".join(describe_missing(study, root, scale)))
+        return 0
+    added = run_study(study, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+                      progress=not args.no_progress)
+    out = results_dir(study, root, scale)
+    print(f"{study.name}: {added} new results in {out / 'results.sqlite'}"
+          + ("" if scale.committed else f" [{QUICK_NOTE}]"))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bridgeplan", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -580,6 +674,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_experiment_commands(sub)
     _add_bench_command(sub)
     _add_demo_command(sub)
+    _add_study_commands(sub)
     return parser
 
 

@@ -46,6 +46,9 @@ class SweepSettings:
     """Evaluate on validation episodes (task seed + ``evaluate.VALIDATION_SEED_OFFSET``), each run's final
     snapshot only, into the experiment ``<name>-validation``: where settings (NFE, sampler) are chosen, to be
     reported on the test episodes of ``<name>``."""
+    train_only: bool = False
+    """Train (or resume) the runs to ``train_steps`` and evaluate nothing: an earlier stage of a study whose runs
+    were trained in passes (``studies``)."""
 
 
 VALIDATION_SUFFIX = "-validation"
@@ -90,6 +93,8 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         done = _trained_step(run_dir)
         if done < config.steps:
             train(config, run_dir, resume=done >= 0, progress=progress)
+    if settings.train_only:
+        return []
     store = ResultsStore(layout.store_path(settings.results_dir))
     suffix = VALIDATION_SUFFIX if settings.validation else ""
     wanted = [(exp.name + suffix, series) for exp in experiments for series in exp.series if series.run == spec]

@@ -16,12 +16,11 @@ seeds; "reaches": yes when the mean is not below, "within noise" when below by l
 "clears": more than two above. The prior alone: the straight line's floor of each evaluation row, the learned
 prior's from docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
 
-Usage: python docs/results/prior_curves.py > docs/results/prior-curves.md
+Made by `bridgeplan study report prior-curves` (studies/prior-curves.toml) into docs/results/prior-curves.md.
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,9 +31,8 @@ from bridgeplan.analysis.selection import best, split_mean
 from bridgeplan.analysis.stats import Paired, goal_verdict, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, rule
 
-HERE = Path(__file__).resolve().parent
 STORES = ("curves", "hold", "consistent-priors")
-"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
 MAZES = ("umaze", "medium")
 PRIORS = ("gaussian", "line", "learned")
 FLOW_NFE = 2
@@ -42,12 +40,15 @@ N = 16
 """Diffusion steps of every run in these stores."""
 DDPM = method("ddpm", steps=N)
 CONSISTENT = method("bridge", "line", steps=N, consistent=True)
+READS = (DDPM, *(method(process, prior, steps=N, **params) for process, params in
+                (("flow", {}), ("bridge", {}), ("bridge", {"consistent": True})) for prior in PRIORS))
+"""The trained methods the tables read (studies that make this report must train them)."""
 SWEEP = "sampler-sweep"
 """The store of run_sampler_sweep.sh (docs/results/<maze>-v2-sampler-sweep): the samplers experiment, 5 seeds."""
 
 
-def load(maze: str, stores=STORES) -> Results:
-    return load_csvs(HERE / f"{maze}-v2-{store}" / "results.csv" for store in stores)
+def load(root: Path, maze: str, stores=STORES) -> Results:
+    return load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in stores)
 
 
 def scores(results: Results, point: Point | None) -> dict[int, float]:
@@ -59,12 +60,13 @@ def best_nfe(results: Results, key: MethodKey, step: int) -> Point | None:
     return best(results, results.points(key, step), split="test")
 
 
-def prior_alone(results: Results, maze: str, prior: str, key: MethodKey, step: int) -> dict[int, float] | None:
+def prior_alone(root: Path, results: Results, maze: str, prior: str, key: MethodKey,
+                step: int) -> dict[int, float] | None:
     """Per-seed score of the prior alone, tracked, on the same episodes (None for Gaussian noise)."""
     if prior == "line":
         return results.values(Point(key, step, FLOW_NFE), field="floor") or None
     if prior == "learned":
-        rows = [read_eval_json(p) for p in sorted((HERE / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))]
+        rows = [read_eval_json(p) for p in sorted((root / f"{maze}-v2-curves" / "learned-floor").glob("s*.json"))]
         return {r.seed: r.floor_learned for r in rows} or None
     return None
 
@@ -88,11 +90,11 @@ def best_cell(results: Results, point: Point | None, name=lambda p: str(p.nfe)) 
     return f"{mean_se(scores(results, point))} ({name(point)})" if point else "-"
 
 
-def reproduction(maze: str) -> str:
+def reproduction(root: Path, maze: str) -> str:
     """How closely the consistent-priors store's retrained runs reproduce the rows the other stores hold."""
     def evaluations(stores):  # the last row of each evaluation
         return {(r.key, r.split, r.step, r.nfe, r.seed): r for store in stores
-                for path in [HERE / f"{maze}-v2-{store}" / "results.csv"] if path.exists() for r in read_csv(path)}
+                for path in [root / f"{maze}-v2-{store}" / "results.csv"] if path.exists() for r in read_csv(path)}
 
     retrained, held = evaluations(STORES[-1:]), evaluations(STORES[:-1])
     both = sorted(set(retrained) & set(held), key=lambda k: (label(k[0]), k[0].multi_task, k[0].tag, *k[1:]))
@@ -114,11 +116,11 @@ def reproduction(maze: str) -> str:
             f"The table takes the first store's rows.")
 
 
-def mean_sampler_table(results: Results, maze: str) -> list[str]:
+def mean_sampler_table(root: Path, results: Results, maze: str) -> list[str]:
     """The consistent bridge from the line sampled by its posterior means at NFE 2 (run_bridge_sampler.sh's eval
     JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
     DDPM's best NFE at each step, per seed, and against the line alone."""
-    here = HERE / f"{maze}-v2-consistent-samplers"
+    here = root / f"{maze}-v2-consistent-samplers"
     lines = []
     by_step: dict[int, list] = {}
     for path in [*here.glob("step*/s[0-9]-mean-nfe2-track.json"), *here.glob("s[0-9]-mean-nfe2-track.json")]:
@@ -137,7 +139,7 @@ def mean_sampler_table(results: Results, maze: str) -> list[str]:
             "line alone |", "|---|---|---|---|---|", *lines, ""]
 
 
-def declared_table(maze: str) -> list[str]:
+def declared_table(root: Path, maze: str) -> list[str]:
     """The goal with the candidate's setting declared before the test episodes are read: the consistent bridge
     from the line at NFE 1 or 2, by posterior draws or by posterior means, whichever has the best mean over seeds
     on the validation episodes (final snapshot; run_sampler_sweep.sh), scored on the test episodes at every
@@ -145,7 +147,7 @@ def declared_table(maze: str) -> list[str]:
     the I2SB bridge's best NFE from the line (docs/results/<maze>-v2-curves, seeds 0-2, paired by seed) and
     the line alone; per-seed differences over the sweep's 5 seeds. A second table gives every candidate on the
     test episodes against DDPM's best, for reference."""
-    results = load(maze, (SWEEP,))
+    results = load(root, maze, (SWEEP,))
 
     def final(key: MethodKey) -> list[Point]:  # the validation episodes' points at the final snapshot
         steps = results.steps(key, "validation")
@@ -165,7 +167,7 @@ def declared_table(maze: str) -> list[str]:
     for step in steps:
         ddpm_best[step] = best(results, [p for key in (DDPM, DDPM.replace(sampler="ddim"))
                                          for p in results.points(key, step)], "test")
-    i2sb = load(maze, ("curves",))
+    i2sb = load(root, maze, ("curves",))
     i2sb_line = method("bridge", "line", steps=N)
     lines = []
     for step in steps:
@@ -204,7 +206,7 @@ def declared_table(maze: str) -> list[str]:
             rule(len(steps) + 1), *on_test, ""]
 
 
-def maze_table(results: Results, maze: str) -> list[str]:
+def maze_table(root: Path, results: Results, maze: str) -> list[str]:
     lines = [f"## {maze}", "",
              "| prior | step | flow NFE 1 | flow NFE 2 | flow full | bridge NFE 1 | bridge NFE 2 | bridge best "
              "(NFE) | consistent bridge best (NFE) | DDPM best (NFE) | prior alone | flow NFE 2 reaches DDPM's best "
@@ -220,7 +222,7 @@ def maze_table(results: Results, maze: str) -> list[str]:
             consistent_best = best_nfe(results, consistent, step)
             either = [b for b in (bridge_best, consistent_best) if b]  # I2SB's best in either variant
             bridges_best = max(either, key=lambda p: split_mean(results, p, "test")) if either else None
-            alone = prior_alone(results, maze, prior, flow, step)
+            alone = prior_alone(root, results, maze, prior, flow, step)
             ours = results.values(Point(flow, step, FLOW_NFE))
 
             def cell(key, nfe):
@@ -238,26 +240,18 @@ def maze_table(results: Results, maze: str) -> list[str]:
     return lines
 
 
-def render() -> str:
-    """prior-curves.md's text."""
+def render(root: Path) -> str:
+    """prior-curves.md's text, from the committed results under ``root`` (docs/results)."""
     lines = ["# Flow matching from each prior across training (issue 15)", "",
-             "Made by `python docs/results/prior_curves.py` from docs/results/<maze>-v2-{curves,consistent-priors}/"
+             "Made by `bridgeplan study report prior-curves` from docs/results/<maze>-v2-{curves,consistent-priors}/"
              "results.csv (data "
              "version 2, `cpu-small`, 200 episodes per evaluation, mean ± standard error over training seeds, "
              "Minari convention). The goal's columns compare flow at NFE 2 with the best NFE of DDPM and of the "
              "bridges (I2SB or consistent) from the same prior, picked on these episodes (which favours them), "
-             "per seed; see the script's docstring.", ""]
+             "per seed; see bridgeplan/studies/reports/prior_curves.py.", ""]
     for maze in MAZES:
-        results = load(maze)
-        lines += [*maze_table(results, maze), "", reproduction(maze), "", *mean_sampler_table(results, maze),
-                  *declared_table(maze)]
+        results = load(root, maze)
+        lines += [*maze_table(root, results, maze), "", reproduction(root, maze), "",
+                  *mean_sampler_table(root, results, maze), *declared_table(root, maze)]
     return "\n".join(lines)
 
-
-def main() -> int:
-    print(render())
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -4,29 +4,30 @@ docs/results/<maze>-v2-curves/results.csv (run_controllers.sh). Each cell: Minar
 training seeds, and the success rate; in bold the lookahead the validation episodes (`controllers-validation`)
 pick for that method and NFE, the one findings.md reports.
 
-Usage: python docs/results/controllers_table.py > docs/results/controllers.md
+Made by `bridgeplan study report controllers` (studies/controllers.toml) into docs/results/controllers.md.
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from bridgeplan.analysis.keys import OPEN_LOOP, label
+from bridgeplan.analysis.keys import method as method_key
 from bridgeplan.analysis.load import Point, Results, Row, load_csvs
 from bridgeplan.analysis.selection import Choice, resolve
 from bridgeplan.analysis.tables import bold, fmt_mean_se
 from bridgeplan.replan import Execution
 
-HERE = Path(__file__).resolve().parent
 MAZES = ("umaze", "medium", "large")
 STORES = ("curves", "hold", "consistent-priors")
-"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as findings.py)."""
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
 PURSUIT = tuple(Execution(controller="pursuit", lookahead=r) for r in (0.5, 1, 1.5))
 """The open-loop pursuit executions of the controllers experiment; the validation episodes pick one."""
 COLUMNS = (OPEN_LOOP, *PURSUIT)
+READS = (method_key("ddpm", steps=16), method_key("bridge", "line", steps=16))
+"""The trained methods every maze's rows have (flow matching's are shown where a store has them)."""
 REPLAN = 32
 
 
@@ -63,16 +64,16 @@ def maze_rows(results: Results, maze: str, multi: int) -> list[str]:
     return lines
 
 
-def render() -> str:
-    """controllers.md's text."""
+def render(root: Path) -> str:
+    """controllers.md's text, from the committed results under ``root`` (docs/results)."""
     lines = ["# Executing plans: tracking against pursuit (issue 13)", "",
-             "Made by `python docs/results/controllers_table.py` from the `controllers` rows of "
+             "Made by `bridgeplan study report controllers` from the `controllers` rows of "
              "docs/results/<maze>-v2-curves/results.csv (run_controllers.sh): each run's final snapshot, 3 training "
              "seeds x 200 test episodes, Minari score mean ± standard error over seeds (success rate). `track`: "
              "Diffuser's controller; `pursuit R`: the plan's path at the expert's pace, toward the first planned "
              "position R away; bold: the lookahead the validation episodes pick; `replan32 pursuit 1`: a new plan "
              "every 32 steps (bridge and flow from the warm prior).", ""]
-    results = {maze: load_csvs(HERE / f"{maze}-v2-{store}" / "results.csv" for store in STORES) for maze in MAZES}
+    results = {maze: load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in STORES) for maze in MAZES}
     for multi in (0, 1):
         lines += [f"## {'Multi2D' if multi else 'single-task'}", "",
                   "| maze | method | NFE | track | pursuit 0.5 | pursuit 1 | pursuit 1.5 | replan32 pursuit 1 |",
@@ -82,11 +83,3 @@ def render() -> str:
         lines.append("")
     return "\n".join(lines)
 
-
-def main() -> int:
-    print(render())
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -12,13 +12,12 @@ both have (or the first, where the finding says so); "full" is each method's mos
 the best mean over seeds on the validation episodes (rows of `<experiment>-validation`, made by `experiment
 --validation`: other tasks than the reported ones), whose score on the reported (test) episodes the cell uses.
 
-Usage: python docs/results/findings.py > docs/results/findings.md
+Made by `bridgeplan study report findings` (studies/findings.toml) into docs/results/findings.md.
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +30,6 @@ from bridgeplan.analysis.stats import finding_verdict, mean_se, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.replan import Execution
 
-HERE = Path(__file__).resolve().parent
 MAZES = ("umaze", "medium", "large")
 FLOOR = "floor"
 """The second series of a finding that compares with the straight line, tracked alone, on the same episodes."""
@@ -124,14 +122,18 @@ FINDINGS = [
 ]
 
 
+READS = tuple(dict.fromkeys(choice.method.replace(sampler="", execution=OPEN_LOOP, multi_task=False)
+                            for finding in FINDINGS for choice in finding[1:3] if choice != FLOOR))
+"""The trained methods the findings compare (studies that make this report must train them)."""
+
 STORES = ("curves", "hold", "consistent-priors")
 """The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence: a row another store holds too
 (a run retrained in a store of its own) is taken from the first."""
 
 
-def load(maze: str, stores=STORES) -> Results:
+def load(root: Path, maze: str, stores=STORES) -> Results:
     """The maze's rows, store by store (test and validation episodes)."""
-    return load_csvs(HERE / f"{maze}-v2-{store}" / "results.csv" for store in stores)
+    return load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in stores)
 
 
 def on(choice: Choice, multi: int) -> Choice:
@@ -202,18 +204,19 @@ def goal_cell(results: Results, multi: int, expert: list[float]) -> str:
             f"{np.mean([e.calls for e in test]):.0f} calls/episode, {timing}; expert {np.mean(expert):.1f})")
 
 
-def render() -> str:
-    """findings.md's text."""
-    results = {maze: load(maze) for maze in MAZES}
+def render(root: Path) -> str:
+    """findings.md's text, from the committed results under ``root`` (docs/results)."""
+    results = {maze: load(root, maze) for maze in MAZES}
     header = ["finding", *MAZES, *(f"{m} Multi2D" for m in MAZES)]
     lines = ["# Findings per maze", "",
-             "Made by `python docs/results/findings.py` from docs/results/<maze>-v2-curves/results.csv "
+             "Made by `bridgeplan study report findings` from docs/results/<maze>-v2-curves/results.csv "
              "(data version 2, `cpu-small`; umaze 128 states x 1, medium 32 x 8, large 48 x 8). Each cell: the "
              "per-seed difference, first series minus second, mean ± standard error over training seeds "
-             "(Minari convention), and the verdict at two standard errors (see the script's docstring).", "",
+             "(Minari convention), and the verdict at two standard errors (see "
+             "bridgeplan/studies/reports/findings.py).", "",
              *table(header, [[finding[0], *(cell(results[m], finding, multi) for multi in (0, 1) for m in MAZES)]
                              for finding in FINDINGS])]
-    expert = json.loads((HERE / "expert-on-eval-tasks.json").read_text())["rows"]
+    expert = json.loads((root / "expert-on-eval-tasks.json").read_text())["rows"]
     lines += ["", "## Issue 13's goal: a Minari score of 95 or more", "",
               "The setting (method, NFE, execution) with the best mean on the validation episodes "
               "(`experiment --validation`: nfe-curves and controllers), scored on the test episodes; the expert "
@@ -224,11 +227,3 @@ def render() -> str:
                             for multi in (0, 1))] for m in MAZES])]
     return "\n".join(lines)
 
-
-def main() -> int:
-    print(render())
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

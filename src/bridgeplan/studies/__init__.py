@@ -1,0 +1,66 @@
+"""Studies: one declarative file per campaign (``studies/NAME.toml`` at the repository root) and the commands
+that run it and regenerate its reports.
+
+- :mod:`~bridgeplan.studies.spec`: the file format, parsed into frozen dataclasses (:class:`Study`);
+- :mod:`~bridgeplan.studies.plan`: the study as sweeps of the experiments runner, what is missing from its
+  store and what that costs, the quick scale;
+- :mod:`~bridgeplan.studies.reports`: the generators of the committed reports (findings.md, prior-curves.md,
+  controllers.md) from the committed results under docs/results.
+
+The repository root (``--root``; default: the git top-level of the current directory, else the current
+directory) holds ``studies/`` and ``docs/results/``.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.studies.spec import Study, StudyError, parse_study
+
+__all__ = ["Study", "StudyError", "find_root", "load_studies", "parse_study", "select"]
+
+
+def find_root(root: str | Path | None = None) -> Path:
+    """The repository root: ``root`` if given, else the git top-level of the current directory, else the
+    current directory; it must hold ``studies/``."""
+    if root is None:
+        try:
+            root = subprocess.run(["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True,
+                                  timeout=5, check=True).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            root = "."
+    root = Path(root).resolve()
+    if not (root / "studies").is_dir():
+        raise BridgeplanError(f"no studies/ folder in {root}; give the repository root with --root")
+    return root
+
+
+def load_studies(root: Path) -> dict[str, Study]:
+    """Every study of ``root/studies``, parsed and checked against each other (``uses``, reports' methods)."""
+    from bridgeplan.studies.plan import check_reports
+
+    studies = {}
+    for path in sorted((Path(root) / "studies").glob("*.toml")):
+        study = parse_study(path, shown=path.relative_to(root))
+        if study.name in studies:
+            raise StudyError(study.file, "name", f"{study.name!r} is also the name of {studies[study.name].file}")
+        studies[study.name] = study
+    for study in studies.values():
+        check_reports(study, studies)
+    return studies
+
+
+def select(studies: dict[str, Study], names: list[str], root: Path) -> list[Study]:
+    """The studies named (by name or by file), all when none is."""
+    if not names:
+        return list(studies.values())
+    out = []
+    for name in names:
+        match = [s for s in studies.values() if name in (s.name, str(s.file), str((root / s.file).resolve()))
+                 or Path(name).resolve() == (root / s.file).resolve()]
+        if not match:
+            raise BridgeplanError(f"unknown study {name!r}: choose from {', '.join(studies)}")
+        out.append(match[0])
+    return out

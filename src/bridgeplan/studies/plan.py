@@ -1,0 +1,340 @@
+"""From a study to the experiments runner: the sweeps it runs, what is missing from its store, its cost.
+
+Each ``[[experiments]]`` entry and split becomes one :class:`~bridgeplan.experiments.grids.Experiment` with its
+:class:`~bridgeplan.experiments.runner.SweepSettings`; ``study run`` hands them to
+:func:`~bridgeplan.experiments.runner.run_sweep` in order, so a study resumes as sweeps do (finished runs and
+evaluations are skipped; runs are locked while trained) and runs with ``--workers`` or the Ray backend.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sqlite3
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError
+
+TRAIN_STEPS_PER_SECOND = 18.6
+"""Assumed training rate of one run (optimizer steps per second): cpu-small at one torch thread on a quiet CPU
+core, docs/results/bench.md. The diffuser preset is ten times slower; a GPU much faster."""
+EVAL_SECONDS_PER_EPISODE = 0.05
+"""Assumed cost of one evaluation episode (planning in a batch with the others and simulating), CPU, cpu-small:
+a rough figure, not measured per maze (replanned episodes cost more)."""
+
+
+@dataclass(frozen=True)
+class Scale:
+    """How much of a study to run: ``committed`` as its file says, ``quick`` a look at a smaller scale."""
+
+    name: str = "committed"
+
+    @property
+    def committed(self) -> bool:
+        return self.name == "committed"
+
+    def apply(self, study: Study) -> Study:
+        """The study at this scale. Quick: the first two seeds, a tenth of the training steps (two snapshots),
+        a tenth of the learned prior's, at most 20 episodes per evaluation, at most 100 000 transitions of data."""
+        if self.committed:
+            return study
+        t = study.training
+        steps = max(1, t.steps // 10)
+        training = dataclasses.replace(t, steps=steps, checkpoint_every=max(1, steps // 2), stages=(),
+                                       prior_steps=max(1, t.prior_steps // 10), seeds=t.seeds[:2])
+        evaluation = dataclasses.replace(study.evaluation, episodes=min(study.evaluation.episodes, 20))
+        experiments = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.experiments)
+        dataset = study.dataset
+        if dataset is not None and not dataset.path:
+            n = min(dataset.steps, 100_000)
+            dataset = dataclasses.replace(dataset, steps=n, path=f"results/quick/datasets/{dataset.maze}-{n}-v"
+                                                                 f"{dataset.version}")
+        return dataclasses.replace(study, training=training, evaluation=evaluation, experiments=experiments,
+                                   dataset=dataset)
+
+
+SCALES = ("committed", "quick")
+QUICK_NOTE = "QUICK SCALE (`--quick`): fewer seeds, steps and episodes; NOT the committed scale, not comparable"
+
+
+def results_dir(study: Study, root: Path, scale: Scale) -> Path:
+    """Where the study's store and runs live: ``results/NAME`` (as the campaigns' RESULTS), or
+    ``results/quick/NAME`` at the quick scale."""
+    return Path(root) / "results" / ("" if scale.committed else "quick") / study.name
+
+
+def _informed(study: Study, exp: ExperimentSpec):
+    from bridgeplan.processes import make_process
+
+    return make_process(exp.process, **dict(exp.params))
+
+
+def build_experiment(study: Study, index: int):
+    """The :class:`Experiment` of ``study.experiments[index]``."""
+    from bridgeplan.experiments.grids import Experiment, RunSpec, Series, build_experiments
+    from bridgeplan.processes import make_process
+    from bridgeplan.replan import Execution
+
+    exp = study.experiments[index]
+    key = f"experiments[{index}]"
+    steps = study.training.diffusion_steps
+    try:
+        if exp.grid:
+            experiment = build_experiments(steps, 4, _informed(study, exp))[exp.grid]
+            if exp.title or exp.last_snapshot_only:
+                experiment = dataclasses.replace(experiment, title=exp.title or experiment.title,
+                                                 last_snapshot_only=exp.last_snapshot_only
+                                                 or experiment.last_snapshot_only)
+        else:
+            methods = {m.name: m for m in study.methods}
+            series = []
+            for s in exp.series:
+                m = methods[s.method]
+                run = RunSpec(make_process(m.process, steps=steps, **dict(m.params)), m.prior)
+                execution = Execution(**dict(s.execution))
+                for nfe in s.nfe:
+                    for multi in s.multi_task:
+                        tag = " ".join(t for t in (execution.tag(), s.sampler or "", "Multi2D" if multi else "") if t)
+                        series.append(Series(f"{run.label()} NFE {nfe}{' ' + tag if tag else ''}", run, nfe,
+                                             execution, multi, s.sampler))
+            experiment = Experiment(exp.name, exp.title or exp.name, tuple(series), exp.last_snapshot_only)
+        experiment.validate()
+    except BridgeplanError as e:
+        raise StudyError(study.file, key, str(e)) from None
+    return experiment
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """One experiment of the study on one split, with the runner's settings."""
+
+    experiment: object
+    settings: object
+    stages: tuple[tuple[int, int], ...]
+
+
+def sweeps(study: Study, root: Path, scale: Scale = Scale()) -> list[Sweep]:
+    """The study's sweeps, in file order (test before validation within an entry)."""
+    from bridgeplan.experiments.runner import SweepSettings
+
+    study = scale.apply(study)
+    t = study.training
+    out = []
+    base = dict(t.overrides)
+    for i, exp in enumerate(study.experiments):
+        experiment = build_experiment(study, i)
+        overrides = dict(base)
+        if exp.hold_share is not None:
+            overrides["hold_share"] = exp.hold_share
+        for split in exp.splits:
+            settings = SweepSettings(
+                maze=study.dataset.maze, dataset=str((Path(root) / study.dataset.directory()).resolve()),
+                dataset_steps=study.dataset.steps, preset=t.preset, train_steps=t.steps, prior_steps=t.prior_steps,
+                checkpoint_every=t.checkpoint_every, episodes=study.evaluation.episodes,
+                seeds=exp.seeds or t.seeds, results_dir=str(results_dir(study, root, scale)), overrides=overrides,
+                validation=split == "validation")
+            out.append(Sweep(experiment, settings, t.all_stages()))
+    return out
+
+
+def check_study(study: Study) -> None:
+    """Everything that can be checked without the other studies: the grids and series, the preset and the
+    training fields against the maze."""
+    from bridgeplan import config as cfg
+
+    if study.dataset is not None:
+        try:
+            cfg.preset_config(study.dataset.maze, study.training.preset, **dict(study.training.overrides))
+        except (BridgeplanError, TypeError, ValueError) as e:
+            raise StudyError(study.file, "training", str(e)) from None
+    for i in range(len(study.experiments)):
+        build_experiment(study, i)
+
+
+def trained_methods(study: Study) -> set:
+    """The trained methods (``MethodKey`` at default sampler, open loop, single-task) of the study's runs."""
+    from bridgeplan.analysis.keys import key_of
+
+    out = set()
+    for i, exp in enumerate(study.experiments):
+        hold = exp.hold_share if exp.hold_share is not None else dict(study.training.overrides).get("hold_share", 0.0)
+        for run in build_experiment(study, i).runs():
+            out.add(key_of(run.process, run.prior, hold_share=hold, sampler=""))
+    return out
+
+
+def check_reports(study: Study, studies: dict[str, Study]) -> None:
+    """Its ``uses`` name known studies, and each report's generator reads only methods that the study or the
+    studies it uses train."""
+    from bridgeplan.analysis.keys import label
+    from bridgeplan.studies.reports import GENERATORS
+
+    for i, name in enumerate(study.uses):
+        if name not in studies:
+            raise StudyError(study.file, f"uses[{i}]", f"unknown study {name!r} (known: {', '.join(sorted(studies))})")
+    if not study.reports:
+        return
+    trained = set(trained_methods(study))
+    for name in study.uses:
+        trained |= trained_methods(studies[name])
+    for i, report in enumerate(study.reports):
+        missing = [k for k in GENERATORS[report.generator].reads() if k not in trained]
+        if missing:
+            raise StudyError(study.file, f"reports[{i}].generator",
+                             f"{report.generator} reads {label(missing[0])} (N={missing[0].steps}), which neither "
+                             f"{study.name} nor the studies it uses ({', '.join(study.uses) or 'none'}) train")
+
+
+# --- what is missing ---------------------------------------------------------------------------------------------
+
+def _store_keys(path: Path) -> set[tuple]:
+    """The KEY of every row of the store at ``path`` (read-only; none when there is no store)."""
+    from bridgeplan.experiments.store import KEY
+
+    if not path.exists():
+        return set()
+    try:
+        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
+        try:
+            return {tuple(r) for r in db.execute(f"SELECT {', '.join(KEY)} FROM results")}
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as e:
+        raise BridgeplanError(f"cannot use results store {path}: {e}") from None
+
+
+def _planned_snapshots(run_dir: Path, stages) -> list[int]:
+    from bridgeplan import layout
+
+    steps = set(layout.snapshot_steps(run_dir)) if run_dir.exists() else set()
+    start = 0
+    for total, every in stages:
+        steps |= {s for s in range(start + 1, total + 1) if s % every == 0 or s == total}
+        start = total
+    return sorted(s for s in steps if s <= stages[-1][0])
+
+
+@dataclass(frozen=True)
+class Missing:
+    trains: tuple[tuple[str, int, int], ...]
+    """(run name, steps to train, steps done) per run that is not finished, learned priors included."""
+    evaluations: Counter
+    """Missing evaluations by experiment name (``-validation`` for the validation split)."""
+    episodes: int
+    """Episodes per evaluation."""
+
+    def cost_seconds(self) -> tuple[float, float]:
+        train = sum(n - max(done, 0) for _, n, done in self.trains) / TRAIN_STEPS_PER_SECOND
+        return train, sum(self.evaluations.values()) * self.episodes * EVAL_SECONDS_PER_EPISODE
+
+
+def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
+    """What ``study run`` would train and evaluate: runs short of their steps, evaluations absent from the store."""
+    from bridgeplan import config as cfg
+    from bridgeplan import layout
+    from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
+    from bridgeplan.experiments.runner import VALIDATION_SUFFIX, _prior_config, _train_config, _trained_step
+
+    plan = sweeps(study, root, scale)
+    trains: dict[str, tuple[int, int]] = {}
+    evaluations: Counter = Counter()
+    keys = _store_keys(layout.store_path(results_dir(study, root, scale)))
+    seen = set()
+    for sweep in plan:
+        s, experiment = sweep.settings, sweep.experiment
+        runs = layout.runs_dir(s.results_dir)
+        planner = cfg.preset_config(s.maze, s.preset, **s.overrides)
+        suffix = VALIDATION_SUFFIX if s.validation else ""
+        name = experiment.name + suffix
+        for seed in s.seeds:
+            for spec in experiment.runs():
+                if spec.prior == "learned":
+                    prior = _prior_config(s, seed, planner)
+                    trains.setdefault(prior.run_name(), (prior.steps, _trained_step(runs / prior.run_name())))
+                config = _train_config(s, spec, seed, "")
+                run_dir = runs / config.run_name()
+                trains.setdefault(config.run_name(), (config.steps, _trained_step(run_dir)))
+                snapshots = _planned_snapshots(run_dir, sweep.stages if scale.committed else ((s.train_steps,
+                                                                                                s.checkpoint_every),))
+                last_only = experiment.last_snapshot_only or s.validation
+                task_seed = seed + VALIDATION_SEED_OFFSET if s.validation else seed
+                for series in experiment.series:
+                    if series.run != spec:
+                        continue
+                    for step in (snapshots[-1:] if last_only else snapshots):
+                        key = (name, config.run_name(), step, series.nfe, series.process.sampling_tag(),
+                               series.execution.tag(), int(series.multi_task), s.episodes, task_seed)
+                        if key not in keys and key not in seen:
+                            seen.add(key)
+                            evaluations[name] += 1
+    todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
+    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes)
+
+
+def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
+    """``study run --dry-run``'s lines."""
+    m = missing(study, root, scale)
+    store = results_dir(study, root, scale) / "results.sqlite"
+    lines = [f"study {study.name} ({'committed scale' if scale.committed else QUICK_NOTE}): store {store}"
+             f"{'' if store.exists() else ' (absent)'}"]
+    if not study.experiments:
+        lines.append(f"  trains and evaluates nothing of its own (reports from: {', '.join(study.uses) or 'none'})")
+        return lines
+    for run, n, done in m.trains:
+        lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
+    for name, count in m.evaluations.items():
+        lines.append(f"  evaluate {name}: {count} evaluations x {m.episodes} episodes")
+    train_s, eval_s = m.cost_seconds()
+    lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values())} evaluations; estimated "
+                 f"{_hours(train_s)} of training at {TRAIN_STEPS_PER_SECOND} steps/s per run and {_hours(eval_s)} "
+                 f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumptions: one CPU core, "
+                 f"cpu-small; divide by --workers)")
+    return lines
+
+
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.1f} min"
+
+
+# --- running -----------------------------------------------------------------------------------------------------
+
+def ensure_dataset(study: Study, root: Path) -> Path:
+    """The study's dataset directory, generated (seed and steps as declared) when absent; its data version is
+    checked against the generator's."""
+    from bridgeplan.data.generate import DATA_VERSION
+
+    d = study.dataset
+    path = (Path(root) / d.directory()).resolve()
+    if d.version != DATA_VERSION:
+        raise StudyError(study.file, "dataset.version", f"data version {d.version}, but this bridgeplan generates "
+                                                        f"version {DATA_VERSION}")
+    if not path.exists():
+        from bridgeplan.data import generate_dataset
+
+        generate_dataset(d.maze, d.steps, seed=d.seed, out=path)
+    return path
+
+
+def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,
+              ray_address: str | None = None, progress: bool = True) -> int:
+    """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows."""
+    from bridgeplan.experiments.runner import run_sweep
+
+    if not study.experiments:
+        return 0
+    scaled = scale.apply(study)
+    ensure_dataset(scaled, root)
+    workers = workers or study.evaluation.workers
+    added = 0
+    for sweep in sweeps(study, root, scale):
+        if scale.committed:
+            for steps, every in sweep.stages[:-1]:  # earlier passes: train only, as the committed runs were
+                early = dataclasses.replace(sweep.settings, train_steps=steps, checkpoint_every=every,
+                                            train_only=True)
+                run_sweep([sweep.experiment], early, backend=backend, workers=workers, ray_address=ray_address,
+                          progress=progress)
+        added += run_sweep([sweep.experiment], sweep.settings, backend=backend, workers=workers,
+                           ray_address=ray_address, progress=progress)
+    return added

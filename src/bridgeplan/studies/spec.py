@@ -1,0 +1,407 @@
+"""Study files (``studies/NAME.toml``) parsed into frozen dataclasses, every key checked.
+
+A study is one campaign: a maze, a dataset, how its runs are trained, the experiments it evaluates (a grid of
+:mod:`bridgeplan.experiments.grids` with the process compared with DDPM, or series of declared methods), and the
+reports it makes. A study may read the results of others (``uses``) instead of training anything itself.
+
+Example (the keys and their defaults: the dataclasses below)::
+
+    name = "medium-v2-curves"            # default: the file's stem
+    title = "medium, data version 2: DDPM, the bridges and flow matching across training"
+    uses = []                            # other studies (names) whose results its reports read
+    data = "medium-v2-curves"            # committed results folder under docs/results (results.csv, report.md)
+
+    [dataset]
+    maze = "medium"
+    steps = 1_000_000                    # transitions `bridgeplan data generate` makes
+    seed = 123
+    version = 2                          # the generator's data version (bridgeplan.data.generate.DATA_VERSION)
+
+    [training]
+    preset = "cpu-small"
+    steps = 8000                         # optimizer steps per run (the last stage's)
+    checkpoint_every = 2000              # snapshot (evaluation) interval
+    prior_steps = 2000                   # the learned prior's optimizer steps
+    seeds = [0, 1, 2]
+    diffusion_steps = 16
+    stages = []                          # earlier [steps, checkpoint_every] passes the runs were trained in
+    # any other TrainConfig field (batch_size, lr, horizon, stride, hold_share, model = {dim = 8}, ...)
+
+    [evaluation]
+    episodes = 200
+    workers = 2
+
+    [[experiments]]                      # a thesis grid, with the process compared with DDPM
+    grid = "nfe-curves"
+    process = "bridge"
+    params = { consistent = true }       # that process's parameters
+    splits = ["test", "validation"]      # validation: each run's final snapshot on other tasks
+    seeds = [0]                          # default: the training seeds
+    hold_share = 0.5                     # training windows that wait (default: [training]'s)
+
+    [methods.bridge-line]                # a declared method, for series of one's own
+    process = "bridge"
+    prior = "line"
+
+    [[experiments]]
+    name = "mine"
+    last_snapshot_only = true
+    series = [{ method = "bridge-line", nfe = [1, 2], controller = "pursuit", lookahead = 1.0,
+                replan_every = 32, warm = true, multi_task = [false, true], sampler = "mean" }]
+
+    [[reports]]
+    generator = "findings"               # bridgeplan.studies.reports.GENERATORS
+    output = "findings.md"               # relative to docs/results
+
+Any other key, an unknown grid, process, parameter, method, sampler or generator, or a report whose generator
+reads a method that neither the study nor the studies it uses train: one ``error: FILE: KEY: ...`` line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bridgeplan.errors import BridgeplanError
+
+SPLITS = ("test", "validation")
+EXECUTION_FIELDS = ("controller", "lookahead", "replan_every", "warm", "arrival", "tolerance", "candidates", "select")
+
+
+class StudyError(BridgeplanError):
+    """A bad study file: the message names the file and the key."""
+
+    def __init__(self, file: Path | str, key: str, message: str):
+        super().__init__(f"{file}: {key}: {message}")
+
+
+@dataclass(frozen=True)
+class Dataset:
+    maze: str
+    steps: int = 1_000_000
+    """Transitions of the generated dataset (`bridgeplan data generate --steps`)."""
+    seed: int = 123
+    generator: str = "expert"
+    """The noisy expert stream of `bridgeplan data generate` (Minari's D4RL recipe): the one generator."""
+    version: int = 2
+    """The data version the generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
+    path: str = ""
+    """Dataset directory, relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``
+    (generated there when absent, as the campaigns did)."""
+
+    def directory(self) -> str:
+        return self.path or f"datasets/{self.maze}-{self.steps}-v{self.version}"
+
+
+@dataclass(frozen=True)
+class Training:
+    preset: str = "cpu-small"
+    steps: int = 3000
+    """Optimizer steps per planner run (the final stage's)."""
+    checkpoint_every: int = 500
+    prior_steps: int = 2000
+    seeds: tuple[int, ...] = (0,)
+    diffusion_steps: int = 16
+    stages: tuple[tuple[int, int], ...] = ()
+    """Earlier passes ``(steps, checkpoint_every)``: the runs were trained to ``steps`` first, snapshotting every
+    ``checkpoint_every``, then resumed to :attr:`steps` (the committed snapshot steps come from that history)."""
+    overrides: tuple[tuple[str, Any], ...] = ()
+    """Other TrainConfig fields, sorted by name."""
+
+    def all_stages(self) -> tuple[tuple[int, int], ...]:
+        return (*self.stages, (self.steps, self.checkpoint_every))
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    episodes: int = 200
+    workers: int = 1
+    """Parallel jobs of the local backend (cores divided among them)."""
+
+
+@dataclass(frozen=True)
+class Method:
+    """A declared method: a process with its parameters, from a prior."""
+
+    name: str
+    process: str
+    prior: str = "gaussian"
+    params: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass(frozen=True)
+class SeriesSpec:
+    method: str
+    nfe: tuple[int, ...]
+    multi_task: tuple[bool, ...] = (False,)
+    sampler: str | None = None
+    execution: tuple[tuple[str, Any], ...] = ()
+    """``replan.Execution`` fields (controller, lookahead, replan_every, warm, arrival, ...)."""
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    name: str
+    """The grid's name, or the declared experiment's (the store's ``experiment`` column)."""
+    grid: str = ""
+    """A thesis grid (``experiments.grids.EXPERIMENTS``); '' for declared series."""
+    process: str = "bridge"
+    """Grid: the process compared with DDPM from each prior."""
+    params: tuple[tuple[str, Any], ...] = ()
+    series: tuple[SeriesSpec, ...] = ()
+    title: str = ""
+    last_snapshot_only: bool = False
+    splits: tuple[str, ...] = ("test",)
+    seeds: tuple[int, ...] | None = None
+    """Default: the training seeds."""
+    hold_share: float | None = None
+    """Default: the training's (``hold_share`` in [training], else 0)."""
+
+
+@dataclass(frozen=True)
+class ReportSpec:
+    generator: str
+    output: str
+    """Relative to docs/results."""
+
+
+@dataclass(frozen=True)
+class Study:
+    name: str
+    file: Path
+    title: str = ""
+    data: str = ""
+    """The committed results folder under docs/results (its results.csv); default the study's name."""
+    uses: tuple[str, ...] = ()
+    dataset: Dataset | None = None
+    training: Training = Training()
+    evaluation: Evaluation = Evaluation()
+    methods: tuple[Method, ...] = ()
+    experiments: tuple[ExperimentSpec, ...] = ()
+    reports: tuple[ReportSpec, ...] = ()
+
+    @property
+    def data_dir(self) -> str:
+        return self.data or self.name
+
+
+# --- parsing ----------------------------------------------------------------------------------------------------
+
+def _table(file, key: str, value, allowed: set[str], required: tuple[str, ...] = ()) -> dict:
+    if not isinstance(value, dict):
+        raise StudyError(file, key, f"expected a table, got {type(value).__name__}")
+    unknown = sorted(set(value) - allowed)
+    if unknown:
+        raise StudyError(file, f"{key}.{unknown[0]}" if key else unknown[0],
+                         f"unknown key (known: {', '.join(sorted(allowed))})")
+    for name in required:
+        if name not in value:
+            raise StudyError(file, f"{key}.{name}" if key else name, "required")
+    return value
+
+
+def _typed(file, key: str, value, kind, positive: bool = False):
+    ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value, ok = float(value), True
+    if not ok:
+        raise StudyError(file, key, f"expected {kind.__name__}, got {value!r}")
+    if positive and value <= 0:
+        raise StudyError(file, key, f"must be positive, got {value!r}")
+    return value
+
+
+def _ints(file, key: str, value, minimum: int = 0) -> tuple[int, ...]:
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = [value]
+    if not isinstance(value, list) or not value or any(not isinstance(v, int) or isinstance(v, bool) or v < minimum
+                                                        for v in value):
+        raise StudyError(file, key, f"expected a non-empty list of integers >= {minimum}, got {value!r}")
+    return tuple(value)
+
+
+def _dataclass_fields(cls, value: dict, file, key: str) -> dict:
+    """``value``'s keys that ``cls`` has, type-checked against the defaults' types."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        if f.name in value:
+            default = f.default if f.default is not dataclasses.MISSING else None
+            kind = type(default) if isinstance(default, (int, float, str, bool)) else str
+            out[f.name] = _typed(file, f"{key}.{f.name}", value[f.name], kind, positive=kind in (int,) and
+                                 f.name in ("steps", "episodes", "workers", "checkpoint_every", "prior_steps",
+                                            "diffusion_steps"))
+    return out
+
+
+def _process_params(file, key: str, process: str, params) -> tuple[tuple[str, Any], ...]:
+    from bridgeplan.processes import PROCESSES, make_process
+
+    if process not in PROCESSES:
+        raise StudyError(file, key, f"unknown process {process!r} (choose from {', '.join(PROCESSES)})")
+    params = _table(file, f"{key}.params", params or {}, set(params or {}))
+    try:
+        make_process(process, **params)
+    except (BridgeplanError, TypeError, ValueError) as e:
+        raise StudyError(file, f"{key}.params", str(e)) from None
+    return tuple(sorted(params.items()))
+
+
+def _frozen(value):
+    """TOML lists as tuples (``dim_mults = [1, 2]``), inside tables too, as the configs hold them."""
+    if isinstance(value, list):
+        return tuple(_frozen(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _frozen(v) for k, v in value.items()}
+    return value
+
+
+def _training(file, raw: dict) -> Training:
+    from bridgeplan import config as cfg
+
+    own = {f.name for f in dataclasses.fields(Training)} - {"overrides"}
+    taken = {"maze", "dataset", "preset", "process", "prior", "prior_run", "steps", "checkpoint_every", "seed"}
+    train_fields = {f.name for f in dataclasses.fields(cfg.TrainConfig)} - taken
+    _table(file, "training", raw, own | train_fields)
+    values = _dataclass_fields(Training, {k: v for k, v in raw.items() if k not in ("seeds", "stages")}, file,
+                               "training")
+    if "seeds" in raw:
+        values["seeds"] = _ints(file, "training.seeds", raw["seeds"])
+    if "stages" in raw:
+        stages = raw["stages"]
+        if not isinstance(stages, list) or any(not isinstance(s, list) or len(s) != 2 for s in stages):
+            raise StudyError(file, "training.stages", f"expected a list of [steps, checkpoint_every], got {stages!r}")
+        values["stages"] = tuple(tuple(_ints(file, "training.stages", s, minimum=1)) for s in stages)
+    overrides = tuple(sorted((k, _frozen(v)) for k, v in raw.items() if k in train_fields))
+    return Training(**values, overrides=overrides)
+
+
+def _series(file, key: str, raw, methods: dict[str, Method]) -> SeriesSpec:
+    raw = _table(file, key, raw, {"method", "nfe", "multi_task", "sampler", *EXECUTION_FIELDS}, ("method", "nfe"))
+    if raw["method"] not in methods:
+        raise StudyError(file, f"{key}.method", f"unknown method {raw['method']!r} (declared: "
+                                                f"{', '.join(methods) or 'none'}; see [methods.NAME])")
+    multi = raw.get("multi_task", [False])
+    multi = [multi] if isinstance(multi, bool) else multi
+    if not isinstance(multi, list) or not multi or any(not isinstance(m, bool) for m in multi):
+        raise StudyError(file, f"{key}.multi_task", f"expected true, false or a list of them, got {multi!r}")
+    sampler = raw.get("sampler")
+    if sampler is not None:
+        _typed(file, f"{key}.sampler", sampler, str)
+    execution = tuple(sorted((k, v) for k, v in raw.items() if k in EXECUTION_FIELDS))
+    from bridgeplan.replan import Execution
+
+    try:
+        Execution(**dict(execution))
+    except (BridgeplanError, TypeError, ValueError) as e:
+        raise StudyError(file, key, f"not an execution: {e}") from None
+    return SeriesSpec(method=raw["method"], nfe=_ints(file, f"{key}.nfe", raw["nfe"], minimum=1),
+                      multi_task=tuple(multi), sampler=sampler, execution=execution)
+
+
+def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSpec:
+    from bridgeplan.experiments.grids import EXPERIMENTS
+
+    common = {"title", "last_snapshot_only", "splits", "seeds", "hold_share"}
+    if not isinstance(raw, dict):
+        raise StudyError(file, key, "expected a table")
+    if "grid" in raw:
+        raw = _table(file, key, raw, common | {"grid", "process", "params"})
+        if raw["grid"] not in EXPERIMENTS:
+            raise StudyError(file, f"{key}.grid",
+                             f"unknown grid {raw['grid']!r} (choose from {', '.join(EXPERIMENTS)})")
+        process = _typed(file, f"{key}.process", raw.get("process", "bridge"), str)
+        values: dict[str, Any] = dict(name=raw["grid"], grid=raw["grid"], process=process,
+                                      params=_process_params(file, key, process, raw.get("params")))
+    else:
+        raw = _table(file, key, raw, common | {"name", "series"}, ("name", "series"))
+        series = raw["series"]
+        if not isinstance(series, list) or not series:
+            raise StudyError(file, f"{key}.series", "expected a non-empty list of series tables")
+        values = dict(name=_typed(file, f"{key}.name", raw["name"], str),
+                      series=tuple(_series(file, f"{key}.series[{i}]", s, methods) for i, s in enumerate(series)))
+    if "title" in raw:
+        values["title"] = _typed(file, f"{key}.title", raw["title"], str)
+    if "last_snapshot_only" in raw:
+        values["last_snapshot_only"] = _typed(file, f"{key}.last_snapshot_only", raw["last_snapshot_only"], bool)
+    if "splits" in raw:
+        splits = raw["splits"]
+        if not isinstance(splits, list) or not splits or any(s not in SPLITS for s in splits):
+            raise StudyError(file, f"{key}.splits", f"expected a list of {', '.join(SPLITS)}, got {splits!r}")
+        values["splits"] = tuple(dict.fromkeys(splits))
+    if "seeds" in raw:
+        values["seeds"] = _ints(file, f"{key}.seeds", raw["seeds"])
+    if "hold_share" in raw:
+        values["hold_share"] = _typed(file, f"{key}.hold_share", raw["hold_share"], float)
+    return ExperimentSpec(**values)
+
+
+def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
+    """The study in ``path`` (TOML), checked; :class:`StudyError` names the file (as ``shown``, default
+    ``path``) and the key of the first problem."""
+    from bridgeplan.studies.reports import GENERATORS
+
+    try:
+        text = Path(path).read_text()
+    except OSError as e:
+        raise BridgeplanError(f"cannot read study {path}: {e.strerror or e}") from None
+    stem = Path(path).stem
+    path = Path(shown or path)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise StudyError(path, "(syntax)", str(e)) from None
+    top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "reports"}
+    _table(path, "", raw, top)
+    name = _typed(path, "name", raw.get("name", stem), str)
+    uses = raw.get("uses", [])
+    if not isinstance(uses, list) or any(not isinstance(u, str) for u in uses):
+        raise StudyError(path, "uses", f"expected a list of study names, got {uses!r}")
+    dataset = None
+    if "dataset" in raw:
+        d = _table(path, "dataset", raw["dataset"], {f.name for f in dataclasses.fields(Dataset)}, ("maze",))
+        dataset = Dataset(**_dataclass_fields(Dataset, d, path, "dataset"))
+        from bridgeplan.maze.layouts import get_maze
+
+        try:
+            get_maze(dataset.maze)
+        except BridgeplanError as e:
+            raise StudyError(path, "dataset.maze", str(e)) from None
+        if dataset.generator != "expert":
+            raise StudyError(path, "dataset.generator", f"unknown generator {dataset.generator!r} (choose from expert)")
+    training = _training(path, raw.get("training", {}))
+    evaluation = Evaluation(**_dataclass_fields(
+        Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), {"episodes", "workers"}), path,
+        "evaluation"))
+    methods = {}
+    for mname, m in _table(path, "methods", raw.get("methods", {}), set(raw.get("methods", {}))).items():
+        key = f"methods.{mname}"
+        m = _table(path, key, m, {"process", "prior", "params"}, ("process",))
+        process = _typed(path, f"{key}.process", m["process"], str)
+        methods[mname] = Method(mname, process, _typed(path, f"{key}.prior", m.get("prior", "gaussian"), str),
+                                _process_params(path, key, process, m.get("params")))
+    experiments = raw.get("experiments", [])
+    if not isinstance(experiments, list):
+        raise StudyError(path, "experiments", "expected an array of tables ([[experiments]])")
+    experiments = tuple(_experiment(path, f"experiments[{i}]", e, methods) for i, e in enumerate(experiments))
+    reports = []
+    for i, r in enumerate(raw.get("reports", [])):
+        key = f"reports[{i}]"
+        r = _table(path, key, r, {"generator", "output"}, ("generator",))
+        if r["generator"] not in GENERATORS:
+            raise StudyError(path, f"{key}.generator",
+                             f"unknown generator {r['generator']!r} (choose from {', '.join(GENERATORS)})")
+        output = _typed(path, f"{key}.output", r.get("output", GENERATORS[r["generator"]].output), str)
+        reports.append(ReportSpec(r["generator"], output))
+    study = Study(name=name, file=path, title=_typed(path, "title", raw.get("title", ""), str),
+                  data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
+                  training=training, evaluation=evaluation, methods=tuple(methods.values()),
+                  experiments=experiments, reports=tuple(reports))
+    if experiments and dataset is None:
+        raise StudyError(path, "dataset", "required: the study trains runs (it has experiments)")
+    from bridgeplan.studies.plan import check_study
+
+    check_study(study)
+    return study

@@ -1,0 +1,176 @@
+"""Study files, `bridgeplan study list/report/run`: parsing, the committed reports, dry runs and a tiny run."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from bridgeplan.cli import main
+from bridgeplan.studies import load_studies, parse_study
+from bridgeplan.studies.plan import QUICK_NOTE, Scale, missing
+from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_committed_studies_parse_into_dataclasses():
+    studies = load_studies(REPO)
+    medium = studies["medium-v2-curves"]
+    assert isinstance(medium, Study) and medium.file == Path("studies/medium-v2-curves.toml")
+    assert medium.dataset == Dataset(maze="medium", steps=1_000_000, seed=123, version=2)
+    assert medium.training == Training(preset="cpu-small", steps=8000, checkpoint_every=2000, prior_steps=2000,
+                                       seeds=(0, 1, 2))
+    assert medium.experiments[0] == ExperimentSpec(name="nfe-curves", grid="nfe-curves", splits=("test",
+                                                                                               "validation"))
+    assert ExperimentSpec(name="nfe-curves", grid="nfe-curves", params=(("consistent", True),)) in medium.experiments
+    assert studies["large-v2-curves"].training.all_stages() == ((8000, 2000), (16000, 2000))
+    assert studies["medium-v2-hold"].training.overrides == (("hold_share", 0.5),)
+    assert [(r.generator, r.output) for r in studies["findings"].reports] == [("findings", "findings.md")]
+
+
+@pytest.mark.parametrize("name", ["medium-v2-curves", "large-v2-curves", "umaze-v2-hold"])
+def test_a_campaign_study_lists_every_committed_evaluation(name):
+    """With no store, the dry run's evaluations are the committed CSV's rows, experiment by experiment: the study
+    file encodes the campaign that made them."""
+    m = missing(load_studies(REPO)[name], REPO / "no-such-dir")  # root without results: everything is missing
+    with open(REPO / "docs" / "results" / name / "results.csv") as f:
+        assert m.evaluations == Counter(r["experiment"] for r in csv.DictReader(f))
+
+
+def test_study_report_check_passes_on_the_committed_tree(capsys):
+    assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
+    assert "3 reports match their studies" in capsys.readouterr().out
+
+
+def _docs_copy(tmp_path) -> Path:
+    root = tmp_path / "repo"
+    shutil.copytree(REPO / "studies", root / "studies")
+    shutil.copytree(REPO / "docs" / "results", root / "docs" / "results", ignore=shutil.ignore_patterns("*.png"))
+    return root
+
+
+def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, capsys):
+    root = _docs_copy(tmp_path)
+    findings = root / "docs" / "results" / "findings.md"
+    text = findings.read_text()
+    number = next(w for w in text.split() if w[0].isdigit() and "." in w)
+    findings.write_text(text.replace(number, "99.9", 1))
+    assert main(["study", "report", "--check", "--root", str(root)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: docs/results/findings.md differs from what findings generates "
+                   "(run bridgeplan study report findings)"]
+    assert findings.read_text() != text  # --check writes nothing
+    assert main(["study", "report", "findings", "--root", str(root)]) == 0
+    assert findings.read_text() == text
+    assert main(["study", "report", "--check", "--root", str(root)]) == 0
+
+
+def test_study_report_check_fails_when_a_report_is_missing(tmp_path, capsys):
+    root = _docs_copy(tmp_path)
+    (root / "docs" / "results" / "controllers.md").unlink()
+    assert main(["study", "report", "controllers", "--check", "--root", str(root)]) == 2
+    assert "docs/results/controllers.md differs" in capsys.readouterr().err
+
+
+def test_study_list(capsys):
+    assert main(["study", "list", "--root", str(REPO)]) == 0
+    lines = {line.split("\t")[0]: line.split("\t")[1:] for line in capsys.readouterr().out.strip().splitlines()}
+    assert {"findings", "prior-curves", "controllers", "medium-v2-curves", "umaze-v2-curves"} <= set(lines)
+    assert lines["findings"][0] == "studies/findings.toml"
+    assert "docs/results/findings.md (feeds README.md, docs/results/README.md)" in lines["findings"][1]
+    assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop)"
+
+
+GOOD = """
+[dataset]
+maze = "umaze"
+path = "{dataset}"
+
+[training]
+steps = 2
+checkpoint_every = 1
+prior_steps = 2
+seeds = [0]
+diffusion_steps = 6
+horizon = 32
+batch_size = 4
+device = "cpu"
+model = {{ dim = 8, dim_mults = [1, 2] }}
+
+[evaluation]
+episodes = 4
+
+[methods.ddpm]
+process = "ddpm"
+
+[[experiments]]
+name = "tiny"
+series = [{{ method = "ddpm", nfe = [1, 6] }}]
+"""
+
+BAD = [
+    ("colour = 1\n", "colour: unknown key"),
+    ("[training]\nstep = 3\n", "training.step: unknown key"),
+    ("[training]\nsteps = -3\n", "training.steps: must be positive"),
+    ('[dataset]\nmaze = "maze9"\n', "dataset.maze: unknown maze"),
+    ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "nfe99"\n', "experiments[0].grid: unknown grid"),
+    ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "nfe1"\nprocess = "vae"\n',
+     "experiments[0]: unknown process 'vae'"),
+    ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "nfe1"\nparams = { beta_mx = 0.3 }\n',
+     "experiments[0].params:"),
+    ('[dataset]\nmaze = "umaze"\n[[experiments]]\nname = "x"\nseries = [{ method = "ddpm", nfe = [1] }]\n',
+     "experiments[0].series[0].method: unknown method 'ddpm'"),
+    ('[dataset]\nmaze = "umaze"\n[methods.d]\nprocess = "ddpm"\n[[experiments]]\nname = "x"\n'
+     'series = [{ method = "d", nfe = [99] }]\n', "experiments[0]: experiment x: series"),
+    ('[[reports]]\ngenerator = "tables"\n', "reports[0].generator: unknown generator 'tables'"),
+    ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "bridge-nfe"\n[[reports]]\ngenerator = "controllers"\n',
+     "reports[0].generator: controllers reads DDPM (N=16), which neither bad nor the studies it uses "
+     "(none) train"),
+    ('uses = ["nobody"]\n', "uses[0]: unknown study 'nobody'"),
+    ("this is not toml\n", "(syntax)"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_a_bad_study_is_one_error_line_and_nothing_written(tmp_path, capsys, text, message):
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "bad.toml").write_text(text)
+    for command in (["list"], ["report", "--check"], ["run", "bad", "--dry-run"], ["run", "bad"]):
+        assert main(["study", *command, "--root", str(root)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err
+    assert sorted(p.name for p in root.rglob("*")) == ["bad.toml", "studies"]
+
+
+def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_path, capsys):
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(GOOD.format(dataset=tiny_dataset))
+    study = parse_study(root / "studies" / "tiny.toml")
+    assert study.methods[0].process == "ddpm" and study.experiments[0].series[0].nfe == (1, 6)
+    assert dict(study.training.overrides)["model"] == {"dim": 8, "dim_mults": (1, 2)}
+
+    assert main(["study", "run", "tiny", "--dry-run", "--root", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "(committed scale)" in out and "(absent)" in out
+    assert "  train umaze-ddpm-N6-H32-cpu-small-s0: 2 steps (0 of 2 done)" in out
+    assert "  evaluate tiny: 4 evaluations x 4 episodes" in out  # 2 snapshots x NFE 1, 6
+    assert "  total: 1 runs to train, 4 evaluations" in out
+    assert not (root / "results").exists()
+
+    assert main(["study", "run", "tiny", "--quick", "--dry-run", "--root", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert QUICK_NOTE in out and "2 evaluations" in out  # quick: 1 step, one snapshot
+    assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "tiny: 2 new results" in out and QUICK_NOTE in out
+    assert (root / "results" / "quick" / "tiny" / "results.sqlite").exists()
+    assert not (root / "results" / "tiny").exists()
+    assert sum(missing(study, root, Scale("quick")).evaluations.values()) == 0
+    assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 0 new results" in capsys.readouterr().out  # resumable: nothing left to do
