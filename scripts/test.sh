@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Set up .venv, lint (ruff, pinned in the test extras), then run the test suite (a few minutes on 2 CPU cores).
+# Set up .venv, lint (ruff, pinned in the test extras), check that every committed report is what its study
+# generates from the committed data (trains nothing), then run the test suite (a few minutes on 2 CPU cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 .venv/bin/python -m ruff check src tests
+.venv/bin/bridgeplan study report --check --root .
 exec .venv/bin/python -m pytest "$@"
