@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from bridgeplan.cli import main
 
 TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "--repeats", "1",
-              "--overhead-repeats", "2", "--no-compile", "--device", "cpu"]
+              "--overhead-repeats", "2", "--no-compile", "--throughput-seconds", "0", "--device", "cpu"]
 
 
 def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
@@ -32,7 +33,7 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (train,) = result["train_overhead"]
     assert (train["batch"], train["grad_accum"]) == (32, 1) and train["train_step_over_bare"] > 0
     assert "| cpu-small | 32 x 1 |" in markdown
-    assert result["compile"] == []
+    assert result["compile"] == [] and result["throughput"] == []
 
     budget = result["score_per_budget"]
     evals = budget["evaluations"]
@@ -99,3 +100,50 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     assert sorted(b["run"] for b in best) == sorted([str(tiny_runs["ddpm"]), str(twin)])
     markdown = (tmp_path / "out" / "bench.md").read_text()
     assert "| DDPM (ddpm) | 3 |" in markdown and "| DDPM (ddpm-twin) | 3 |" in markdown
+
+
+def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
+    import torch
+
+    from bridgeplan.bench import suites
+    from bridgeplan.nets.unet import Mish
+
+    monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("medium",))
+    monkeypatch.setattr(suites, "machine_limit", lambda threads, dtype, dev: {"matmul": 100.0, "conv": 50.0})
+    references = []
+    real_reference = suites.with_torch_reference
+
+    def spy(job):
+        real_reference(job)
+        references.append(job.model)
+
+    monkeypatch.setattr(suites, "with_torch_reference", spy)
+    rows = suites.training_throughput("cpu-small", (8,), 0.01, torch.device("cpu"))
+    precisions = ["fp32"] + (["bf16"] if suites_bf16() else [])
+    threads = sorted({1, os.cpu_count() or 1})
+    busy = (0, 1) if (os.cpu_count() or 1) > 1 else (0,)
+    # every setting (and the reference at batch 32, fp32) at every busy x threads combination
+    assert sorted((r["batch"], r["precision"], r["implementation"], r["busy_cores"], r["threads"]) for r in rows) == \
+        sorted([(8, p, "bridgeplan", b, t) for p in precisions for b in busy for t in threads] +
+               [(32, "fp32", "reference", b, t) for b in busy for t in threads])
+    for r in rows:
+        assert (r["maze"], r["horizon"], r["stride"]) == ("medium", 32, 8)
+        assert r["windows_per_s"] == pytest.approx(r["batch"] / (r["step_ms"] / 1000))
+        assert r["gflops"] == pytest.approx(r["gflop_per_step"] / (r["step_ms"] / 1000))
+        assert r["fraction_of_matmul"] == pytest.approx(r["gflops"] / 100) and \
+            r["fraction_of_conv"] == pytest.approx(r["gflops"] / 50)
+    # FLOPs per step scale with the batch: 0.44 GFLOP at 32 (the count of cpu-small at medium's shape)
+    (ref_flops,) = {r["gflop_per_step"] for r in rows if r["batch"] == 32}
+    (flops,) = {r["gflop_per_step"] for r in rows if r["batch"] == 8}
+    assert ref_flops == pytest.approx(0.44, rel=0.02) and flops == pytest.approx(ref_flops / 4)
+    # the reference rows ran torch's Mish, none of bridgeplan's
+    assert references and all(not any(isinstance(m, Mish) for m in net.modules()) and
+                              any(isinstance(m, torch.nn.Mish) for m in net.modules()) for net in references)
+
+
+def suites_bf16() -> bool:
+    import torch
+
+    from bridgeplan.train import bf16_supported
+
+    return bf16_supported(torch.device("cpu"))

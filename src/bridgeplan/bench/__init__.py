@@ -1,5 +1,5 @@
-"""Benchmarks: planning latency, overheads, threads on a busy machine, torch.compile, evaluation
-throughput and score per planning budget.
+"""Benchmarks: planning latency, overheads, threads on a busy machine, torch.compile, training throughput
+against the machine's limit, evaluation throughput and score per planning budget.
 
 ``harness.py`` times, ``suites.py`` measures (one function per figure), ``markdown.py`` writes the
 tables. Timings are medians over repeats after warm-up; the machine is recorded beside them. Not
@@ -39,6 +39,11 @@ class BenchConfig:
     """Interleaved rounds for the overhead ratios (plan vs bare forward; train step vs bare step)."""
     busy_steps: int = 30
     """Training steps per rate of the busy-core figure (0: skip it; CPU devices only)."""
+    throughput_seconds: float = 2.0
+    """Seconds of training steps per figure of the training-throughput table (0: skip it)."""
+    throughput_batch_sizes: tuple[int, ...] = (32, 256)
+    """Batches of the throughput table for ``cpu-small`` (``diffuser``'s network is timed at its own 32 only:
+    a batch of 256 takes seconds per step on a CPU)."""
     compile: bool = True
     """Also time ``torch.compile``'d forward passes against eager ones (compilation takes minutes on a CPU)."""
     eval_run: str = ""
@@ -59,6 +64,8 @@ class BenchConfig:
         for name in ("repeats", "overhead_repeats", "budget_episodes"):
             if getattr(self, name) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        if self.throughput_seconds < 0 or min(self.throughput_batch_sizes, default=1) <= 0:
+            raise BridgeplanError("throughput-seconds must be >= 0 and its batch sizes positive")
         if self.busy_steps < 0:
             raise BridgeplanError(f"busy-steps must be >= 0, got {self.busy_steps}")
         for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
@@ -83,7 +90,7 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
     bench.validate()
     dev = resolve_device(bench.device)
     result = {"bench": dataclasses.asdict(bench), "machine": machine(dev), "latency": [], "plan_overhead": [],
-              "train_overhead": [], "busy_core": [], "compile": []}
+              "train_overhead": [], "busy_core": [], "compile": [], "throughput": []}
     for preset in bench.presets:
         progress(f"[{preset}] planning latency")
         result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev)
@@ -94,6 +101,10 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
         if bench.busy_steps and dev.type == "cpu":
             progress(f"[{preset}] training with a busy core")
             result["busy_core"].append(suites.busy_core_training(preset, bench.busy_steps, dev))
+        if bench.throughput_seconds:
+            progress(f"[{preset}] training throughput")
+            batches = bench.throughput_batch_sizes if preset == "cpu-small" else (32,)
+            result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev)
         if bench.compile:
             progress(f"[{preset}] torch.compile")
             result["compile"] += suites.compile_speedup(preset, bench.batch_sizes, bench.overhead_repeats, dev)

@@ -48,6 +48,8 @@ def format_bench(result: dict) -> str:
                          ("quiet_1thread", f"quiet_{cores}thread", "busy_1thread", f"busy_{cores}thread")),
                          f"{b['busy_over_quiet_1thread']:.2f}", f"{b[f'busy_{cores}thread_over_quiet_1thread']:.2f}"]
                         for b in result["busy_core"]])
+    if result.get("throughput"):
+        lines += format_throughput(result["throughput"])
     if result["compile"]:
         lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode), "
                   f"medians over {result['bench']['overhead_repeats']} interleaved rounds. The first call at each "
@@ -65,6 +67,23 @@ def format_bench(result: dict) -> str:
     if "score_per_budget" in result:
         lines += format_budget(result["score_per_budget"])
     return "\n".join(lines) + "\n"
+
+
+def format_throughput(rows: list[dict]) -> list[str]:
+    """Training windows/s and achieved GFLOP/s of each setting, next to the machine's limit in the same run."""
+    lines = ["", "## Training throughput", "",
+             "`train.py`'s own step (window gathering, prior, loss, fused Adam, EMA) at each preset's plan shape per "
+             "maze; GFLOP/s count the network's forward and backward passes only (torch's FLOP counter), so they "
+             "are a lower bound. The limit is the same run's 1024 x 1024 matmul and a 256 -> 256-channel, kernel-5 "
+             "convolution on 64 x 256 states, in the same precision and threads. `reference` is the implementation "
+             "before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter loop).", ""]
+    body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"],
+             r["implementation"], r["threads"], r["busy_cores"], f"{r['step_ms']:.1f}", f"{r['windows_per_s']:.0f}",
+             f"{r['gflops']:.1f}", f"{r['limit_gflops']['matmul']:.0f} / {r['limit_gflops']['conv']:.0f}",
+             f"{r['fraction_of_matmul']:.2f} / {r['fraction_of_conv']:.2f}"] for r in rows]
+    return lines + table(["preset", "maze, plan shape", "batch", "precision", "implementation", "threads",
+                          "busy cores", "step ms", "windows/s", "GFLOP/s", "limit GFLOP/s (matmul / conv)",
+                          "fraction of limit"], body)
 
 
 def format_budget(s: dict) -> list[str]:

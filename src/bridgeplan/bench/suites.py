@@ -29,14 +29,15 @@ DIFFUSION_STEPS = 16
 """N of the untrained networks timed here (the ``cpu-small`` default); timings depend on NFE, not on N."""
 
 
-def small_windows(horizon: int):
+def small_windows(horizon: int, stride: int = 1):
     """Windows of a small freshly generated umaze stream, and their normalizer (as training fits it)."""
     from bridgeplan.data.datasets import stream_from_generated
     from bridgeplan.data.generate import generate_stream
     from bridgeplan.maze.layouts import get_maze
 
-    stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), 20 * horizon, seed=0)])
-    return windows_of(stream, horizon)
+    steps = 20 * horizon * stride
+    stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), steps, seed=0)])
+    return windows_of(stream, horizon, stride)
 
 
 def method_configs(preset: str) -> dict[str, TrainConfig]:
@@ -102,16 +103,21 @@ def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device) -> di
     return {"preset": preset, "batch": batch, "forward_ms": ratios.pop("forward_ms"), "plan_nfe1_over_forward": ratios}
 
 
-def _train_step(config: TrainConfig, dev: torch.device):
+def _train_step(config: TrainConfig, dev: torch.device, reference: bool = False):
     """``(step, bare_step)``: one optimizer step of the training loop (``TrainJob``'s own: window sampling,
     prior sample, process loss, EMA update) and a bare step with as many forward+backward passes (an MSE
-    of the same network on a batch already on the device) before its one Adam step."""
+    of the same network on a batch already on the device) before its one Adam step. ``reference``: with
+    torch's Mish and Adam's per-parameter loop (:func:`with_torch_reference`)."""
     from bridgeplan.train import make_ema, make_optimizer, planner_job
 
-    windows, normalizer = small_windows(config.horizon)
+    windows, normalizer = small_windows(config.horizon, config.stride)
+    windows.to(dev)
     job = planner_job(config, normalizer, dev)
+    if reference:
+        with_torch_reference(job)
     model = job.model.train()
-    opt = make_optimizer(model, config.lr)
+    opt = torch.optim.Adam(model.parameters(), lr=config.lr, fused=False) if reference else \
+        make_optimizer(model, config.lr)
     ema = make_ema(model)
     gen = torch.Generator(device=dev).manual_seed(0)
     step = config.ema_start  # past the EMA's warm-up copy: the steady state of a long run
@@ -256,3 +262,105 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
                              "score_minari": test.score("minari")})
     return {"episodes": episodes, "selection_seed": selection_seed, "test_seed": test_seed,
             "evaluations": evals, "best": best}
+
+
+THROUGHPUT_MAZES = ("medium", "large")
+"""Plan shapes of the throughput figure: ``cpu-small``'s 32 x 8 and 48 x 8 (and Diffuser's 256 and 384 states)."""
+
+
+def machine_limit(threads: int, dtype: torch.dtype, dev: torch.device, seconds: float = 1.0) -> dict:
+    """GFLOP/s of work the machine does at its best: a 1024 x 1024 matmul and a large convolution (Diffuser's
+    widest layer, 256 -> 256 channels, kernel 5, on 64 windows of 256 states), at ``threads`` threads."""
+    a = torch.randn(1024, 1024, device=dev, dtype=dtype)
+    x = torch.randn(64, 256, 256, device=dev, dtype=dtype)
+    w = torch.randn(256, 256, 5, device=dev, dtype=dtype)
+    work = {"matmul": (lambda: a @ a, 2 * 1024 ** 3),
+            "conv": (lambda: torch.nn.functional.conv1d(x, w, padding=2), 2 * 64 * 256 * 256 * 256 * 5)}
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return {name: flops / _seconds_per_call(fn, seconds, dev) / 1e9 for name, (fn, flops) in work.items()}
+    finally:
+        torch.set_num_threads(before)
+
+
+def _seconds_per_call(fn, seconds: float, dev: torch.device) -> float:
+    """Mean wall seconds per call of ``fn`` over at least ``seconds`` of calls (after two warm-up calls)."""
+    fn()
+    fn()
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    calls, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        fn()
+        calls += 1
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    return (time.perf_counter() - t0) / calls
+
+
+def step_flops(config: TrainConfig, dev: torch.device) -> float:
+    """FLOPs of one forward+backward of the network on one batch (torch's FLOP counter; the optimizer and the
+    elementwise work are not counted, so achieved GFLOP/s are a lower bound)."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    model = build_model(config).to(dev)
+    x = torch.randn(config.batch_size, config.horizon, TRANSITION_DIM, device=dev)
+    with FlopCounterMode(display=False) as counter:
+        model(x, torch.zeros(config.batch_size, device=dev)).square().mean().backward()
+    return float(counter.get_total_flops())
+
+
+def with_torch_reference(job) -> None:
+    """Give a planner job's network torch's own Mish in place of bridgeplan's (with Adam's per-parameter loop,
+    which ``_train_step`` picks, the implementation before bridgeplan's kernels: the throughput's reference)."""
+    from bridgeplan.nets.unet import Mish
+
+    for module in list(job.model.modules()):
+        for name, child in module.named_children():
+            if isinstance(child, Mish):
+                setattr(module, name, torch.nn.Mish())
+
+
+def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.device) -> list[dict]:
+    """Training windows per second and achieved GFLOP/s of ``train.py``'s own step, per maze shape, batch and
+    precision, at one thread and at one per core, quiet and with another core busy; beside each, the machine's
+    limit in the same precision and threads (``machine_limit``) and the fraction of it achieved.
+
+    ``reference`` rows run the implementation bridgeplan had before its own Mish and the fused Adam, at batch
+    32 in float32: the speed-up of today's code over it is measured in the same run.
+    """
+    from bridgeplan.train import bf16_supported
+
+    cores = os.cpu_count() or 1
+    threads_list = sorted({1, cores}) if dev.type == "cpu" else [torch.get_num_threads()]
+    precisions = ["fp32"] + (["bf16"] if bf16_supported(dev) else [])
+    dtypes = {"fp32": torch.float32, "bf16": torch.bfloat16}
+    limits = {(t, p): machine_limit(t, dtypes[p], dev) for t in threads_list for p in precisions}
+    settings = [(b, p, False) for b in batch_sizes for p in precisions] + [(32, "fp32", True)]
+    before = torch.get_num_threads()
+    rows = []
+    try:
+        for maze in THROUGHPUT_MAZES:
+            for batch, precision, reference in settings:
+                config = preset_config(maze, preset, batch_size=batch, precision=precision)
+                flops = step_flops(config, dev) * config.grad_accum
+                train_step, _ = _train_step(config, dev, reference=reference)
+                for busy in ((0, 1) if dev.type == "cpu" and cores > 1 else (0,)):
+                    with busy_cores(busy):
+                        for threads in threads_list:
+                            torch.set_num_threads(threads)
+                            step_s = _seconds_per_call(train_step, seconds, dev)
+                            limit = limits[(threads, precision)]
+                            rows.append({
+                                "preset": preset, "maze": maze, "horizon": config.horizon, "stride": config.stride,
+                                "batch": batch, "grad_accum": config.grad_accum, "precision": precision,
+                                "implementation": "reference" if reference else "bridgeplan",
+                                "threads": threads, "busy_cores": busy, "step_ms": 1000 * step_s,
+                                "windows_per_s": batch * config.grad_accum / step_s,
+                                "gflop_per_step": flops / 1e9, "gflops": flops / step_s / 1e9,
+                                "limit_gflops": limit, "fraction_of_matmul": flops / step_s / 1e9 / limit["matmul"],
+                                "fraction_of_conv": flops / step_s / 1e9 / limit["conv"]})
+    finally:
+        torch.set_num_threads(before)
+    return rows
