@@ -93,6 +93,13 @@ def test_resume_with_other_config_is_refused(tiny_dataset, tmp_path, capsys):
     (["--steps", "0"], "steps must be positive"),
     (["--process", "bridge", "--prior", "magic"], "unknown prior"),
     (["--process", "bridge", "--prior", "learned"], "--prior-run"),
+    (["--lr", "-1"], "lr must be a positive, finite number"),
+    (["--lr", "nan"], "lr must be a positive, finite number"),
+    (["--batch-size", "0"], "batch_size must be positive"),
+    (["--grad-accum", "0"], "grad_accum must be >= 1"),
+    (["--ema-decay", "1.5"], "ema_decay must be in [0, 1]"),
+    (["--checkpoint-every", "0"], "checkpoint_every must be positive"),
+    (["--precision", "fp16"], "unknown precision 'fp16'"),
 ])
 def test_bad_input(tiny_dataset, tmp_path, capsys, bad, message):
     run = tmp_path / "run"
@@ -113,3 +120,59 @@ def test_nan_loss_stops_and_keeps_last_checkpoint(tiny_dataset, tmp_path, capsys
     state = torch.load(run / "checkpoint.pt", weights_only=False)
     assert 1 <= state["step"] < 50
     assert all(torch.isfinite(v).all() for v in state["model"].values() if v.is_floating_point())
+
+
+@pytest.mark.parametrize("flag, patch, message", [
+    ("--precision=bf16", ("bridgeplan.train.bf16_supported", lambda device: False), "has no bfloat16 kernels"),
+    ("--compile", ("shutil.which", lambda name: None), "needs a C++ compiler"),
+])
+def test_device_features_missing_are_refused_before_anything_is_written(tiny_dataset, tmp_path, capsys,
+                                                                        monkeypatch, flag, patch, message):
+    monkeypatch.setattr(*patch)
+    run = tmp_path / "run"
+    assert main(train_args(tiny_dataset, run, 2, flag)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and message in err[0], err
+    assert not run.exists()
+
+
+def test_bf16_training_learns_and_resumes_exactly(tiny_dataset, tmp_path):
+    from bridgeplan.train import bf16_supported
+
+    if not bf16_supported(torch.device("cpu")):
+        pytest.skip("this CPU has no bfloat16 kernels")
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    assert main(train_args(tiny_dataset, whole, 6, "--precision", "bf16")) == 0
+    assert main(train_args(tiny_dataset, split, 3, "--precision", "bf16")) == 0
+    assert main(train_args(tiny_dataset, split, 6, "--precision", "bf16", "--resume")) == 0
+    (m1, e1, s1), (m2, e2, s2) = weights(whole), weights(split)
+    assert s1 == s2 == 6 and all(torch.equal(m1[k], m2[k]) and torch.equal(e1[k], e2[k]) for k in m1)
+    # the weights stay float32 (autocast computes in bfloat16, the optimizer updates float32 weights)
+    assert all(v.dtype == torch.float32 for v in m1.values() if v.is_floating_point())
+    fp32 = tmp_path / "fp32"
+    assert main(train_args(tiny_dataset, fp32, 6)) == 0
+    assert any(not torch.equal(m1[k], weights(fp32)[0][k]) for k in m1)  # bf16 did compute differently
+
+
+def test_losses_are_read_back_every_log_interval_off_the_cpu(tiny_dataset, tmp_path, monkeypatch, capsys):
+    """On a GPU the loop reads the losses back every log_every steps (one host-device wait each), not every step;
+    the CPU is made to behave so here, and the reads (stacks of losses) are counted."""
+    import bridgeplan.train as train_module
+
+    assert train_module.loss_check_every(torch.device("cuda"), 50) == 50
+    assert train_module.loss_check_every(torch.device("cpu"), 50) == 1
+    monkeypatch.setattr(train_module, "loss_check_every", lambda device, log_every: log_every)
+    reads = []
+    real_stack = torch.stack
+    monkeypatch.setattr(train_module.torch, "stack",
+                        lambda ts, *a, **k: reads.append(len(ts)) or real_stack(ts, *a, **k))
+    assert main(train_args(tiny_dataset, tmp_path / "run", 10, "--log-every", "4", "--checkpoint-every", "100")) == 0
+    assert reads == [4, 4, 2]  # at steps 4 and 8 (logged), then the last two before the final save
+    # a loss that blows up between two reads (after the first update) is reported at its own step, never saved
+    reads.clear()
+    run = tmp_path / "nan"
+    assert main(train_args(tiny_dataset, run, 50, "--lr", "1e30", "--log-every", "4", "--checkpoint-every",
+                           "4")) == 2
+    err = capsys.readouterr().err
+    assert "loss became" in err and "at step 2;" in err and "before any checkpoint" in err, err
+    assert reads == [4] and not (run / "checkpoint.pt").exists()

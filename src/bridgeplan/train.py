@@ -143,6 +143,12 @@ def _setup(config) -> torch.device:
     return device
 
 
+def loss_check_every(device: torch.device, log_every: int) -> int:
+    """Steps between reads of the losses (and before every checkpoint): on a GPU each read makes the host wait for
+    the device, so every ``log_every`` steps; on a CPU reading is free, so every step."""
+    return 1 if device.type == "cpu" else log_every
+
+
 def bf16_supported(device: torch.device) -> bool:
     """Whether ``device`` runs bfloat16 convolutions natively (on a CPU: oneDNN with AVX-512 BF16 or AMX)."""
     if device.type == "cuda":
@@ -275,9 +281,7 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
                unit="step", dynamic_ncols=True)
     model.train()
     last_saved = step
-    # Losses are read back every check_every steps (and before every checkpoint), not every step: on a GPU each
-    # read makes the host wait for the device. On a CPU reading is free, so every step is checked at once.
-    check_every = 1 if device.type == "cpu" else config.log_every
+    check_every = loss_check_every(device, config.log_every)
     unchecked: list[torch.Tensor] = []
 
     def check_losses() -> float:

@@ -44,4 +44,7 @@ GENERATORS = {g.name: g for g in [
     Generator("controllers", "bridgeplan.studies.reports.controllers", "controllers.md",
               "tracking against pursuit at each lookahead, open loop and replanned, per maze and task set",
               ("README.md", "docs/results/README.md")),
+    Generator("wallclock", "bridgeplan.studies.reports.wallclock", "throughput-wallclock.md",
+              "training settings at equal minutes of training: score, success and windows/s, paired over seeds",
+              ("README.md",)),
 ]}

@@ -1,0 +1,145 @@
+"""Score at equal wall-clock: training settings compared at the same minutes of training, not the same steps.
+
+Each arm is a training setting (batch, learning rate, precision); each run trains for a wall-clock budget with
+``train --minutes M`` (resumed with a larger M for the next budget), side by side with the run of the other arm
+and the same seed, one torch thread each. Its final EMA snapshot is evaluated at several NFEs on test episodes
+(task seed = training seed) and on validation episodes (task seed + 1000). The NFE is chosen per arm and budget
+on the validation episodes (best mean over seeds) and reported on the test episodes; the difference between the
+arms is paired per seed (:func:`bridgeplan.analysis.stats.paired`), with its verdict at two standard errors.
+
+:func:`collect` turns the evaluation JSONs of a campaign into ``results.csv`` (one row per evaluation, every key,
+the dataset named by what it is); :func:`render` makes the report from the committed CSVs. Made by
+`bridgeplan study report throughput-wallclock` (studies/throughput-wallclock.toml).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.analysis.stats import compare, mean_se, paired
+from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
+from bridgeplan.files import atomic_write_text
+
+FOLDER = "throughput-wallclock"
+"""Its folder under docs/results: one ``<maze>/results.csv`` per maze."""
+MAZES = ("medium", "large")
+READS = ()
+"""It reads no run of the grids: its runs are its own arms (see the module's docstring)."""
+FIELDS = ("maze", "arm", "batch_size", "lr", "precision", "seed", "minutes", "step", "train_seconds",
+          "windows_per_s", "nfe", "split", "eval_seed", "episodes", "score_minari", "score_minari_se",
+          "success_rate", "floor_line_minari", "process", "dataset", "code_version")
+
+
+def arm_name(config: dict) -> str:
+    """An arm by its training setting: ``batch 256, lr 0.003, bf16``."""
+    return f"batch {config['batch_size']}, lr {config['lr']:g}, {config.get('precision', 'fp32')}"
+
+
+def row_of(evaluation: dict) -> dict:
+    """The CSV row of one evaluation JSON (``bridgeplan eval --out``): no path of the machine that made it."""
+    config = evaluation["config"]
+    validation = evaluation["seed"] >= VALIDATION_SEED_OFFSET
+    return {"maze": evaluation["maze"], "arm": arm_name(config), "batch_size": config["batch_size"],
+            "lr": config["lr"], "precision": config.get("precision", "fp32"),
+            "seed": evaluation["seed"] - (VALIDATION_SEED_OFFSET if validation else 0),
+            "minutes": config["minutes"], "step": evaluation["step"], "train_seconds": evaluation["train_seconds"],
+            "windows_per_s": evaluation["step"] * config["batch_size"] * config["grad_accum"]
+            / evaluation["train_seconds"],
+            "nfe": evaluation["nfe"], "split": "validation" if validation else "test", "eval_seed": evaluation["seed"],
+            "episodes": evaluation["episodes"], "score_minari": evaluation["score"]["minari"]["mean"],
+            "score_minari_se": evaluation["score"]["minari"]["se"], "success_rate": evaluation["success_rate"]["mean"],
+            "floor_line_minari": evaluation["floor_line"]["score"]["minari"]["mean"],
+            "process": evaluation["process"], "dataset": Path(config["dataset"]).name,
+            "code_version": evaluation["environment"]["code_version"]}
+
+
+def collect(eval_jsons, out_csv: Path) -> int:
+    """Write the rows of ``eval_jsons`` (paths) to ``out_csv``, sorted by every key; returns the row count."""
+    rows = sorted((row_of(json.loads(Path(p).read_text())) for p in eval_jsons),
+                  key=lambda r: (r["arm"], r["seed"], r["minutes"], r["split"], r["nfe"]))
+    if not rows:
+        raise BridgeplanError("no evaluation JSONs to collect")
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=FIELDS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(Path(out_csv), text.getvalue())
+    return len(rows)
+
+
+def read(path: Path) -> list[dict]:
+    numeric = {"batch_size": int, "seed": int, "step": int, "nfe": int, "eval_seed": int, "episodes": int}
+    with open(path, newline="") as f:
+        return [{k: numeric.get(k, float)(v) if k in numeric or k in _FLOATS else v for k, v in r.items()}
+                for r in csv.DictReader(f)]
+
+
+_FLOATS = {"lr", "minutes", "train_seconds", "windows_per_s", "score_minari", "score_minari_se", "success_rate",
+           "floor_line_minari"}
+
+
+def maze_table(rows: list[dict]) -> list[str]:
+    """The table of one maze: per budget and arm, the chosen NFE's test score, success and speed; the paired
+    difference of each arm from the first (the slowest in windows/s, the baseline)."""
+    arms = sorted({r["arm"] for r in rows}, key=lambda a: np.mean([r["windows_per_s"] for r in rows
+                                                                    if r["arm"] == a]))
+    body, diffs = [], []
+    for minutes in sorted({r["minutes"] for r in rows}):
+        at = [r for r in rows if r["minutes"] == minutes]
+        chosen = {}
+        for arm in arms:
+            mine = [r for r in at if r["arm"] == arm]
+            validation = {nfe: np.mean([r["score_minari"] for r in mine if r["nfe"] == nfe and r["split"] ==
+                                        "validation"]) for nfe in sorted({r["nfe"] for r in mine})}
+            nfe = max(validation, key=validation.get)  # first best in NFE order on ties
+            test = {r["seed"]: r for r in mine if r["nfe"] == nfe and r["split"] == "test"}
+            chosen[arm] = test
+            body.append([f"{minutes:g}", arm, f"{np.mean([r['step'] for r in test.values()]):.0f}",
+                         f"{np.mean([r['windows_per_s'] for r in test.values()]):.0f}", nfe,
+                         fmt_mean_se({s: r["score_minari"] for s, r in test.items()}),
+                         fmt_mean_se({s: r["success_rate"] for s, r in test.items()}, digits=3), len(test)])
+        base = arms[0]
+        for arm in arms[1:]:
+            d = paired({s: r["score_minari"] for s, r in chosen[arm].items()},
+                       {s: r["score_minari"] for s, r in chosen[base].items()})
+            ds = paired({s: r["success_rate"] for s, r in chosen[arm].items()},
+                        {s: r["success_rate"] for s, r in chosen[base].items()})
+            diffs.append([f"{minutes:g}", f"{arm} - {base}", fmt_diff(d), compare(d), fmt_diff(ds, digits=3),
+                          compare(ds)])
+    floor = mean_se({r["seed"]: r["floor_line_minari"] for r in rows if r["split"] == "test"})
+    lines = table(["minutes", "arm", "steps", "windows/s", "NFE (validation)", "Minari score (test)",
+                   "success rate", "seeds"], body)
+    lines += ["", *table(["minutes", "difference", "score, per seed", "verdict", "success, per seed", "verdict"],
+                         diffs)]
+    return lines + ["", f"The straight line alone, tracked, on the same test episodes: {fmt_mean_se(floor)}."]
+
+
+def render(root: Path) -> str:
+    lines = ["# Score at equal wall-clock", "",
+             "Generated by `bridgeplan study report throughput-wallclock` from "
+             f"`docs/results/{FOLDER}/<maze>/results.csv`; do not edit. DDPM, `cpu-small`, each run trained for the "
+             "minutes in its row on one torch thread, side by side with the same seed's run of the other arm; "
+             "the final EMA snapshot evaluated on 200 test episodes (task seed = training seed) and 200 "
+             "validation episodes (task seed + 1000). The NFE is chosen on the validation episodes; scores "
+             "(Minari convention) and success rates are mean ± standard error over training seeds; the "
+             "differences are paired per seed, verdict at two standard errors."]
+    found = False
+    for maze in MAZES:
+        path = Path(root) / FOLDER / maze / "results.csv"
+        if not path.exists():
+            continue
+        found = True
+        rows = read(path)
+        versions = sorted({r["code_version"] for r in rows})
+        lines += ["", f"## {maze}", "", f"Dataset {', '.join(sorted({r['dataset'] for r in rows}))}; code "
+                  f"{', '.join(versions)}.", "", *maze_table(rows)]
+    if not found:
+        raise BridgeplanError(f"no {FOLDER}/<maze>/results.csv under {root}")
+    return "\n".join(lines)
