@@ -1,0 +1,54 @@
+"""The score-at-equal-wall-clock report: evaluation JSONs to rows (no machine paths), NFE chosen on validation,
+paired differences, against a table computed by hand."""
+
+from __future__ import annotations
+
+import json
+
+from bridgeplan.studies.reports import GENERATORS
+from bridgeplan.studies.reports.wallclock import FOLDER, collect
+
+ARMS = {"A": {"batch_size": 32, "lr": 0.001, "precision": "fp32", "step": 9000},
+        "B": {"batch_size": 256, "lr": 0.003, "precision": "bf16", "step": 3300}}
+# validation: A is best at NFE 2, B at NFE 1; test at those NFEs, per seed 0, 1, 2
+VALIDATION = {("A", 1): 80.0, ("A", 2): 82.0, ("B", 1): 85.0, ("B", 2): 84.0}
+TEST = {("A", 2): [70.0, 72.0, 74.0], ("B", 1): [80.0, 83.0, 80.0], ("A", 1): [99.0] * 3, ("B", 2): [99.0] * 3}
+SUCCESS = {"A": 0.9, "B": 0.95}
+
+
+def evaluation(arm, seed, nfe, split):
+    a = ARMS[arm]
+    score = VALIDATION[(arm, nfe)] if split == "validation" else TEST[(arm, nfe)][seed]
+    return {"run": f"/somewhere/on/this/machine/{arm}-s{seed}", "step": a["step"], "train_seconds": 300.0,
+            "maze": "medium", "process": "ddpm", "nfe": nfe, "episodes": 200,
+            "seed": seed + (1000 if split == "validation" else 0),
+            "score": {"minari": {"mean": score, "se": 1.0}}, "success_rate": {"mean": SUCCESS[arm], "se": 0.0},
+            "floor_line": {"score": {"minari": {"mean": 40.0 + seed, "se": 1.0}}},
+            "environment": {"code_version": "0.1.0+abc1234"},
+            "config": {"dataset": "/somewhere/datasets/medium-1000000", "batch_size": a["batch_size"],
+                       "lr": a["lr"], "precision": a["precision"], "minutes": 5.0, "grad_accum": 1}}
+
+
+def test_wallclock_report_against_a_hand_computed_table(tmp_path):
+    paths = []
+    for arm in ARMS:
+        for seed in range(3):
+            for nfe in (1, 2):
+                for split in ("test", "validation"):
+                    paths.append(tmp_path / f"{arm}-{seed}-{nfe}-{split}.json")
+                    paths[-1].write_text(json.dumps(evaluation(arm, seed, nfe, split)))
+    csv_path = tmp_path / "results" / FOLDER / "medium" / "results.csv"
+    csv_path.parent.mkdir(parents=True)
+    assert collect(paths, csv_path) == 24
+    text = csv_path.read_text()
+    assert "/somewhere" not in text and ",medium-1000000," in text  # the dataset by what it is, no paths
+    report = GENERATORS["wallclock"].render(tmp_path / "results")
+    # A: NFE 2 on validation, test 70/72/74 -> 72.0 ± 1.2 (sd 2); B: NFE 1, test 80/83/80 -> 81.0 ± 1.0 (sd 1.73)
+    # windows/s: 9000 x 32 / 300 = 960 and 3300 x 256 / 300 = 2816, so A is the baseline
+    assert "| 5 | batch 32, lr 0.001, fp32 | 9000 | 960 | 2 | 72.0 ± 1.2 | 0.900 ± 0.000 | 3 |" in report
+    assert "| 5 | batch 256, lr 0.003, bf16 | 3300 | 2816 | 1 | 81.0 ± 1.0 | 0.950 ± 0.000 | 3 |" in report
+    # per seed B - A: 10, 11, 6 -> +9.0 ± 1.5 (sd sqrt 7), better; success +0.05 everywhere
+    assert ("| 5 | batch 256, lr 0.003, bf16 - batch 32, lr 0.001, fp32 | +9.0 ± 1.5 | better | +0.050 ± 0.000 "
+            "| better |") in report
+    assert "tracked, on the same test episodes: 41.0 ± 0.6." in report  # floors 40, 41, 42 (both arms' rows)
+    assert "code 0.1.0+abc1234" in report and "Dataset medium-1000000" in report
