@@ -108,7 +108,7 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
     from bridgeplan.bench import suites
     from bridgeplan.nets.unet import Mish
 
-    monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("medium",))
+    monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("medium",))  # one shape is enough here
     monkeypatch.setattr(suites, "machine_limit", lambda threads, dtype, dev: {"matmul": 100.0, "conv": 50.0})
     references = []
     real_reference = suites.with_torch_reference

@@ -174,3 +174,24 @@ def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_pat
     assert sum(missing(study, root, Scale("quick")).evaluations.values()) == 0
     assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 0 new results" in capsys.readouterr().out  # resumable: nothing left to do
+
+
+def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
+    import json
+
+    from bridgeplan import config as cfg
+    from bridgeplan.studies.plan import THROUGHPUT_BENCH, TRAIN_STEPS_PER_SECOND, training_rate
+
+    config = cfg.preset_config("medium", "cpu-small")
+    rate, source = training_rate(tmp_path, "medium", config)
+    assert rate == TRAIN_STEPS_PER_SECOND and "assumed" in source  # no bench committed
+    row = {"preset": "cpu-small", "maze": "medium", "batch": 32, "grad_accum": 1, "precision": "fp32",
+           "implementation": "bridgeplan", "threads": 1, "busy_cores": 1, "windows_per_s": 1120.0}
+    others = [row | {"busy_cores": 0, "windows_per_s": 9e9}, row | {"maze": "large", "windows_per_s": 9e9},
+              row | {"implementation": "reference", "windows_per_s": 9e9}]
+    (tmp_path / THROUGHPUT_BENCH).parent.mkdir(parents=True)
+    (tmp_path / THROUGHPUT_BENCH).write_text(json.dumps({"throughput": [*others, row]}))
+    rate, source = training_rate(tmp_path, "medium", config)
+    assert rate == 1120.0 / 32 and "a core busy" in source  # 35 steps/s: two jobs of a sweep, one thread each
+    rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256))
+    assert rate == TRAIN_STEPS_PER_SECOND  # no figure at that batch

@@ -264,8 +264,9 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
             "evaluations": evals, "best": best}
 
 
-THROUGHPUT_MAZES = ("medium", "large")
-"""Plan shapes of the throughput figure: ``cpu-small``'s 32 x 8 and 48 x 8 (and Diffuser's 256 and 384 states)."""
+THROUGHPUT_MAZES = ("umaze", "medium", "large")
+"""Plan shapes of the throughput figure: ``cpu-small``'s 128 x 1, 32 x 8 and 48 x 8 (Diffuser's 128, 256 and 384
+states)."""
 
 
 def machine_limit(threads: int, dtype: torch.dtype, dev: torch.device, seconds: float = 1.0) -> dict:

@@ -18,8 +18,11 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError
 
 TRAIN_STEPS_PER_SECOND = 18.6
-"""Assumed training rate of one run (optimizer steps per second): cpu-small at one torch thread on a quiet CPU
-core, docs/results/bench.md. The diffuser preset is ten times slower; a GPU much faster."""
+"""Training rate of one run (optimizer steps per second) assumed where the committed throughput bench has no
+figure for the study's maze and preset (:func:`training_rate`): cpu-small umaze at one torch thread on a quiet
+core, docs/results/bench.md."""
+THROUGHPUT_BENCH = Path("docs/results/throughput/bench.json")
+"""The committed training-throughput bench (``bridgeplan bench``) that costs are sized from."""
 EVAL_SECONDS_PER_EPISODE = 0.05
 """Assumed cost of one evaluation episode (planning in a batch with the others and simulating), CPU, cpu-small:
 a rough figure, not measured per maze (replanned episodes cost more)."""
@@ -225,9 +228,27 @@ class Missing:
     episodes: int
     """Episodes per evaluation."""
 
-    def cost_seconds(self) -> tuple[float, float]:
-        train = sum(n - max(done, 0) for _, n, done in self.trains) / TRAIN_STEPS_PER_SECOND
+    def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
+        train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
         return train, sum(self.evaluations.values()) * self.episodes * EVAL_SECONDS_PER_EPISODE
+
+
+def training_rate(root: Path, maze: str, config) -> tuple[float, str]:
+    """Steps per second of one run of ``config`` (its preset, batch and precision) in ``maze`` as a sweep runs it,
+    one torch thread with the other core busy (two jobs of ``--workers 2``), from the committed throughput bench;
+    ``TRAIN_STEPS_PER_SECOND`` where the bench has no such figure. Returns the rate and where it came from."""
+    import json
+
+    path = Path(root) / THROUGHPUT_BENCH
+    try:
+        rows = json.loads(path.read_text())["throughput"]
+    except (OSError, ValueError, KeyError):
+        rows = []
+    for r in rows:
+        if (r["preset"], r["maze"], r["batch"], r["precision"], r["implementation"], r["threads"],
+                r["busy_cores"]) == (config.preset, maze, config.batch_size, config.precision, "bridgeplan", 1, 1):
+            return r["windows_per_s"] / (r["batch"] * r["grad_accum"]), f"{THROUGHPUT_BENCH}, one thread, a core busy"
+    return TRAIN_STEPS_PER_SECOND, "assumed, no figure in the throughput bench"
 
 
 def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
@@ -286,11 +307,15 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
     for name, count in m.evaluations.items():
         lines.append(f"  evaluate {name}: {count} evaluations x {m.episodes} episodes")
-    train_s, eval_s = m.cost_seconds()
+    from bridgeplan import config as cfg
+
+    rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
+        study.dataset.maze, study.training.preset, **dict(study.training.overrides)))
+    train_s, eval_s = m.cost_seconds(rate)
     lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values())} evaluations; estimated "
-                 f"{_hours(train_s)} of training at {TRAIN_STEPS_PER_SECOND} steps/s per run and {_hours(eval_s)} "
-                 f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumptions: one CPU core, "
-                 f"cpu-small; divide by --workers)")
+                 f"{_hours(train_s)} of training at {rate:.1f} steps/s per run ({source}) and {_hours(eval_s)} "
+                 f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumed; one CPU core per job: "
+                 f"divide by --workers)")
     return lines
 
 
