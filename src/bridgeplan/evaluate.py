@@ -255,7 +255,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
     for lo in range(0, n, batch):
         plan = planner.plan(starts[lo:lo + batch], goals[lo:lo + batch], nfe, gen)
         plans.append(plan.states)
-        for key, values in plan.residuals.items():
+        for key, values in planner.residuals(plan).items():
             residuals[key].append(values)
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -30,8 +30,8 @@ class Plan:
     """Wall time to sample the prior for the whole batch."""
     sample_seconds: float
     """Wall time of the sampler (the network calls, and the correction's work) for the whole batch."""
-    residuals: dict[str, np.ndarray] = field(default_factory=dict)
-    """``kinematics_rms``, ``dynamics_rms`` ``[N]`` (m/s) of the plans as sampled (``consistency.plan_residuals``)."""
+    sampled: torch.Tensor | None = None
+    """The plans as sampled ``[N, H, 6]``, normalized and not densified (``Planner.residuals`` measures them)."""
 
 
 @dataclass
@@ -102,8 +102,12 @@ class Planner:
             x = self.process.sample(self.model, x, conditions, nfe, generator=generator, **extra)
         t2 = _now(self.device)
         states, actions = self.unnormalize(x)
-        return Plan(densify(states, self.stride), densify(actions, self.stride), t1 - t0, t2 - t1,
-                    plan_residuals(x, self.normalizer, self.stride))
+        return Plan(densify(states, self.stride), densify(actions, self.stride), t1 - t0, t2 - t1, x)
+
+    def residuals(self, plan: Plan) -> dict[str, np.ndarray]:
+        """``kinematics_rms``, ``dynamics_rms`` ``[N]`` (m/s) of ``plan`` as sampled (``consistency.plan_residuals``;
+        computed on request, off the planning path)."""
+        return plan_residuals(plan.sampled, self.normalizer, self.stride)
 
 
 def _now(device: torch.device) -> float:
