@@ -99,9 +99,12 @@ def build_experiment(study: Study, index: int):
                 execution = Execution(**dict(s.execution))
                 for nfe in s.nfe:
                     for multi in s.multi_task:
-                        tag = " ".join(t for t in (execution.tag(), s.sampler or "", "Multi2D" if multi else "") if t)
-                        series.append(Series(f"{run.label()} NFE {nfe}{' ' + tag if tag else ''}", run, nfe,
-                                             execution, multi, s.sampler))
+                        for correction in s.correction:
+                            tag = " ".join(t for t in (execution.tag(), s.sampler or "",
+                                                       correction.tag() if correction else "",
+                                                       "Multi2D" if multi else "") if t)
+                            series.append(Series(f"{run.label()} NFE {nfe}{' ' + tag if tag else ''}", run, nfe,
+                                                 execution, multi, s.sampler, correction))
             experiment = Experiment(exp.name, exp.title or exp.name, tuple(series), exp.last_snapshot_only)
         experiment.validate()
     except BridgeplanError as e:
@@ -285,7 +288,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                     if series.run != spec:
                         continue
                     for step in (snapshots[-1:] if last_only else snapshots):
-                        key = (name, config.run_name(), step, series.nfe, series.process.sampling_tag(),
+                        key = (name, config.run_name(), step, series.nfe, series.sampling_tag(),
                                series.execution.tag(), int(series.multi_task), s.episodes, task_seed)
                         if key not in keys and key not in seen:
                             seen.add(key)
