@@ -215,16 +215,23 @@ def test_a_corrected_series_is_listed_apart_in_the_dry_run(tmp_path, capsys):
 
 def test_a_tiny_corrected_sweep_stores_the_correction_and_resumes(tiny_dataset, tmp_path, capsys, monkeypatch):
     """The corrected row's sampler names the correction, and the runner's and the plan's "missing" keys are the
-    row's: a second run evaluates nothing (not even to find the row already stored)."""
+    row's: a corrected series added to a study whose uncorrected row is stored is missing (and then run), and a
+    further run evaluates nothing (not even to find the row already stored)."""
     import bridgeplan.evaluate
     from bridgeplan.experiments.store import ResultsStore
 
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
-    (root / "studies" / "tiny.toml").write_text(CORRECTED.format(dataset=tiny_dataset))
-    study = parse_study(root / "studies" / "tiny.toml")
+    file = root / "studies" / "tiny.toml"
+    file.write_text(CORRECTED.format(dataset=tiny_dataset).replace('"none", "dynamics=1e-4"', '"none"'))
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
-    assert "tiny: 2 new results" in capsys.readouterr().out
+    assert "tiny: 1 new results" in capsys.readouterr().out
+
+    file.write_text(CORRECTED.format(dataset=tiny_dataset))
+    study = parse_study(file)
+    assert missing(study, root).corrections == Counter({("tiny", "cddb-x0 dynamics=0.0001"): 1})
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 1 new results" in capsys.readouterr().out
     rows = ResultsStore(root / "results" / "tiny" / "results.sqlite").rows()
     assert sorted((r["nfe"], r["step"], r["sampler"]) for r in rows) == [(1, 1, ""), (1, 1, "cddb-x0 dynamics=0.0001")]
     assert sum(missing(study, root).evaluations.values()) == 0
