@@ -275,6 +275,19 @@ def test_correction_costs_and_tags():
     assert cheap.network_call_equivalents(2) == 2 and cheap.backward_passes(2) == 0
 
 
+def test_a_series_keys_its_rows_by_the_sampler_and_the_correction():
+    """``Series.sampling_tag`` (the runner's "missing" key) is the store's ``sampler`` that evaluations write."""
+    from bridgeplan.consistency import sampling_tag
+    from bridgeplan.experiments.grids import RunSpec, Series
+
+    cheap = Correction((("dynamics", 1e-4),))
+    assert sampling_tag("", None) == "" and sampling_tag("mean", cheap) == "mean cddb-x0 dynamics=0.0001"
+    run = RunSpec(DDPM(6))
+    assert Series("plain", run, 2).sampling_tag() == ""
+    assert Series("c", run, 2, correction=cheap).sampling_tag() == "cddb-x0 dynamics=0.0001"
+    assert Series("s c", run, 2, sampler="ddim", correction=cheap).sampling_tag() == "ddim cddb-x0 dynamics=0.0001"
+
+
 # --- CLI --------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("bad, message", [

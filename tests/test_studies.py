@@ -131,6 +131,21 @@ BAD = [
      "reports[0].generator: controllers reads DDPM (N=16), which neither bad nor the studies it uses "
      "(none) train"),
     ('uses = ["nobody"]\n', "uses[0]: unknown study 'nobody'"),
+    *[('[dataset]\nmaze = "umaze"\n[methods.d]\nprocess = "ddpm"\n[[experiments]]\nname = "x"\n'
+        f'series = [{{ method = "d", nfe = [1], {series} }}]\n', message) for series, message in [
+        ('correction = ["none", "dynamics=-1"]', "experiments[0].series[0].correction[1]: the step size of the "
+                                                  "dynamics correction must be a finite number >= 0"),
+        ('correction = ["wiggle=1e-4"]', "experiments[0].series[0].correction[0]: unknown residual 'wiggle'"),
+        ('correction = ["dynamics"]', "experiments[0].series[0].correction[0]: --correction takes RESIDUAL=STEP"),
+        ('correction = ["conditions=1e-4"]', "experiments[0].series[0].correction[0]: the conditions correction in "
+                                             "x0 form"),
+        ('correction = ["dynamics=1e-4", "dynamics=1e-4"]', "experiments[0].series[0].correction: a correction is "
+                                                            "listed twice"),
+        ('correction = []', "experiments[0].series[0].correction: expected"),
+        ('correction = ["dynamics=1e-4"], correction_form = "dpe"', "experiments[0].series[0].correction_form: "
+                                                                    "expected one of x0, deep, got 'dpe'"),
+        ('correction_form = "deep"', "experiments[0].series[0].correction_form: needs correction"),
+    ]],
     ("this is not toml\n", "(syntax)"),
 ]
 
@@ -174,6 +189,58 @@ def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_pat
     assert sum(missing(study, root, Scale("quick")).evaluations.values()) == 0
     assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 0 new results" in capsys.readouterr().out  # resumable: nothing left to do
+
+
+CORRECTED = GOOD.replace("steps = 2\ncheckpoint_every = 1", "steps = 1\ncheckpoint_every = 1").replace(
+    'nfe = [1, 6] }}', 'nfe = [1], correction = ["none", "dynamics=1e-4"] }}')
+
+
+def test_a_corrected_series_is_listed_apart_in_the_dry_run(tmp_path, capsys):
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(CORRECTED.format(dataset="no-such-dataset"))
+    study = parse_study(root / "studies" / "tiny.toml")
+    from bridgeplan.consistency import Correction
+    from bridgeplan.studies.plan import build_experiment
+
+    assert study.experiments[0].series[0].correction == (None, Correction((("dynamics", 1e-4),)))
+    series = build_experiment(study, 0).series
+    assert [(s.correction, s.sampling_tag()) for s in series] == [(None, ""), (Correction((("dynamics", 1e-4),)),
+                                                                               "cddb-x0 dynamics=0.0001")]
+    assert main(["study", "run", "tiny", "--dry-run", "--root", str(root)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    at = out.index("  evaluate tiny: 2 evaluations x 4 episodes")
+    assert out[at + 1:at + 3] == ["    uncorrected: 1 evaluations", "    cddb-x0 dynamics=0.0001: 1 evaluations"]
+
+
+def test_a_tiny_corrected_sweep_stores_the_correction_and_resumes(tiny_dataset, tmp_path, capsys, monkeypatch):
+    """The corrected row's sampler names the correction, and the runner's and the plan's "missing" keys are the
+    row's: a corrected series added to a study whose uncorrected row is stored is missing (and then run), and a
+    further run evaluates nothing (not even to find the row already stored)."""
+    import bridgeplan.evaluate
+    from bridgeplan.experiments.store import ResultsStore
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    file = root / "studies" / "tiny.toml"
+    file.write_text(CORRECTED.format(dataset=tiny_dataset).replace('"none", "dynamics=1e-4"', '"none"'))
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 1 new results" in capsys.readouterr().out
+
+    file.write_text(CORRECTED.format(dataset=tiny_dataset))
+    study = parse_study(file)
+    assert missing(study, root).corrections == Counter({("tiny", "cddb-x0 dynamics=0.0001"): 1})
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 1 new results" in capsys.readouterr().out
+    rows = ResultsStore(root / "results" / "tiny" / "results.sqlite").rows()
+    assert sorted((r["nfe"], r["step"], r["sampler"]) for r in rows) == [(1, 1, ""), (1, 1, "cddb-x0 dynamics=0.0001")]
+    assert sum(missing(study, root).evaluations.values()) == 0
+
+    calls = []
+    real = bridgeplan.evaluate.evaluate_planner
+    monkeypatch.setattr(bridgeplan.evaluate, "evaluate_planner", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 0 new results" in capsys.readouterr().out and calls == []
 
 
 def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):

@@ -227,7 +227,8 @@ class Correction:
         return cls(tuple(steps), form)
 
     def tag(self) -> str:
-        """How results name it, e.g. ``cddb-deep dynamics=0.01``."""
+        """How results name it, e.g. ``cddb-deep dynamics=0.01`` (the store's ``sampler`` column:
+        :func:`sampling_tag`)."""
         return f"cddb-{self.form} " + " ".join(f"{n}={a:g}" for n, a in self.steps)
 
     def file_tag(self) -> str:
@@ -262,3 +263,10 @@ class Correction:
                 conditions = {t: c.clone() for t, c in conditions.items()}
         objective = self.objective(conditions, normalizer, stride)
         return lambda predict: corrected(predict, objective, self.form)
+
+
+def sampling_tag(process_tag: str, correction: Correction | None) -> str:
+    """The results store's ``sampler`` of an evaluation: the process's ``sampling_tag()`` and the correction's
+    :meth:`Correction.tag`, if any, e.g. ``mean cddb-x0 dynamics=0.0001`` ('' sampled as trained, uncorrected).
+    The row (``EvalResult.sampling_tag``) and the runner's "missing" key (``Series.sampling_tag``) both use it."""
+    return " ".join(t for t in (process_tag, correction.tag() if correction is not None else "") if t)

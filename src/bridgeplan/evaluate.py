@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from bridgeplan import config as cfg
-from bridgeplan.consistency import Correction
+from bridgeplan.consistency import Correction, sampling_tag
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, code_version
 from bridgeplan.maze.layouts import Maze, get_maze
@@ -147,8 +147,7 @@ class EvalResult:
 
     def sampling_tag(self) -> str:
         """The process's :meth:`~bridgeplan.processes.Process.sampling_tag` and the correction's, if any."""
-        correction = self.planner.correction
-        return " ".join(t for t in (self.planner.process.sampling_tag(), correction and correction.tag()) if t)
+        return sampling_tag(self.planner.process.sampling_tag(), self.planner.correction)
 
     def cost_fields(self) -> dict:
         """``correction`` (its settings and passes per plan; None: uncorrected) and

@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from bridgeplan.config import check_prior
+from bridgeplan.consistency import Correction, sampling_tag
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM, Bridge, Process
 from bridgeplan.replan import Execution
@@ -42,11 +43,18 @@ class Series:
     """Multi2D tasks (random goals) instead of the maze's single evaluation goal."""
     sampler: str | None = None
     """One of the run's process's samplers (``Process.with_sampler``); None: the one it was trained with."""
+    correction: Correction | None = None
+    """A consistency correction of every x0 prediction (CDDB, ``Planner.with_correction``); None: uncorrected."""
 
     @property
     def process(self) -> Process:
         """The run's process as this series samples it."""
         return self.run.process if self.sampler is None else self.run.process.with_sampler(self.sampler)
+
+    def sampling_tag(self) -> str:
+        """The store's ``sampler`` of this series' rows (``consistency.sampling_tag``: the sampler and the
+        correction), as ``EvalResult.sampling_tag`` writes it: the runner's and the study plan's "missing" key."""
+        return sampling_tag(self.process.sampling_tag(), self.correction)
 
 
 @dataclass(frozen=True)
@@ -65,6 +73,9 @@ class Experiment:
             if s.sampler is not None and s.sampler not in s.run.process.usable_samplers():
                 raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks sampler {s.sampler!r}, but "
                                       f"{s.run.label()} has {', '.join(s.run.process.usable_samplers()) or 'one'}")
+            if s.correction is not None and not s.run.process.predicts_x0:
+                raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks a correction of x0 "
+                                      f"predictions, but {s.run.label()} does not sample through them")
             if not 1 <= s.nfe <= s.run.process.max_nfe:
                 raise BridgeplanError(f"experiment {self.name}: series {s.label!r} asks NFE {s.nfe}, but "
                                       f"{s.run.label()} with {s.run.process.steps} steps allows "

@@ -78,8 +78,9 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
             prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
     """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
 
-    Each snapshot is loaded once and evaluated for every series (NFE, sampler, execution, task set) missing from
-    the store; the floors are computed once per task set and controller for the job.
+    Each snapshot is loaded once and evaluated for every series (NFE, sampler, correction, execution, task set)
+    missing from the store (keyed by ``Series.sampling_tag``, as the row writes it); the floors are computed once per
+    task set and controller for the job.
     """
     from bridgeplan.device import configure_threads
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
@@ -108,7 +109,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         missing = [(name, series) for name, series in wanted
                    if (step == steps[-1] or name not in last_only)
                    and not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=series.nfe,
-                                     sampler=series.process.sampling_tag(), execution=series.execution.tag(),
+                                     sampler=series.sampling_tag(), execution=series.execution.tag(),
                                      multi_task=int(series.multi_task),
                                      episodes=settings.episodes, eval_seed=task_seed)]
         if not missing:
@@ -121,6 +122,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
             if floors_key not in job_floors:
                 job_floors[floors_key] = floors(planner, task_set, ex)
             sampled = planner if series.sampler is None else planner.with_sampler(series.sampler)
+            sampled = sampled.with_correction(series.correction)
             row = evaluate_planner(sampled, task_set, series.nfe, run=info, execution=series.execution,
                                    precomputed_floors=job_floors[floors_key]).to_row(name)
             if store.add(row):  # a concurrent sweep may have added it meanwhile

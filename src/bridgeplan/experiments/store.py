@@ -55,7 +55,8 @@ COLUMNS = {
     "created": "REAL",
 }
 KEY = ("experiment", "run_name", "step", "nfe", "sampler", "execution", "multi_task", "episodes", "eval_seed")
-"""What makes an evaluation: ``sampler`` is ``Process.sampling_tag()`` ('' as the process samples by default),
+"""What makes an evaluation: ``sampler`` is ``consistency.sampling_tag``: ``Process.sampling_tag()`` ('' as the
+process samples by default) and the consistency correction's tag, if any;
 ``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1."""
 
 

@@ -99,9 +99,12 @@ def build_experiment(study: Study, index: int):
                 execution = Execution(**dict(s.execution))
                 for nfe in s.nfe:
                     for multi in s.multi_task:
-                        tag = " ".join(t for t in (execution.tag(), s.sampler or "", "Multi2D" if multi else "") if t)
-                        series.append(Series(f"{run.label()} NFE {nfe}{' ' + tag if tag else ''}", run, nfe,
-                                             execution, multi, s.sampler))
+                        for correction in s.correction:
+                            tag = " ".join(t for t in (execution.tag(), s.sampler or "",
+                                                       correction.tag() if correction else "",
+                                                       "Multi2D" if multi else "") if t)
+                            series.append(Series(f"{run.label()} NFE {nfe}{' ' + tag if tag else ''}", run, nfe,
+                                                 execution, multi, s.sampler, correction))
             experiment = Experiment(exp.name, exp.title or exp.name, tuple(series), exp.last_snapshot_only)
         experiment.validate()
     except BridgeplanError as e:
@@ -227,6 +230,8 @@ class Missing:
     """Missing evaluations by experiment name (``-validation`` for the validation split)."""
     episodes: int
     """Episodes per evaluation."""
+    corrections: Counter = dataclasses.field(default_factory=Counter)
+    """Missing evaluations by experiment name and consistency correction (its tag; '' uncorrected)."""
 
     def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
         train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
@@ -261,6 +266,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     plan = sweeps(study, root, scale)
     trains: dict[str, tuple[int, int]] = {}
     evaluations: Counter = Counter()
+    corrections: Counter = Counter()
     keys = _store_keys(layout.store_path(results_dir(study, root, scale)))
     seen = set()
     for sweep in plan:
@@ -285,13 +291,14 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                     if series.run != spec:
                         continue
                     for step in (snapshots[-1:] if last_only else snapshots):
-                        key = (name, config.run_name(), step, series.nfe, series.process.sampling_tag(),
+                        key = (name, config.run_name(), step, series.nfe, series.sampling_tag(),
                                series.execution.tag(), int(series.multi_task), s.episodes, task_seed)
                         if key not in keys and key not in seen:
                             seen.add(key)
                             evaluations[name] += 1
+                            corrections[name, series.correction.tag() if series.correction else ""] += 1
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes)
+    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
@@ -307,6 +314,9 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
     for name, count in m.evaluations.items():
         lines.append(f"  evaluate {name}: {count} evaluations x {m.episodes} episodes")
+        by_correction = sorted((tag, n) for (exp, tag), n in m.corrections.items() if exp == name)
+        if any(tag for tag, _ in by_correction):  # corrected series: each correction's evaluations apart
+            lines.extend(f"    {tag or 'uncorrected'}: {n} evaluations" for tag, n in by_correction)
     from bridgeplan import config as cfg
 
     rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(

@@ -48,6 +48,8 @@ Example (the keys and their defaults: the dataclasses below)::
     last_snapshot_only = true
     series = [{ method = "bridge-line", nfe = [1, 2], controller = "pursuit", lookahead = 1.0,
                 replan_every = 32, warm = true, multi_task = [false, true], sampler = "mean" }]
+    series = [{ method = "bridge-line", nfe = [1, 2], correction = ["none", "dynamics=1e-4"],
+                correction_form = "x0" }]  # consistency corrections (CDDB) of x0 (default) or deep form
 
     [[reports]]
     generator = "findings"               # bridgeplan.studies.reports.GENERATORS
@@ -140,6 +142,9 @@ class SeriesSpec:
     sampler: str | None = None
     execution: tuple[tuple[str, Any], ...] = ()
     """``replan.Execution`` fields (controller, lookahead, replan_every, warm, arrival, ...)."""
+    correction: tuple[Any, ...] = (None,)
+    """``consistency.Correction`` (None: uncorrected), one series each: ``correction = ["none", "dynamics=1e-4",
+    "dynamics=1e-4,kinematics=1e-4"]`` (residuals of one correction joined by commas) at ``correction_form``."""
 
 
 @dataclass(frozen=True)
@@ -279,7 +284,8 @@ def _training(file, raw: dict) -> Training:
 
 
 def _series(file, key: str, raw, methods: dict[str, Method]) -> SeriesSpec:
-    raw = _table(file, key, raw, {"method", "nfe", "multi_task", "sampler", *EXECUTION_FIELDS}, ("method", "nfe"))
+    raw = _table(file, key, raw, {"method", "nfe", "multi_task", "sampler", "correction", "correction_form",
+                                  *EXECUTION_FIELDS}, ("method", "nfe"))
     if raw["method"] not in methods:
         raise StudyError(file, f"{key}.method", f"unknown method {raw['method']!r} (declared: "
                                                 f"{', '.join(methods) or 'none'}; see [methods.NAME])")
@@ -298,7 +304,37 @@ def _series(file, key: str, raw, methods: dict[str, Method]) -> SeriesSpec:
     except (BridgeplanError, TypeError, ValueError) as e:
         raise StudyError(file, key, f"not an execution: {e}") from None
     return SeriesSpec(method=raw["method"], nfe=_ints(file, f"{key}.nfe", raw["nfe"], minimum=1),
-                      multi_task=tuple(multi), sampler=sampler, execution=execution)
+                      multi_task=tuple(multi), sampler=sampler, execution=execution,
+                      correction=_corrections(file, key, raw))
+
+
+def _corrections(file, key: str, raw: dict) -> tuple:
+    """A series' ``correction`` (a string or a list: "none", or ``RESIDUAL=STEP[,RESIDUAL=STEP...]``) at its
+    ``correction_form`` (x0 or deep, default x0) as ``Correction``s, None for "none"."""
+    from bridgeplan.consistency import FORMS, Correction
+
+    form = raw.get("correction_form")
+    if form is not None and (not isinstance(form, str) or form not in FORMS):
+        raise StudyError(file, f"{key}.correction_form", f"expected one of {', '.join(FORMS)}, got {form!r}")
+    if "correction" not in raw:
+        if form is not None:
+            raise StudyError(file, f"{key}.correction_form", "needs correction = [\"RESIDUAL=STEP\", ...]")
+        return (None,)
+    values = raw["correction"]
+    values = [values] if isinstance(values, str) else values
+    if not isinstance(values, list) or not values or any(not isinstance(v, str) for v in values):
+        raise StudyError(file, f"{key}.correction", f"expected \"none\", \"RESIDUAL=STEP\" or a list of them, "
+                                                    f"got {raw['correction']!r}")
+    out = []
+    for i, text in enumerate(values):
+        try:
+            out.append(None if text.strip() == "none" else
+                       Correction.parse([part for part in text.split(",") if part.strip()], form or "x0"))
+        except BridgeplanError as e:
+            raise StudyError(file, f"{key}.correction[{i}]", str(e)) from None
+    if len(set(out)) != len(out):
+        raise StudyError(file, f"{key}.correction", f"a correction is listed twice: {values!r}")
+    return tuple(out)
 
 
 def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSpec:
