@@ -83,10 +83,14 @@ def make_optimizer(model: torch.nn.Module, lr: float) -> torch.optim.Optimizer:
     return torch.optim.Adam(model.parameters(), lr=lr, fused=fused)
 
 
+def _bf16(config) -> bool:
+    """Whether ``config`` trains under bfloat16 autocast (the learned prior's config has no such field: fp32)."""
+    return getattr(config, "precision", "fp32") == "bf16"
+
+
 def autocast(device: torch.device, config):
     """The precision ``config`` trains in: bfloat16 autocast for ``bf16``, nothing for ``fp32``."""
-    bf16 = getattr(config, "precision", "fp32") == "bf16"
-    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16)
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=_bf16(config))
 
 
 def make_ema(model: torch.nn.Module) -> torch.nn.Module:
@@ -134,7 +138,7 @@ def _setup(config) -> torch.device:
     """The device, its threads and the seed; refuses what the device cannot do before anything is written."""
     device = resolve_device(config.device)
     configure_threads(config.threads, device)
-    if getattr(config, "precision", "fp32") == "bf16" and not bf16_supported(device):
+    if _bf16(config) and not bf16_supported(device):
         raise BridgeplanError(f"precision bf16 asked for, but {device} has no bfloat16 kernels here "
                               "(train in fp32)")
     if getattr(config, "compile", False):

@@ -74,15 +74,17 @@ def collect(eval_jsons, out_csv: Path) -> int:
     return len(rows)
 
 
+_FLOATS = {"lr", "minutes", "train_seconds", "windows_per_s", "score_minari", "score_minari_se", "success_rate",
+           "floor_line_minari"}
+
+
 def read(path: Path) -> list[dict]:
+    """The rows of a ``results.csv`` written by :func:`collect`, numbers as numbers."""
     numeric = {"batch_size": int, "seed": int, "step": int, "nfe": int, "eval_seed": int, "episodes": int}
     with open(path, newline="") as f:
         return [{k: numeric.get(k, float)(v) if k in numeric or k in _FLOATS else v for k, v in r.items()}
                 for r in csv.DictReader(f)]
 
-
-_FLOATS = {"lr", "minutes", "train_seconds", "windows_per_s", "score_minari", "score_minari_se", "success_rate",
-           "floor_line_minari"}
 
 
 def maze_table(rows: list[dict]) -> list[str]:
