@@ -97,7 +97,7 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
                  f"{tiny_runs['ddpm']},{twin}", "--budgets", "1", "--budget-episodes", "2"]) == 0
     capsys.readouterr()
     best = json.loads((tmp_path / "out" / "bench.json").read_text())["score_per_budget"]["best"]
-    assert sorted(b["run"] for b in best) == sorted([str(tiny_runs["ddpm"]), str(twin)])
+    assert sorted(b["run"] for b in best) == sorted([tiny_runs["ddpm"].name, twin.name])
     markdown = (tmp_path / "out" / "bench.md").read_text()
     assert "| DDPM (ddpm) | 3 |" in markdown and "| DDPM (ddpm-twin) | 3 |" in markdown
 

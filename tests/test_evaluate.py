@@ -31,6 +31,9 @@ def test_eval_json_fields(tiny_runs, tmp_path, capsys, process, nfe):
     assert saved["plan_ms_per_plan"] > 0
     assert sum(c["episodes"] for c in saved["per_start_cell"]) == 6
     assert saved["floor_line"]["prior"] == "line"
+    # results carry no path of this machine: the run and its dataset are named by their directories
+    assert saved["run"] == tiny_runs[process].name and saved["config"]["dataset"] == "umaze-tiny"
+    assert str(tmp_path.parent.parent) not in out.read_text()
     if process == "bridge":
         assert saved["prior"] == "learned" and "prior_only_learned" in saved
 

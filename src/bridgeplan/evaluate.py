@@ -161,7 +161,7 @@ class EvalResult:
         """The JSON that ``bridgeplan eval`` writes (fields: README, "Evaluation output")."""
         process, run = self.planner.process, self.run
         out = {
-            "run": str(run.path) if run else None, "step": run.step if run else None,
+            "run": run.name if run else None, "step": run.step if run else None,
             "train_seconds": run.elapsed_seconds if run else None, "maze": self.tasks.maze.name,
             "method": cfg.method_label(process, self.prior, run.config.hold_share if run else 0.0),
             "process": process.name, "prior": self.prior,
@@ -176,7 +176,7 @@ class EvalResult:
             "per_start_cell": self.per_start_cell, **self.floors, "environment": self.environment,
             **self.execution_fields(), **self.cost_fields(),
         }
-        out["config"] = run.config_dict if run else None
+        out["config"] = run.portable_config if run else None
         return out
 
     def execution_fields(self) -> dict:
@@ -212,7 +212,7 @@ class EvalResult:
             "multi_task": int(self.tasks.multi_task),
             "calls_per_episode": self.execution_fields()["calls_per_episode"],
             "decision_ms_p50": latency.get("p50"), "decision_ms_p95": latency.get("p95"),
-            "config": run.config_dict, "code_version": self.environment["code_version"],
+            "config": run.portable_config, "code_version": self.environment["code_version"],
         }
 
 

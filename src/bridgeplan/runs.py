@@ -98,6 +98,19 @@ class RunInfo:
     def name(self) -> str:
         return self.path.name
 
+    @property
+    def portable_config(self) -> dict:
+        """``config_dict`` as results record it: the dataset named by its directory (``medium-1000000-v2``) and a
+        learned prior by its run's name, not by where they lay on the machine that trained the run, so that
+        committed rows carry no absolute path."""
+        out = dict(self.config_dict)
+        if out.get("dataset"):
+            out["dataset"] = Path(out["dataset"]).name
+        if out.get("prior_run"):
+            prior = Path(out["prior_run"])  # a run directory or one of its checkpoint files
+            out["prior_run"] = (run_dir_of(prior) if prior.suffix == ".pt" else prior).name
+        return out
+
 
 def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
                  eta: float = 0.0, compile: bool = False) -> tuple[Planner, RunInfo]:

@@ -214,7 +214,7 @@ def eval_throughput(run: str, device: str) -> dict:
 
     t0 = time.perf_counter()
     result = evaluate(Path(run), episodes=200, nfe=1, device=device)
-    return {"run": run, "episodes": 200, "nfe": 1, "seconds": time.perf_counter() - t0,
+    return {"run": Path(run).name, "episodes": 200, "nfe": 1, "seconds": time.perf_counter() - t0,
             "plan_ms_per_plan": result.plan_ms_per_plan, "score_minari": result.score("minari")}
 
 
@@ -246,7 +246,7 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
                         r = evaluate_planner(sampled, tasks[split], nfe, run=info,
                                              precomputed_floors=run_floors[split])
                         scored[(sampler, nfe, split)] = r
-                        evals.append({"method": method, "run": run, "step": info.step, "split": split,
+                        evals.append({"method": method, "run": info.name, "step": info.step, "split": split,
                                       "train_minutes": info.elapsed_seconds / 60, "nfe": nfe,
                                       "sampler": sampler or "-", "score_minari": r.score("minari"),
                                       "score_d4rl": r.score("d4rl"), "success_rate": r.scores["success_rate"]["mean"],
@@ -256,7 +256,7 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
                 within = [key for key in scored if key[2] == "validation" and key[1] <= k]
                 sampler, nfe, _ = max(within, key=lambda key: scored[key].score("minari")["mean"])
                 test = scored[(sampler, nfe, "test")]
-                best.append({"method": method, "run": run, "budget": k, "nfe": nfe, "sampler": sampler or "-",
+                best.append({"method": method, "run": info.name, "budget": k, "nfe": nfe, "sampler": sampler or "-",
                              "step": info.step, "train_minutes": info.elapsed_seconds / 60,
                              "validation_score_minari": scored[(sampler, nfe, "validation")].score("minari"),
                              "score_minari": test.score("minari")})
