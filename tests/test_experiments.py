@@ -190,6 +190,8 @@ def test_closed_loop_sweep(tiny_dataset, tmp_path, capsys):
         replanned = r["execution"] != ""
         assert r["calls_per_episode"] == (10 * r["nfe"] if replanned else r["nfe"])  # ceil(300 / 32) plans
         assert (r["decision_ms_p50"] is not None) == replanned
+        assert r["network_calls_per_plan"] == r["nfe"]
+        assert (r["plan_dynamics_rms"] is None) == replanned  # residuals of the one plan, open loop only
     capsys.readouterr()
     assert main(args) == 0 and "0 new results" in capsys.readouterr().out
     assert main(["report", "--results", str(results)]) == 0
@@ -217,6 +219,6 @@ def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
     assert store.has(experiment="nfe1", run_name="r", step=1000, nfe=1, sampler="", execution="", multi_task=0,
                      episodes=200, eval_seed=0)
     with sqlite3.connect(db) as con:
-        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
     ResultsStore(db)  # opening it again changes nothing
     assert len(store.rows()) == 1

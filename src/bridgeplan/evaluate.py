@@ -199,6 +199,7 @@ class EvalResult:
             raise BridgeplanError("a store row needs the run the planner was loaded from")
         run = self.run
         latency = self.decisions.get("decision_ms_batch1", {})
+        residual = self.plan_residuals or {}
         return {
             "experiment": experiment, "run_name": run.config.run_name(), "maze": self.tasks.maze.name,
             "process": self.planner.process.name, "prior": self.prior, "diffusion_steps": self.planner.process.steps,
@@ -212,6 +213,9 @@ class EvalResult:
             "multi_task": int(self.tasks.multi_task),
             "calls_per_episode": self.execution_fields()["calls_per_episode"],
             "decision_ms_p50": latency.get("p50"), "decision_ms_p95": latency.get("p95"),
+            "network_calls_per_plan": self.cost_fields()["network_call_equivalents_per_plan"],
+            "plan_kinematics_rms": residual.get("kinematics_rms", {}).get("mean"),
+            "plan_dynamics_rms": residual.get("dynamics_rms", {}).get("mean"),
             "config": run.portable_config, "code_version": self.environment["code_version"],
         }
 

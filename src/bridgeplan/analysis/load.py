@@ -64,6 +64,13 @@ class Row:
     eval_seed: int = 0
     code_version: str = ""
     score_d4rl: float | None = None
+    network_calls: float | None = None
+    """Network-call equivalents per plan (NFE, plus 2 per backward pass of a deep correction); None in rows made
+    before the store recorded it."""
+    plan_kinematics: float | None = None
+    """RMS kinematics residual of the plans as sampled (m/s), open loop; None where not recorded."""
+    plan_dynamics: float | None = None
+    """RMS dynamics residual of the plans as sampled (m/s), open loop; None where not recorded."""
     floor_learned: float | None = None
     """The learned prior tracked alone on the same episodes, where the evaluation measured it."""
     source: str = ""
@@ -112,7 +119,10 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
                    calls=float(r.get("calls_per_episode") or r["nfe"]), plan_ms=float(r["plan_ms"]),
                    decision_ms=(p50, p95) if p50 is not None else None, maze=r["maze"], experiment=r["experiment"],
                    run_name=r["run_name"], episodes=int(r["episodes"]), eval_seed=int(r["eval_seed"]),
-                   code_version=r.get("code_version", ""), score_d4rl=_float(r.get("score_d4rl")), source=source)
+                   code_version=r.get("code_version", ""), score_d4rl=_float(r.get("score_d4rl")),
+                   network_calls=_float(r.get("network_calls_per_plan")),
+                   plan_kinematics=_float(r.get("plan_kinematics_rms")),
+                   plan_dynamics=_float(r.get("plan_dynamics_rms")), source=source)
     except BridgeplanError as e:
         raise BridgeplanError(str(e) if str(e).startswith(where) else f"{where}: {e}") from None
     except (KeyError, ValueError, json.JSONDecodeError) as e:
@@ -140,6 +150,7 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
                      execution=execution_from_dict(d.get("execution")), multi_task=bool(d.get("multi_task")))
         latency = d.get("decision_ms_batch1")
         learned = d.get("prior_only_learned")
+        residuals = d.get("plan_residuals") or {}
         return Row(key=key, split=split_of(experiment), seed=int(d["seed"]), step=int(d["step"]), nfe=int(d["nfe"]),
                    score=float(d["score"]["minari"]["mean"]), score_se=float(d["score"]["minari"]["se"]),
                    floor=float(d["floor_line"]["score"]["minari"]["mean"]) if d.get("floor_line") else float("nan"),
@@ -149,7 +160,10 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
                    maze=d.get("maze", ""), experiment=experiment, run_name=Path(d.get("run", "")).name,
                    episodes=int(d.get("episodes", 0)), code_version=d.get("environment", {}).get("code_version", ""),
                    score_d4rl=float(d["score"]["d4rl"]["mean"]) if "d4rl" in d["score"] else None,
-                   floor_learned=float(learned["score"]["minari"]["mean"]) if learned else None, source=str(path))
+                   floor_learned=float(learned["score"]["minari"]["mean"]) if learned else None,
+                   network_calls=_float(d.get("network_call_equivalents_per_plan")),
+                   plan_kinematics=residuals.get("kinematics_rms", {}).get("mean"),
+                   plan_dynamics=residuals.get("dynamics_rms", {}).get("mean"), source=str(path))
     except (KeyError, ValueError, TypeError, json.JSONDecodeError) as e:
         raise BridgeplanError(f"{path}: not an evaluation JSON ({type(e).__name__}: {e})") from None
 

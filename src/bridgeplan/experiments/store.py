@@ -4,7 +4,8 @@ WAL journaling and a busy timeout let two sweeps write at once; every insert is 
 so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the schema
 version: a database from a newer bridgeplan is refused, untouched; one from an older one is upgraded in
 place, in one transaction (version 1 had no execution or multi-task columns: its rows were open loop,
-single-task; version 2 had no sampler column: its rows were sampled as their processes are by default).
+single-task; version 2 had no sampler column: its rows were sampled as their processes are by default; version 3
+had no plan-cost columns: ``network_calls_per_plan`` and the plans' residuals are empty there).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Iterator
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 COLUMNS = {
     "experiment": "TEXT NOT NULL",
@@ -50,6 +51,9 @@ COLUMNS = {
     "calls_per_episode": "REAL",
     "decision_ms_p50": "REAL",
     "decision_ms_p95": "REAL",
+    "network_calls_per_plan": "REAL",
+    "plan_kinematics_rms": "REAL",
+    "plan_dynamics_rms": "REAL",
     "config": "TEXT",
     "code_version": "TEXT",
     "created": "REAL",
