@@ -47,4 +47,7 @@ GENERATORS = {g.name: g for g in [
     Generator("wallclock", "bridgeplan.studies.reports.wallclock", "throughput-wallclock.md",
               "training settings at equal minutes of training: score, success and windows/s, paired over seeds",
               ("README.md",)),
+    Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
+              "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
+              "validation", ("README.md",)),
 ]}

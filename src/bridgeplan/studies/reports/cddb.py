@@ -1,0 +1,175 @@
+"""Issue 27's decisive table: do consistency corrections of the x0 predictions (CDDB, bridgeplan.consistency)
+bring the consistent bridge or flow matching from the line prior at NFE <= 2 up to DDPM's best on medium?
+
+Rows: docs/results/medium-cddb/results.csv (studies/medium-cddb.toml: 5 training seeds, 200 episodes per
+evaluation; `cddb-uncorrected` at every snapshot, `cddb` the corrected samplers at the final snapshot, each with
+its `-validation` rows on other episodes). A correction is a sampler tag ``cddb-<form> <residual>=<step>`` on the
+same trained runs; the corrections are found in the rows, not listed here.
+
+Choices: DDPM's bar at a step is its best NFE by mean over seeds on the test episodes themselves (the bar raised
+for the bridges, as in prior-curves.md). A corrected setting (residual, step size, form; uncorrected among them)
+is chosen per method and NFE on the validation episodes at the final snapshot and reported on the test ones.
+Differences are per seed (first minus second, Minari score), mean ± standard error over seeds; "reaches": yes
+when the mean is not below zero, "within noise" when below by less than two standard errors, else no.
+
+Made by `bridgeplan study report cddb` (studies/medium-cddb.toml) into docs/results/cddb.md.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.analysis.keys import MethodKey, label, method
+from bridgeplan.analysis.load import Point, Results, read_csv
+from bridgeplan.analysis.selection import best, split_mean
+from bridgeplan.analysis.stats import goal_verdict, paired
+from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
+
+DATA = "medium-cddb"
+"""The study's folder under docs/results."""
+N = 16
+DDPM = method("ddpm", steps=N)
+BRIDGES = (method("bridge", "line", steps=N, consistent=True), method("flow", "line", steps=N))
+READS = (DDPM, *BRIDGES)
+"""The trained methods the tables read (studies that make this report must train them)."""
+GOAL_NFE = (1, 2)
+CORRECTED = "cddb-"
+"""The prefix of a corrected sampler's tag (``consistency.Correction.tag``)."""
+
+
+def settings(results: Results, base: MethodKey) -> list[MethodKey]:
+    """``base`` uncorrected, then each correction of it found in the rows, in the order first given."""
+    found = [k for k in results.keys("validation") + results.keys("test")
+             if k.sampler.startswith(CORRECTED) and k.replace(sampler="") == base]
+    return [base, *dict.fromkeys(found)]
+
+
+def setting_name(key: MethodKey) -> str:
+    return key.sampler if key.sampler else "uncorrected"
+
+
+def measured(results: Results) -> list[MethodKey]:
+    """The bridges with test rows."""
+    return [b for b in BRIDGES if results.steps(b)]
+
+
+def ddpm_bar(results: Results, step: int) -> Point | None:
+    """DDPM's NFE with the best mean over seeds on the test episodes at ``step``."""
+    return best(results, results.points(DDPM, step), split="test")
+
+
+def reaches(ours: dict[int, float], bar: dict[int, float]) -> str:
+    if len(set(ours) & set(bar)) < 2:
+        return "not measured"
+    d = paired(ours, bar, seeds="common")
+    return f"{goal_verdict(d, 'reaches')} ({fmt_diff(d)})"
+
+
+def cell(values: dict[int, float], digits: int = 1) -> str:
+    return fmt_mean_se(values, one_seed="mean", digits=digits) if values else "-"
+
+
+def mean_of(results: Results, point: Point, field: str) -> str:
+    values = [v for v in results.values(point, field=field).values() if v is not None]
+    return f"{np.mean(values):.3g}" if values else "-"
+
+
+def curves_table(results: Results) -> list[str]:
+    """Uncorrected, at every snapshot: DDPM's bar against each bridge at NFE 1, 2, 4."""
+    bridges = measured(results)
+    nfes = sorted({n for b in bridges for s in results.steps(b) for n in results.nfes(b, s)})
+    header = ["step", "DDPM best (NFE)"] + [f"{label(b)}, NFE {n}" for b in bridges for n in nfes]
+    header += [f"{label(b)} at NFE <= 2 reaches DDPM's best" for b in bridges]
+    rows = []
+    for step in results.steps(DDPM):
+        bar = ddpm_bar(results, step)
+        bar_scores = results.values(bar) if bar else {}
+        cells = [step, f"{cell(bar_scores)} ({bar.nfe})" if bar else "-"]
+        cells += [cell(results.values(Point(b, step, n))) for b in bridges for n in nfes]
+        for b in bridges:  # the better of NFE 1 and 2 on the test episodes: a bar lowered for the bridge, on purpose
+            ours = best(results, [Point(b, step, n) for n in GOAL_NFE], split="test")
+            cells.append(reaches(results.values(ours), bar_scores) + f" at NFE {ours.nfe}" if ours else "-")
+        rows.append(cells)
+    return table(header, rows)
+
+
+def corrections_table(results: Results, base: MethodKey, step: int, bar_scores: dict[int, float]) -> list[str]:
+    """Every setting of ``base`` at the final snapshot: validation and test scores, its cost, its plans'
+    residuals; the setting chosen on validation per NFE in bold."""
+    header = ["NFE", "setting", "validation", "test", "success", "test - uncorrected", "reaches DDPM's best",
+              "network calls / plan", "ms / plan", "plan kinematics rms", "plan dynamics rms"]
+    rows = []
+    keys = settings(results, base)
+    for nfe in sorted({n for k in keys for n in results.nfes(k, step)}):
+        points = [Point(k, step, nfe) for k in keys]
+        chosen = best(results, points, split="validation")
+        plain = results.values(Point(base, step, nfe))
+        for p in points:
+            test = results.values(p)
+            if not test:
+                continue
+            name = setting_name(p.key)
+            diff = (fmt_diff(paired(test, plain, seeds="common")) if p.key != base and len(set(test) & set(plain)) >= 2
+                    else "-")
+            validation = split_mean(results, p, "validation")
+            rows.append([nfe, bold(name) if p == chosen else name,
+                         "-" if np.isnan(validation) else f"{validation:.1f}", cell(test),
+                         cell(results.values(p, field="success"), digits=3), diff, reaches(test, bar_scores),
+                         mean_of(results, p, "network_calls"), mean_of(results, p, "plan_ms"),
+                         mean_of(results, p, "plan_kinematics"), mean_of(results, p, "plan_dynamics")])
+    return table(header, rows)
+
+
+def residual_of(key: MethodKey) -> str:
+    """The correction's residuals and form without step sizes (``cddb-x0 dynamics``); '' uncorrected."""
+    if not key.sampler:
+        return ""
+    form, *terms = key.sampler.split(" ")
+    return " ".join([form, *(t.split("=")[0] for t in terms)])
+
+
+def goal_lines(results: Results, base: MethodKey, step: int, bar: Point) -> list[str]:
+    """Per residual (its step size and NFE <= 2 chosen on validation), the verdict on the test episodes."""
+    bar_scores = results.values(bar)
+    by_residual: dict[str, list[Point]] = {}
+    for k in settings(results, base):
+        by_residual.setdefault(residual_of(k), []).extend(Point(k, step, n) for n in GOAL_NFE
+                                                          if results.rows(Point(k, step, n), "validation"))
+    lines = []
+    for residual, points in by_residual.items():
+        chosen = best(results, points, split="validation")
+        if chosen is None:
+            continue
+        lines.append(f"- {residual or 'uncorrected'}: chosen on validation {setting_name(chosen.key)} at NFE "
+                     f"{chosen.nfe}: test {cell(results.values(chosen))}, reaches DDPM's best "
+                     f"({cell(bar_scores)} at NFE {bar.nfe}): {reaches(results.values(chosen), bar_scores)}")
+    return lines
+
+
+def render(root: Path) -> str:
+    results = Results(read_csv(Path(root) / DATA / "results.csv"))
+    seeds = sorted({r.seed for r in results})
+    episodes = sorted({r.episodes for r in results})
+    versions = sorted({r.code_version for r in results})
+    lines = ["# CDDB consistency corrections on medium: the consistent bridge and flow (line prior) against DDPM", "",
+             f"Generated by `bridgeplan study report cddb` from docs/results/{DATA}/results.csv "
+             f"(studies/medium-cddb.toml; training seeds {', '.join(map(str, seeds))}; "
+             f"{', '.join(map(str, episodes))} episodes per evaluation; code {', '.join(versions)}). Scores: Minari "
+             "convention, mean ± standard error over training seeds. DDPM's bar: its best NFE on the test episodes. "
+             "The corrections were evaluated at the final snapshot only.", "",
+             "## Uncorrected, at every snapshot", "", *curves_table(results), ""]
+    for base in measured(results):
+        step = max(results.steps(base))
+        bar = ddpm_bar(results, step)
+        if bar is None:
+            continue
+        lines += [f"## {label(base)} at step {step}, each setting", "",
+                  f"DDPM's best at step {step}: {cell(results.values(bar))} at NFE {bar.nfe}. Bold: the setting "
+                  "chosen on the validation episodes at that NFE. Residuals: rms over the plans as sampled (m/s); "
+                  "network calls: NFE plus two per backward pass of a deep correction.", "",
+                  *corrections_table(results, base, step, results.values(bar)), "",
+                  f"The goal at NFE <= 2, per residual (step size and NFE chosen on validation):", "",
+                  *goal_lines(results, base, step, bar), ""]
+    return "\n".join(lines).rstrip("\n")

@@ -1,0 +1,78 @@
+"""The CDDB report (bridgeplan.studies.reports.cddb) on hand-made rows: settings are chosen on validation and
+reported on test, DDPM's bar is its best NFE, and the verdicts follow the paired differences."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+from bridgeplan.processes import make_process
+from bridgeplan.studies.reports import GENERATORS, cddb
+
+SEEDS = (0, 1, 2)
+FIELDS = ["id", "experiment", "run_name", "maze", "process", "prior", "diffusion_steps", "seed", "step", "nfe",
+          "episodes", "eval_seed", "score_minari", "score_minari_se", "success_rate", "plan_ms", "floor_minari",
+          "execution", "multi_task", "sampler", "calls_per_episode", "network_calls_per_plan", "plan_kinematics_rms",
+          "plan_dynamics_rms", "config", "code_version"]
+
+
+def _row(experiment, process, prior, step, nfe, score, seed, sampler="", calls=None):
+    config = {"process": process.to_dict(), "prior": prior, "hold_share": 0.0}
+    return {"experiment": experiment, "run_name": f"{process.name}-s{seed}", "maze": "medium",
+            "process": process.name, "prior": prior if process.uses_prior else "gaussian",
+            "diffusion_steps": process.steps, "seed": seed, "step": step, "nfe": nfe, "episodes": 200,
+            "eval_seed": seed, "score_minari": score + 0.1 * seed, "score_minari_se": 1.0, "success_rate": 0.5,
+            "plan_ms": 2.0, "floor_minari": 30.0, "execution": "", "multi_task": 0, "sampler": sampler,
+            "calls_per_episode": nfe, "network_calls_per_plan": calls or nfe, "plan_kinematics_rms": 0.5,
+            "plan_dynamics_rms": 0.25, "config": json.dumps(config), "code_version": "0.1.0+test"}
+
+
+def write_rows(root):
+    ddpm = make_process("ddpm", steps=16)
+    bridge = make_process("bridge", steps=16, consistent=True)
+    rows = []
+    for seed in SEEDS:
+        for step in (4000, 8000):
+            rows += [_row("cddb-uncorrected", ddpm, "gaussian", step, 1, 50.0, seed),
+                     _row("cddb-uncorrected", ddpm, "gaussian", step, 16, 70.0, seed),
+                     _row("cddb-uncorrected", bridge, "line", step, 1, 60.0, seed),
+                     _row("cddb-uncorrected", bridge, "line", step, 2, 62.0, seed)]
+        rows += [_row("cddb-uncorrected-validation", bridge, "line", 8000, nfe, 61.0, seed) for nfe in (1, 2)]
+        # validation prefers the small step, test the large one: the report must take validation's choice
+        for sampler, validation, test in (("cddb-x0 dynamics=0.0001", 80.0, 65.0),
+                                          ("cddb-x0 dynamics=0.0003", 70.0, 75.0)):
+            for nfe in (1, 2):
+                rows += [_row("cddb", bridge, "line", 8000, nfe, test, seed, sampler),
+                         _row("cddb-validation", bridge, "line", 8000, nfe, validation + nfe, seed, sampler)]
+        rows += [_row("cddb", bridge, "line", 8000, 1, 71.0, seed, "cddb-deep dynamics=0.0001", calls=3),
+                 _row("cddb-validation", bridge, "line", 8000, 1, 60.0, seed, "cddb-deep dynamics=0.0001", calls=3)]
+    path = root / cddb.DATA / "results.csv"
+    path.parent.mkdir(parents=True)
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=FIELDS)
+        writer.writeheader()
+        writer.writerows({"id": i, **r} for i, r in enumerate(rows))
+
+
+def test_the_report_chooses_on_validation_and_judges_on_test(tmp_path):
+    write_rows(tmp_path)
+    text = GENERATORS["cddb"].render(tmp_path)
+    lines = text.splitlines()
+    # DDPM's bar is its best NFE (16) at each step; the uncorrected bridge at NFE <= 2 falls 8 short
+    curve = next(line for line in lines if line.startswith("| 8000 |"))
+    assert "70.1 ± 0.1 (16)" in curve and "no (-8.0 ± 0.0) at NFE 2" in curve
+    # at NFE 2, validation chooses dynamics=0.0001 (bold) although dynamics=0.0003 scores higher on test
+    nfe2 = [line for line in lines if line.startswith("| 2 |")]
+    assert any("**cddb-x0 dynamics=0.0001**" in line and "| 65.1 ± 0.1 |" in line and "+3.0 ± 0.0" in line
+               for line in nfe2)
+    assert any("| cddb-x0 dynamics=0.0003 |" in line and "| 75.1 ± 0.1 |" in line and "yes (+5.0 ± 0.0)" in line
+               for line in nfe2)
+    # the deep correction's cost: 3 network-call equivalents per plan at NFE 1
+    assert any("cddb-deep dynamics=0.0001" in line and "| 3 |" in line for line in lines if line.startswith("| 1 |"))
+    # the goal per residual: each form and residual with its validation choice, judged on test
+    goal = [line for line in lines if line.startswith("- ")]
+    assert "- cddb-x0 dynamics: chosen on validation cddb-x0 dynamics=0.0001 at NFE 2: test 65.1 ± 0.1" in goal[1]
+    assert goal[1].endswith("no (-5.0 ± 0.0)")
+    assert goal[2].startswith("- cddb-deep dynamics: chosen on validation cddb-deep dynamics=0.0001 at NFE 1")
+    assert goal[2].endswith("yes (+1.0 ± 0.0)")
+    assert goal[0].startswith("- uncorrected: chosen on validation uncorrected at NFE 1")
