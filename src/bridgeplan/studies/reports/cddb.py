@@ -170,6 +170,6 @@ def render(root: Path) -> str:
                   "chosen on the validation episodes at that NFE. Residuals: rms over the plans as sampled (m/s); "
                   "network calls: NFE plus two per backward pass of a deep correction.", "",
                   *corrections_table(results, base, step, results.values(bar)), "",
-                  f"The goal at NFE <= 2, per residual (step size and NFE chosen on validation):", "",
+                  "The goal at NFE <= 2, per residual (step size and NFE chosen on validation):", "",
                   *goal_lines(results, base, step, bar), ""]
     return "\n".join(lines).rstrip("\n")
