@@ -43,7 +43,7 @@ def test_a_campaign_study_lists_every_committed_evaluation(name):
 
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert "4 reports match their studies" in capsys.readouterr().out
+    assert "5 reports and the generated blocks in README.md match their studies" in capsys.readouterr().out
 
 
 def _docs_copy(tmp_path) -> Path:
@@ -67,6 +67,29 @@ def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, ca
     assert main(["study", "report", "findings", "--root", str(root)]) == 0
     assert findings.read_text() == text
     assert main(["study", "report", "--check", "--root", str(root)]) == 0
+
+
+def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
+    """The README's headline table sits between markers that `study report` rewrites and `--check` verifies."""
+    from bridgeplan.studies.reports import markers
+
+    root = _docs_copy(tmp_path)
+    readme = root / "README.md"
+    text = (REPO / "README.md").read_text()
+    begin, end = markers("headline")
+    block = text.split(begin, 1)[1].split(end, 1)[0]
+    assert "| medium | single-task |" in block
+    number = next(w for w in block.split() if w[0].isdigit() and "." in w)
+    readme.write_text(text.replace(block, block.replace(number, "99.9", 1)))
+    assert main(["study", "report", "--check", "--root", str(root)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: README.md differs from what headline generates (run bridgeplan study report headline)"]
+    assert main(["study", "report", "headline", "--root", str(root)]) == 0
+    assert readme.read_text() == text and "wrote README.md" in capsys.readouterr().out
+    readme.write_text(text.replace(end, ""))  # a block that never closes: one error line, nothing written
+    assert main(["study", "report", "headline", "--root", str(root)]) == 2
+    assert "never closes" in capsys.readouterr().err
+    assert readme.read_text() == text.replace(end, "")
 
 
 def test_study_report_check_fails_when_a_report_is_missing(tmp_path, capsys):

@@ -621,24 +621,38 @@ def _cmd_study_report(args) -> int:
     root = find_root(args.root)
     studies = load_studies(root)
     chosen = select(studies, args.names, root)
-    texts = {}
-    for s in chosen:  # every report first: nothing is written unless all of them render
+    results = root / "docs" / "results"
+    texts = {}  # file (relative to root) -> (study, text): every report first, nothing written unless all render
+    for s in chosen:
         for r in s.reports:
-            texts[(s.name, r.output)] = GENERATORS[r.generator].render(root / "docs" / "results")
+            generator = GENERATORS[r.generator]
+            texts[f"docs/results/{r.output}"] = (s.name, generator.render(results))
+            for feed in generator.feeds:  # the tables the README and docs show between the generator's markers
+                current = texts[feed][1] if feed in texts else _read_or_empty(root / feed)
+                filled = generator.fill_blocks(current, results)
+                if filled is not None:
+                    texts[feed] = (s.name, filled)
     differ = 0
-    for (name, output), text in texts.items():
-        path = root / "docs" / "results" / output
+    for output, (name, text) in texts.items():
+        path = root / output
         if args.check:
             if not path.exists() or path.read_text() != text:
-                print(f"error: docs/results/{output} differs from what {name} generates "
+                print(f"error: {output} differs from what {name} generates "
                       f"(run bridgeplan study report {name})", file=sys.stderr)
                 differ += 1
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
-            print(f"wrote docs/results/{output}")
+            print(f"wrote {output}")
+    reports = sum(output.startswith("docs/results/") for output in texts)
     if args.check and not differ:
-        print(f"{len(texts)} reports match their studies")
+        fed = [output for output in texts if not output.startswith("docs/results/")]
+        blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
+        print(f"{reports} reports{blocks} match their studies")
     return 2 if differ else 0
+
+
+def _read_or_empty(path: Path) -> str:
+    return path.read_text() if path.exists() else ""
 
 
 def _cmd_study_run(args) -> int:

@@ -1,0 +1,134 @@
+"""The README's headline table: per maze and task set, the best planner executed by Diffuser's tracking controller
+and the best pursued one, each chosen on the validation episodes and reported on the test episodes, beside the
+straight line alone executed the same ways, the expert on the same episodes and Diffuser's published score.
+
+Rows: docs/results/<maze>-v2-{curves,hold,consistent-priors}/results.csv, each run's final snapshot; candidates
+are every method (holds included), NFE and open-loop or replanned execution evaluated there on both splits. The
+expert: docs/results/expert-on-eval-tasks.json (the same test episodes). Diffuser's published scores (Janner et
+al. 2022, Table 1) use D4RL's normalization constants in the old environment (goal threshold 0.5): they are
+shown beside this project's scores converted to that convention (``score_d4rl``), not compared with them.
+
+Made by `bridgeplan study report headline` (studies/headline.toml) into docs/results/headline.md and the README's
+generated block.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.analysis.keys import MethodKey, label, method
+from bridgeplan.analysis.load import Point, Results, load_csvs
+from bridgeplan.analysis.selection import best
+from bridgeplan.analysis.tables import fmt_mean_se, table
+
+MAZES = ("umaze", "medium", "large")
+STORES = ("curves", "hold", "consistent-priors")
+"""The maze's stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
+EXPERT = "expert-on-eval-tasks.json"
+READS = (method("ddpm", steps=16), method("bridge", "line", steps=16))
+"""The trained methods every maze's rows have."""
+DIFFUSER_PUBLISHED = {("umaze", False): 113.9, ("medium", False): 121.5, ("large", False): 123.0,
+                      ("umaze", True): 128.9, ("medium", True): 127.2, ("large", True): 132.1}
+"""Diffuser's Maze2D scores (Janner et al. 2022, Table 1; D4RL convention, old environment)."""
+
+
+def candidates(results: Results, multi_task: bool, pursued: bool) -> list[Point]:
+    """Every (method, execution, NFE) at its final snapshot with rows on both splits, tracked or pursued."""
+    points = []
+    for key in results.keys("validation"):
+        if key.multi_task != multi_task or (key.execution.controller == "pursuit") != pursued:
+            continue
+        steps = results.steps(key)
+        if steps:
+            points += [p for p in results.points(key, steps[-1]) if results.rows(p)]
+    return points
+
+
+def describe(key: MethodKey, nfe: int) -> str:
+    """``DDPM, NFE 16, pursuit 1.5`` (with the hold share and replanning where they apply)."""
+    ex = key.execution
+    parts = [label(key), f"NFE {nfe}"]
+    if ex.controller == "pursuit":
+        parts.append(f"pursuit {ex.lookahead:g}")
+    if ex.replan_every:
+        parts.append(ex.tag().split("-pursuit")[0])
+    return ", ".join(parts)
+
+
+def mean(results: Results, point: Point, field: str) -> float:
+    return float(np.mean(list(results.values(point, field=field).values())))
+
+
+def ms_per_decision(results: Results, point: Point) -> str:
+    """Open loop: ms per plan planned with the other episodes in one batch; replanned: a decision's p50 at batch 1."""
+    if point.key.execution.replan_every:
+        p50 = [r.decision_ms[0] for r in results.rows(point).values() if r.decision_ms]
+        return f"{np.mean(p50):.1f} ms at batch 1" if p50 else "-"
+    return f"{mean(results, point, 'plan_ms'):.2f} ms batched"
+
+
+def expert_scores(root: Path) -> dict[tuple[str, bool], list[float]]:
+    rows = json.loads((root / EXPERT).read_text())["rows"]
+    out: dict[tuple[str, bool], list[float]] = {}
+    for r in rows:
+        out.setdefault((r["maze"], bool(r["multi_task"])), []).append(r["score_minari"])
+    return out
+
+
+def scored(results: Results, point: Point) -> str:
+    """``84.0 ± 0.6 (0.95)``: the score over seeds and the mean success rate."""
+    return f"{fmt_mean_se(results.values(point))} ({mean(results, point, 'success'):.2f})"
+
+
+def headline_rows(root: Path) -> list[list[str]]:
+    expert = expert_scores(root)
+    rows = []
+    for multi_task in (False, True):
+        for maze in MAZES:
+            results = load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in STORES)
+            tracked, pursued = (best(results, candidates(results, multi_task, p)) for p in (False, True))
+            if tracked is None or pursued is None:
+                continue
+            scores = expert.get((maze, multi_task))
+            rows.append([
+                maze, "Multi2D" if multi_task else "single-task",
+                f"{describe(tracked.key, tracked.nfe)}; {ms_per_decision(results, tracked)}", scored(results, tracked),
+                f"{describe(pursued.key, pursued.nfe)}; {ms_per_decision(results, pursued)}", scored(results, pursued),
+                f"{fmt_mean_se(results.values(tracked, field='floor'))} / "
+                f"{fmt_mean_se(results.values(pursued, field='floor'))}",
+                fmt_mean_se(scores) if scores else "-",
+                f"{fmt_mean_se(results.values(tracked, field='score_d4rl'))} / "
+                f"{DIFFUSER_PUBLISHED[(maze, multi_task)]}"])
+    return rows
+
+
+HEADER = ["maze", "tasks", "best tracked planner; ms / decision", "score (success)",
+          "best pursued planner; ms / decision", "score (success)", "line alone: tracked / pursued",
+          "expert", "tracked, D4RL convention / Diffuser published"]
+
+
+def block(root: Path) -> str:
+    """The table the README shows (its generated block)."""
+    return "\n".join(table(HEADER, headline_rows(Path(root))))
+
+
+def render(root: Path) -> str:
+    root = Path(root)
+    versions = sorted({r.code_version for maze in MAZES for store in STORES
+                       for path in [root / f"{maze}-v2-{store}" / "results.csv"] if path.exists()
+                       for r in load_csvs([path])})
+    return "\n".join([
+        "# Headline: the best tracked and the best pursued planner per maze", "",
+        "Generated by `bridgeplan study report headline` from docs/results/<maze>-v2-{curves,hold,consistent-priors}"
+        "/results.csv and docs/results/expert-on-eval-tasks.json (codes " + ", ".join(versions) + "). Each run's "
+        "final snapshot; 3 training seeds x 200 test episodes; Minari score, mean ± standard error over seeds. "
+        "Each planner (method, NFE, execution) is chosen among all evaluated on 200 validation episodes per seed, "
+        "then scored on the test episodes; the line alone is executed the same way on the same episodes. ms / "
+        "decision: open loop, one plan per episode planned in a batch with the others; replanned, the p50 of one "
+        "decision at batch 1. The last column puts this project's tracked score in D4RL's convention beside "
+        "Diffuser's published one (Janner et al. 2022, Table 1: old environment, goal threshold 0.5), which is not "
+        "a like-for-like comparison.", "",
+        block(root)])
