@@ -58,7 +58,6 @@ def test_names():
 
 def test_env_ids_are_registered():
     import gymnasium
-
     import ogbench  # noqa: F401
 
     for maze in MAZES:
