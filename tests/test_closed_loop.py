@@ -25,6 +25,7 @@ from bridgeplan.planner import Plan, Planner
 from bridgeplan.priors import PRIORS, WarmPrior, make_prior
 from bridgeplan.replan import Execution, PlanSource, arrival_index, select_candidates, truncate_at_arrival
 from bridgeplan.runs import load_planner
+from bridgeplan.trajectory import MAZE2D
 
 UMAZE = get_maze("umaze")
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -62,7 +63,7 @@ def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny
                             follower=Follower(5, "pursuit", 0.7))
     expected = json.loads(json.dumps(score_returns("umaze", pursued.returns, pursued.success)))
     assert {k: saved[k] for k in expected} == expected
-    line = planner.with_prior(make_prior("line", planner.normalizer, stride=planner.stride))
+    line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
     line_plan = line.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
     line_pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, line_plan.states,
                                  follower=Follower(5, "pursuit", 0.7))
@@ -148,25 +149,25 @@ def test_warm_prior_is_the_previous_plan_shifted():
     start = np.c_[rng.uniform(-1.2, 1.2, size=(b, 2)), rng.uniform(-1, 1, size=(b, 2))]
     cond = {0: torch.as_tensor(norm.normalize(start, slice(2, None)), dtype=torch.float32),
             h - 1: torch.as_tensor(norm.normalize(np.c_[goal, np.zeros((b, 2))], slice(2, None)), dtype=torch.float32)}
-    x = WarmPrior(norm, prev, [k] * b).sample(cond, h, b)
+    x = WarmPrior(norm, MAZE2D, prev, [k] * b).sample(cond, h, b)
     assert torch.equal(x[:, 0, 2:], cond[0]) and torch.equal(x[:, h - 1, 2:], cond[h - 1])
     traj = norm.unnormalize(x.double().numpy())
     np.testing.assert_allclose(traj[:, 1:h - k], prev[:, k + 1:], atol=1e-6)  # shifted
     np.testing.assert_allclose(traj[:, h - k:, 2:4], np.repeat(goal[:, None], k, axis=1), atol=1e-6)  # held
     np.testing.assert_allclose(traj[:, h - k:-1, 4:], 0.0, atol=1e-6)
     # elapsed 0: the previous plan itself; per-row shifts; a moved goal: a straight line to it
-    same = norm.unnormalize(WarmPrior(norm, prev, [0] * b).sample(cond, h, b).double().numpy())
+    same = norm.unnormalize(WarmPrior(norm, MAZE2D, prev, [0] * b).sample(cond, h, b).double().numpy())
     np.testing.assert_allclose(same[:, 1:-1], prev[:, 1:-1], atol=1e-6)
     moved = dict(cond)
     moved[h - 1] = torch.as_tensor(norm.normalize(np.zeros((b, 4)), slice(2, None)), dtype=torch.float32)
-    line = norm.unnormalize(WarmPrior(norm, prev, [4, 4, 4]).sample(moved, h, b).double().numpy())
+    line = norm.unnormalize(WarmPrior(norm, MAZE2D, prev, [4, 4, 4]).sample(moved, h, b).double().numpy())
     steps = np.diff(line[:, h - 5:, 2:4], axis=1)
     np.testing.assert_allclose(steps, np.repeat(steps[:, :1], 4, axis=1), atol=1e-6)
 
 
 def test_warm_prior_registry_and_first_plan():
     assert "warm" in PRIORS
-    prior = make_prior("warm", _normalizer())
+    prior = make_prior("warm", _normalizer(), MAZE2D)
     cond = {0: torch.zeros(2, 4), 7: torch.zeros(2, 4)}
     with pytest.raises(BridgeplanError, match="only valid on replans"):
         prior.sample(cond, 8, 2)
@@ -190,7 +191,8 @@ def test_warm_replans_start_from_the_previous_plan(tiny_runs):
             seen.append(self.prior)
             return super().plan(starts, goals, nfe, generator, **kwargs)
 
-    spy = Spy(**{f: getattr(planner, f) for f in ("model", "process", "prior", "normalizer", "horizon", "device")})
+    spy = Spy(**{f: getattr(planner, f)
+                 for f in ("model", "process", "prior", "normalizer", "horizon", "device", "layout")})
     source = PlanSource(spy, Execution(replan_every=4, warm=True), 1, torch.Generator().manual_seed(0), 2, UMAZE)
     tasks = make_tasks("umaze", 2, 0)
     first = source(tasks.start_states, tasks.goals_xy, np.arange(2), 0)
@@ -228,17 +230,18 @@ def test_keep_holds_replans_to_the_first_plans_arrival(tiny_runs):
             seen.append(arrival)
             return super().plan(starts, goals, nfe, generator, prior_only, arrival)
 
-    spy = Spy(**{f: getattr(planner, f) for f in ("model", "process", "prior", "normalizer", "horizon", "device")})
+    spy = Spy(**{f: getattr(planner, f)
+                 for f in ("model", "process", "prior", "normalizer", "horizon", "device", "layout")})
     source = PlanSource(spy, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 3,
                         UMAZE)
     tasks = make_tasks("umaze", 3, 0)
     first = source(tasks.start_states, tasks.goals_xy, np.arange(3), 0)
     full = np.c_[np.zeros((3, first.shape[1], 2)), first]
-    before = arrival_index(full, tasks.goals_xy)
+    before = arrival_index(full, tasks.goals_xy, MAZE2D)
     second = source(first[:, 4], tasks.goals_xy, np.arange(3), 4)
     assert seen[0] is None
     np.testing.assert_array_equal(seen[1], np.clip(before - 4, 1, planner.horizon - 1))
-    after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy)
+    after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy, MAZE2D)
     assert (after <= seen[1]).all()
     source(second[:, 6], tasks.goals_xy, np.arange(3), 10)
     np.testing.assert_array_equal(seen[2], np.clip(before - 10, 1, planner.horizon - 1))
@@ -284,7 +287,7 @@ def test_truncate_at_arrival_holds_the_goal():
     traj[:, :, 2] = np.linspace(0, 2, h)  # along x toward the goal at x = 2
     traj[:, :, 4] = 1.0
     goals = np.array([[2.0, 0.0], [0.9, 0.0]])
-    out, arrival = truncate_at_arrival(traj, goals)
+    out, arrival = truncate_at_arrival(traj, goals, MAZE2D)
     assert arrival.tolist() == [7, 3]  # first x within 0.45 of the goal: 1.56 (index 7); 0.67 (index 3)
     np.testing.assert_array_equal(out[1, :4], traj[1, :4])
     np.testing.assert_array_equal(out[1, 4:, 2:4], np.repeat(goals[1:], h - 4, axis=0))
@@ -298,7 +301,9 @@ class KnownCandidates:
     ARRIVE = (20, 9, 14, 5)
 
     def __init__(self, horizon=24):
-        self.horizon, self.prior, self.normalizer, self.device = horizon, make_prior("gaussian", None), None, "cpu"
+        self.horizon, self.prior, self.normalizer, self.device = (horizon, make_prior("gaussian", None, MAZE2D),
+                                                                  None, "cpu")
+        self.layout = MAZE2D
 
     def with_prior(self, prior):
         return self
@@ -335,14 +340,15 @@ def test_candidates_pick_by_the_criterion(how, expected):
     chosen = source(starts, goals, np.arange(2), 0)
     assert batches == [8]  # 2 episodes x 4 candidates, one batch
     want = planner.plan(np.repeat(starts, 4, axis=0), np.repeat(goals, 4, axis=0), 1, None).states
-    want, _ = truncate_at_arrival(np.concatenate([np.zeros((8, 24, 2)), want], axis=2), np.repeat(goals, 4, axis=0))
+    want, _ = truncate_at_arrival(np.concatenate([np.zeros((8, 24, 2)), want], axis=2), np.repeat(goals, 4, axis=0),
+                                  MAZE2D)
     np.testing.assert_array_equal(chosen, want.reshape(2, 4, 24, 6)[:, expected, :, 2:])
 
 
 def test_agreement_picks_the_medoid():
     traj = np.zeros((1, 3, 5, 6))
     traj[0, 0, :, 2], traj[0, 1, :, 2], traj[0, 2, :, 2] = 0.0, 0.1, 1.0  # 1 sits between 0 and the outlier 2
-    assert select_candidates(traj, np.zeros((1, 2)), "agreement").tolist() == [1]
+    assert select_candidates(traj, np.zeros((1, 2)), "agreement", MAZE2D).tolist() == [1]
 
 
 def test_candidates_through_the_cli(tiny_runs, tmp_path):

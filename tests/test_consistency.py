@@ -24,10 +24,11 @@ from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.processes import DDPM, Bridge, Flow
-from bridgeplan.trajectory import ACT_DIM, densify
+from bridgeplan.trajectory import MAZE2D, densify
 from tests.test_cli_data import _error
 
 B, H, D = 3, 8, 6
+ACT_DIM = MAZE2D.act_dim
 # a normalizer with ranges of Maze2D's order: actions [-1, 1], positions ~[0.5, 3.5], velocities [-5, 5]
 NORM = Normalizer((-1.0, -1.0, 0.4, 0.5, -5.0, -5.0), (1.0, 1.0, 3.6, 2.5, 5.0, 5.0))
 
@@ -91,15 +92,15 @@ def _simulate(stride: int, steps: int = 24, seed: int = 0) -> np.ndarray:
 @pytest.mark.parametrize("stride", [1, 3])
 def test_dynamics_residual_is_zero_on_simulated_motion_and_positive_when_perturbed(stride):
     traj = torch.as_tensor(_simulate(stride))
-    assert dynamics_error(traj, stride).abs().max() < 1e-10
+    assert dynamics_error(traj, MAZE2D, stride).abs().max() < 1e-10
     if stride == 1:
-        assert kinematics_error(traj, stride).abs().max() < 1e-10
+        assert kinematics_error(traj, MAZE2D, stride).abs().max() < 1e-10
     x0 = NORM.normalize(traj)  # through the normalizer, as a sampler's x0 is
-    assert residual("dynamics", x0, NORM, stride).max() < 1e-18
+    assert residual("dynamics", x0, NORM, MAZE2D, stride).max() < 1e-18
     for column in range(D):  # an action, a position or a velocity off by a little: a residual
         bad = x0.clone()
         bad[1, 3, column] = bad[1, 3, column] * 0.5 if column < ACT_DIM else bad[1, 3, column] + 0.01  # (clips)
-        r = residual("dynamics", bad, NORM, stride)
+        r = residual("dynamics", bad, NORM, MAZE2D, stride)
         assert r[1] > 1e-6 and r[0] < 1e-18 and r[2] < 1e-18
 
 
@@ -109,8 +110,8 @@ def test_kinematics_at_a_stride_is_the_mean_of_its_densified_steps():
     k = 4
     x = NORM.unnormalize(trajectories(1))
     dense = torch.as_tensor(densify(x.numpy(), k))
-    per_step = kinematics_error(dense, 1)
-    assert torch.allclose(kinematics_error(x, k), per_step.reshape(B, H - 1, k, 2).mean(2), atol=1e-10)
+    per_step = kinematics_error(dense, MAZE2D, 1)
+    assert torch.allclose(kinematics_error(x, MAZE2D, k), per_step.reshape(B, H - 1, k, 2).mean(2), atol=1e-10)
 
 
 # --- the correction on closed forms --------------------------------------------------------------------------
@@ -121,10 +122,11 @@ def test_x0_step_on_the_conditions_residual_shrinks_it_by_one_minus_alpha_square
     unit = Normalizer((-1.0,) * D, (1.0,) * D)
     x = trajectories(2)
     cond = conditions_of(x)
-    before = residual("conditions", x, unit, 1, cond)
+    before = residual("conditions", x, unit, MAZE2D, 1, cond)
     for alpha in (0.25, 0.6):
-        out = corrected(lambda x_n, n: x_n, lambda z: alpha * residual("conditions", z, unit, 1, cond), "x0")(x, 0)
-        after = residual("conditions", out, unit, 1, cond)
+        out = corrected(lambda x_n, n: x_n, lambda z: alpha * residual("conditions", z, unit, MAZE2D, 1, cond),
+                        "x0")(x, 0)
+        after = residual("conditions", out, unit, MAZE2D, 1, cond)
         assert torch.allclose(after, (1 - alpha) ** 2 * before, rtol=1e-12)
         assert torch.equal(out[1, -1], x[1, -1])  # the NaN goal row of plan 1
         assert torch.equal(out[:, 1:-1], x[:, 1:-1]) and torch.equal(out[:, :, :ACT_DIM], x[:, :, :ACT_DIM])
@@ -136,14 +138,14 @@ def test_x0_step_decreases_a_quadratic_residual_by_the_expected_amount(name, str
     x' = x - alpha g, g = J^T (J x - y), gives exactly R(x') = R(x) - alpha |g|^2 + alpha^2 / 2 |J g|^2."""
     x = trajectories(3) * 0.6  # velocities within the clip
     z = x.clone().requires_grad_(True)
-    (grad,) = torch.autograd.grad(residual(name, z, NORM, stride).sum(), z)
+    (grad,) = torch.autograd.grad(residual(name, z, NORM, MAZE2D, stride).sum(), z)
     alpha = 0.05 / float(grad.abs().max())  # a step that stays inside [-1, 1] (no clip)
-    out = corrected(lambda x_n, n: x_n, lambda z: alpha * residual(name, z, NORM, stride), "x0")(x, 0)
+    out = corrected(lambda x_n, n: x_n, lambda z: alpha * residual(name, z, NORM, MAZE2D, stride), "x0")(x, 0)
     assert out.abs().max() < 1
     g = (x - out) / alpha
     err = {"kinematics": kinematics_error, "dynamics": dynamics_error}[name]
-    _, jg = torch.autograd.functional.jvp(lambda z: err(NORM.unnormalize(z), stride), x, g)
-    before, after = residual(name, x, NORM, stride), residual(name, out, NORM, stride)
+    _, jg = torch.autograd.functional.jvp(lambda z: err(NORM.unnormalize(z), MAZE2D, stride), x, g)
+    before, after = residual(name, x, NORM, MAZE2D, stride), residual(name, out, NORM, MAZE2D, stride)
     expected = before - alpha * g.pow(2).flatten(1).sum(1) + alpha ** 2 / 2 * jg.pow(2).flatten(1).sum(1)
     assert torch.allclose(after, expected, rtol=1e-10, atol=1e-12)
     assert (after < before).all()
@@ -178,7 +180,7 @@ def test_deep_gradient_through_the_network_matches_finite_differences(process, n
     cond = conditions_of(x_n)
 
     def objective(z):
-        return residual("dynamics", z, NORM, 2) + 0.5 * residual("conditions", z, NORM, 2, cond)
+        return residual("dynamics", z, NORM, MAZE2D, 2) + 0.5 * residual("conditions", z, NORM, MAZE2D, 2, cond)
 
     def predict(z, step):
         return process.predict_x0(model, z, step)
@@ -213,8 +215,8 @@ PROCESSES = [DDPM(steps=6), DDPM(steps=6, sampler="ddim", eta=0.5), Bridge(steps
 
 
 def _planner(process, correction=None) -> Planner:
-    prior = make_prior("gaussian" if not process.uses_prior else "line", NORM, stride=2)
-    return Planner(_tiny_net(), process, prior, NORM, H, torch.device("cpu"), stride=2, correction=correction)
+    prior = make_prior("gaussian" if not process.uses_prior else "line", NORM, MAZE2D, stride=2)
+    return Planner(_tiny_net(), process, prior, NORM, H, torch.device("cpu"), MAZE2D, stride=2, correction=correction)
 
 
 def _plan(planner: Planner):

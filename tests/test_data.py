@@ -22,6 +22,7 @@ from bridgeplan.maze.expert import D_GAIN, P_GAIN, WAYPOINT_RADIUS, WaypointExpe
 from bridgeplan.maze.layouts import GOAL_RADIUS, get_maze
 from bridgeplan.maze.rollout import rollout
 from bridgeplan.normalizer import Normalizer
+from bridgeplan.trajectory import MAZE2D
 
 UMAZE = get_maze("umaze")
 
@@ -261,7 +262,7 @@ def test_hold_tails_wait_still_after_a_random_index():
     gen = torch.Generator().manual_seed(0)
     x = torch.rand((4000, 16, 6), generator=gen) * 2 - 1
     rest = torch.tensor([0.1, -0.2, 0.3, 0.4, -0.5, 0.6])
-    out = hold_tails(x, 0.5, rest, gen)
+    out = hold_tails(x, 0.5, rest, MAZE2D, gen)
     changed = (out != x).any(dim=2)  # [B, H]
     held = changed.any(dim=1)
     assert abs(held.float().mean().item() - 0.5) < 0.03
@@ -271,8 +272,8 @@ def test_hold_tails_wait_still_after_a_random_index():
         torch.testing.assert_close(out[i, k + 1:, 2:4], x[i, k, 2:4].expand(15 - k, 2))  # position of state k
         torch.testing.assert_close(out[i, k + 1:, :2], rest[:2].expand(15 - k, 2))  # no action
         torch.testing.assert_close(out[i, k + 1:, 4:], rest[4:].expand(15 - k, 2))  # no velocity
-    assert torch.equal(hold_tails(x, 0.0, rest, gen), x)
-    assert (hold_tails(x, 1.0, rest, gen)[:, -1] != x[:, -1]).any(dim=1).all()
+    assert torch.equal(hold_tails(x, 0.0, rest, MAZE2D, gen), x)
+    assert (hold_tails(x, 1.0, rest, MAZE2D, gen)[:, -1] != x[:, -1]).any(dim=1).all()
 
 
 def _write_d4rl(path, stream, maze, stale_after=()):

@@ -13,12 +13,14 @@ from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import Flow, make_process, parse_process_params, process_from_dict
 from bridgeplan.processes.flow import flow_posterior, flow_sample, flow_time, linear_interpolant
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.trajectory import MAZE2D
 from tests.test_process_maths import close, regress
 from tests.test_train import train_args
 
 F64 = torch.float64
 B, H, D = 5, 8, 6
+
+ACT_DIM = MAZE2D.act_dim
 
 
 def data(seed=0) -> torch.Tensor:

@@ -18,10 +18,12 @@ from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.processes.base import Process
 from bridgeplan.replan import Execution, PlanSource
 from bridgeplan.runs import load_windows
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.trajectory import MAZE2D
 from tests.test_train import train_args
 
 # ---------------------------------------------------------------- pursuit while replanning
+
+ACT_DIM = MAZE2D.act_dim
 
 
 def _line(xs, ys) -> np.ndarray:
@@ -169,7 +171,7 @@ def test_keep_arrival_at_a_stride_counts_env_steps_and_holds_from_the_next_plann
             seen.append(None if arrival is None else np.asarray(arrival).tolist())
             return super().plan(starts, goals, nfe, generator, prior_only, arrival)
 
-    planner = Spy(_Ramp(norm, h), DDPM(steps=6), GaussianPrior(), norm, h, torch.device("cpu"), stride=k)
+    planner = Spy(_Ramp(norm, h), DDPM(steps=6), GaussianPrior(MAZE2D), norm, h, torch.device("cpu"), MAZE2D, stride=k)
     source = PlanSource(planner, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 1)
     goal = np.array([[2.0, 0.0]])
     first = source(np.zeros((1, 4)), goal, np.arange(1), 0)

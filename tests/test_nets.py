@@ -8,7 +8,9 @@ import torch
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.nets.unet import TemporalUNet, UNetConfig
-from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
+from bridgeplan.trajectory import MAZE2D
+
+OBS_DIM, TRANSITION_DIM = MAZE2D.obs_dim, MAZE2D.transition_dim
 
 
 def n_params(module: torch.nn.Module) -> int:

@@ -18,10 +18,11 @@ from bridgeplan.priors import (
     make_prior,
     train_prior_loss,
 )
-from bridgeplan.trajectory import ACT_DIM, OBS_DIM, TRANSITION_DIM
+from bridgeplan.trajectory import MAZE2D
 
 B, H = 4, 8
 NORMALIZER = Normalizer(low=(-1.0, -1.0, -2.0, -1.0, -5.0, -5.0), high=(1.0, 1.0, 3.0, 4.0, 5.0, 5.0))
+ACT_DIM, OBS_DIM, TRANSITION_DIM = MAZE2D.act_dim, MAZE2D.obs_dim, MAZE2D.transition_dim
 STATE = slice(ACT_DIM, None)
 
 
@@ -44,7 +45,7 @@ def some_conditions():
 
 def all_priors():
     torch.manual_seed(0)
-    return [GaussianPrior(), LinePrior(NORMALIZER), LearnedPrior(PriorMLP(OBS_DIM, H, TRANSITION_DIM))]
+    return [GaussianPrior(MAZE2D), LinePrior(NORMALIZER, MAZE2D), LearnedPrior(PriorMLP(OBS_DIM, H, TRANSITION_DIM))]
 
 
 @pytest.mark.parametrize("prior", all_priors(), ids=lambda p: p.name)
@@ -58,10 +59,10 @@ def test_shape_and_endpoints(prior):
 
 def test_gaussian_prior_is_seeded_white_noise():
     cond = some_conditions()
-    a = GaussianPrior().sample(cond, H, B, torch.Generator().manual_seed(3))
-    b = GaussianPrior().sample(cond, H, B, torch.Generator().manual_seed(3))
+    a = GaussianPrior(MAZE2D).sample(cond, H, B, torch.Generator().manual_seed(3))
+    b = GaussianPrior(MAZE2D).sample(cond, H, B, torch.Generator().manual_seed(3))
     assert torch.equal(a, b)
-    big = GaussianPrior().sample({0: cond[0][:1].expand(4000, -1), 63: cond[H - 1][:1].expand(4000, -1)},
+    big = GaussianPrior(MAZE2D).sample({0: cond[0][:1].expand(4000, -1), 63: cond[H - 1][:1].expand(4000, -1)},
                                  64, 4000, torch.Generator().manual_seed(4))
     inner = big[:, 1:-1]
     assert abs(float(inner.mean())) < 0.01 and abs(float(inner.std()) - 1) < 0.01
@@ -70,7 +71,7 @@ def test_gaussian_prior_is_seeded_white_noise():
 def test_line_prior_in_physical_units():
     start, goal = torch.tensor([[0.0, 0.5], [2.0, 3.0]]), torch.tensor([[1.4, 0.29], [2.0, 3.0]])
     cond = {0: conditions(start, goal)[0][:2], H - 1: conditions(start, goal)[H - 1][:2]}
-    x = LinePrior(NORMALIZER).sample(cond, H, 2)
+    x = LinePrior(NORMALIZER, MAZE2D).sample(cond, H, 2)
     traj = NORMALIZER.unnormalize(x.double())
     act, pos, vel = traj[..., :2], traj[..., 2:4], traj[..., 4:]
     frac = torch.arange(H, dtype=torch.float64)[None, :, None] / (H - 1)
@@ -110,33 +111,33 @@ def test_learned_prior_is_the_net_output_and_trains():
     x0 = torch.rand((16, H, TRANSITION_DIM), generator=torch.Generator().manual_seed(2)) * 2 - 1
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
     with torch.no_grad():
-        before = float(train_prior_loss(net, x0))
+        before = float(train_prior_loss(net, x0, MAZE2D))
     for _ in range(50):
-        loss = train_prior_loss(net, x0)
+        loss = train_prior_loss(net, x0, MAZE2D)
         opt.zero_grad()
         loss.backward()
         opt.step()
     with torch.no_grad():
-        assert float(train_prior_loss(net, x0)) < 0.5 * before
+        assert float(train_prior_loss(net, x0, MAZE2D)) < 0.5 * before
 
 
 def test_registry_and_errors():
     assert set(PRIORS) == {"gaussian", "line", "learned", "warm"}
     net = PriorMLP(OBS_DIM, H, TRANSITION_DIM)
     for name in PRIORS:
-        prior = make_prior(name, NORMALIZER, net=net)
+        prior = make_prior(name, NORMALIZER, MAZE2D, net=net)
         assert prior.name == name
     with pytest.raises(BridgeplanError, match="unknown prior .spline.*gaussian, line, learned, warm"):
-        make_prior("spline", NORMALIZER)
+        make_prior("spline", NORMALIZER, MAZE2D)
     with pytest.raises(BridgeplanError, match="learned prior needs"):
-        make_prior("learned", NORMALIZER)
+        make_prior("learned", NORMALIZER, MAZE2D)
     cond = some_conditions()
     with pytest.raises(BridgeplanError, match="horizon 8, not 16"):
         LearnedPrior(net).sample({0: cond[0], 15: cond[H - 1]}, 16, B)
     with pytest.raises(BridgeplanError, match="t=0 and t=15"):
-        GaussianPrior().sample(cond, 16, B)
+        GaussianPrior(MAZE2D).sample(cond, 16, B)
     with pytest.raises(BridgeplanError, match="batch"):
-        LinePrior(NORMALIZER).sample(cond, H, B + 1)
+        LinePrior(NORMALIZER, MAZE2D).sample(cond, H, B + 1)
 
 
 @pytest.mark.parametrize("prior", all_priors(), ids=lambda p: p.name)

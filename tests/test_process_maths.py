@@ -16,9 +16,11 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.processes.samplers import bridge_posterior, bridge_sample, ddpm_ancestral, ddpm_posterior
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.trajectory import MAZE2D
 
 F64 = torch.float64
+
+ACT_DIM = MAZE2D.act_dim
 
 
 def regress(rows: list[list[float]], target: int, given: list[int]) -> tuple[list[float], float]:

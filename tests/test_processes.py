@@ -17,9 +17,11 @@ from bridgeplan.processes.schedules import (
     i2sb_betas,
     spaced_steps,
 )
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.trajectory import MAZE2D
 
 B, H, D = 5, 8, 6
+
+ACT_DIM = MAZE2D.act_dim
 
 
 def oracle(x0: torch.Tensor, process):

@@ -13,7 +13,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import LinePrior, WarmPrior
 from bridgeplan.runs import load_planner, windows_of
-from bridgeplan.trajectory import densify, span
+from bridgeplan.trajectory import MAZE2D, densify, span
 from tests.test_train import train_args
 
 
@@ -56,8 +56,8 @@ def test_line_prior_at_a_stride_is_the_dense_line_subsampled():
     norm, h, k, b = _normalizer(), 9, 4, 3
     rng = np.random.default_rng(2)
     start, goal = np.c_[rng.uniform(-1, 1, (b, 2)), np.zeros((b, 2))], rng.uniform(-1, 1, (b, 2))
-    strided = LinePrior(norm, k).sample(_conditions(norm, start, goal, h), h, b)
-    dense = LinePrior(norm).sample(_conditions(norm, start, goal, span(h, k)), span(h, k), b)
+    strided = LinePrior(norm, MAZE2D, k).sample(_conditions(norm, start, goal, h), h, b)
+    dense = LinePrior(norm, MAZE2D).sample(_conditions(norm, start, goal, span(h, k)), span(h, k), b)
     torch.testing.assert_close(strided[:, 1:-1], dense[:, k:-1:k])
 
 
@@ -69,8 +69,9 @@ def test_warm_prior_at_a_stride_is_the_dense_warm_prior_subsampled(elapsed):
     rng = np.random.default_rng(3)
     prev = densify(rng.uniform(-0.9, 0.9, size=(b, h, 6)), k)  # previous plans as executed: every step
     start, goal = np.c_[rng.uniform(-1, 1, (b, 2)), rng.uniform(-1, 1, (b, 2))], rng.uniform(-1, 1, (b, 2))
-    strided = WarmPrior(norm, prev, [elapsed] * b, stride=k).sample(_conditions(norm, start, goal, h), h, b)
-    dense = WarmPrior(norm, prev, [elapsed] * b).sample(_conditions(norm, start, goal, span(h, k)), span(h, k), b)
+    strided = WarmPrior(norm, MAZE2D, prev, [elapsed] * b, stride=k).sample(_conditions(norm, start, goal, h), h, b)
+    dense = WarmPrior(norm, MAZE2D, prev, [elapsed] * b).sample(_conditions(norm, start, goal, span(h, k)),
+                                                                span(h, k), b)
     torch.testing.assert_close(strided[:, 1:-1], dense[:, k:-1:k])
 
 
@@ -79,7 +80,7 @@ def test_warm_prior_refuses_plans_of_another_span():
     prev = np.zeros((2, 9, 6))  # 9 steps: horizon 9 at stride 1, not at stride 4
     cond = _conditions(norm, np.zeros((2, 4)), np.zeros((2, 2)), 9)
     with pytest.raises(BridgeplanError, match="33 steps"):
-        WarmPrior(norm, prev, [1, 1], stride=4).sample(cond, 9, 2)
+        WarmPrior(norm, MAZE2D, prev, [1, 1], stride=4).sample(cond, 9, 2)
 
 
 def test_config_stride_names_and_checks():

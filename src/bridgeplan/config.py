@@ -19,7 +19,7 @@ from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
-from bridgeplan.trajectory import span
+from bridgeplan.trajectory import Layout, layout_for, span
 
 # Diffuser's Maze2D settings per maze: horizon and diffusion steps.
 _DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
@@ -133,6 +133,11 @@ class TrainConfig:
         if self.precision not in PRECISIONS:
             raise BridgeplanError(f"unknown precision {self.precision!r}: choose from {', '.join(PRECISIONS)}")
 
+    @property
+    def layout(self) -> Layout:
+        """The columns of the run's transitions: its environment's (:func:`~bridgeplan.trajectory.layout_for`)."""
+        return layout_for(self.maze)
+
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
         hold = [f"hold{self.hold_share:g}"] if self.hold_share else []
@@ -207,6 +212,10 @@ class PriorTrainConfig:
         if self.stride == 0:
             object.__setattr__(self, "stride", stride)
         _check_horizon(self.maze, self.horizon, self.stride)
+
+    @property
+    def layout(self) -> Layout:
+        return layout_for(self.maze)
 
     def run_name(self) -> str:
         return f"{self.maze}-prior-learned-{_horizon_tag(self.horizon, self.stride)}-s{self.seed}"

@@ -15,7 +15,8 @@ residual ``R`` (``[B]``, one value per plan, in physical units; the plans of a b
 Both act on every prediction, the last one (the plan) included; ``clip`` keeps the predictor's [-1, 1] contract
 (and the deep gradient passes through ``predict_x0``'s own clip, zero where it clips).
 
-Residuals (``R = 1/2 sum e^2`` over the error ``e`` below, per plan, physical units from the run's normalizer):
+Residuals (``R = 1/2 sum e^2`` over the error ``e`` below, per plan, physical units from the run's normalizer; the
+columns from the run's :class:`~bridgeplan.trajectory.Layout`):
 
 - ``conditions``: the start/goal (and held arrival) states the plan is conditioned on, minus the prediction's
   states at those indices (m and m/s), *before* the sampler overwrites them: every sampler overwrites the
@@ -26,13 +27,17 @@ Residuals (``R = 1/2 sum e^2`` over the error ``e`` below, per plan, physical un
   transition of rows ``i -> i + 1`` (``k = stride`` environment steps of ``h`` seconds apart)
   ``e = (p_{i+1} - p_i) / (k h) - vbar_i`` in m/s, ``vbar_i`` the mean velocity over the k steps with the
   velocity linear between rows (as ``trajectory.densify`` hands the plan to the controller):
-  ``((k - 1) v_i + (k + 1) v_{i+1}) / (2 k)``; at stride 1, ``v_{i+1}`` (MuJoCo's semi-implicit Euler).
+  ``((k - 1) v_i + (k + 1) v_{i+1}) / (2 k)``; at stride 1, ``v_{i+1}`` (MuJoCo's semi-implicit Euler). For a
+  :class:`KinematicPoint` (no velocity: each step moves the position by ``gain * action``) the actions take the
+  velocities' place: ``e = (p_{i+1} - p_i) / (k gain) - abar_i`` in action units, ``abar_i`` the mean action over
+  the k steps, ``((k + 1) a_i + (k - 1) a_{i+1}) / (2 k)`` (step j moves by row i's action interpolated at j / k).
 - ``dynamics``: the whole transition of PointMaze v3's point mass (:data:`POINT_MASS`): from row i's state and
   action, ``k`` steps of ``v <- (m clip(v, -5, 5) + h gear clip(a, -1, 1)) / (m + h damping)``, ``p <- p + h v``
   (MuJoCo's Euler integrator, damping implicit) give the predicted next state; ``e`` is row i+1's state minus it,
   the position part divided by ``k h`` (so both parts are m/s). Exact at stride 1 in free space (walls push);
   at stride k > 1 it holds row i's action for the k steps (zero-order hold): the data do not (their actions change
   every step, with noise), so there a data-like plan has a residual of its own; ``kinematics`` has no actions.
+  It needs the velocity columns: a layout without them is refused.
 
 **Step sizes.** alpha is in R's units (m/s squared) against normalized x0: the position parts, divided by k h, make
 R stiff there, and one gradient step on them is stable only for ``alpha < (k h)^2 / (2 s_p^2)`` or so (``s_p`` the
@@ -56,7 +61,7 @@ import torch
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.processes.samplers import X0Predictor
-from bridgeplan.trajectory import ACT_DIM, Conditions
+from bridgeplan.trajectory import Conditions, Layout
 
 RESIDUALS = ("conditions", "kinematics", "dynamics")
 FORMS = ("x0", "deep")
@@ -91,63 +96,113 @@ class PointMass:
     def step_seconds(self) -> float:
         return self.timestep * self.frame_skip
 
+    @property
+    def position_step(self) -> float:
+        """Position moved per environment step per unit of velocity: the step's seconds."""
+        return self.step_seconds
+
+    def mean_rate(self, traj: torch.Tensor, layout: Layout, stride: int) -> torch.Tensor:
+        """``[B, H - 1, 2]`` the mean velocity over each transition's ``stride`` steps (semi-implicit Euler: step j
+        moves by the velocity at j + 1)."""
+        _require_velocity(layout, "kinematics")
+        vel = layout.velocities(traj)
+        k = stride
+        return ((k - 1) * vel[:, :-1] + (k + 1) * vel[:, 1:]) / (2 * k)
+
 
 POINT_MASS = PointMass()
+
+
+@dataclass(frozen=True)
+class KinematicPoint:
+    """A point that its action moves directly (OGBench pointmaze): each environment step adds ``gain * action``
+    to the position. The gain is the environment's (OGBench: 0.2), given by whoever builds the environment."""
+
+    gain: float
+
+    @property
+    def position_step(self) -> float:
+        """Position moved per environment step per unit of action."""
+        return self.gain
+
+    def mean_rate(self, traj: torch.Tensor, layout: Layout, stride: int) -> torch.Tensor:
+        """``[B, H - 1, 2]`` the mean action over each transition's ``stride`` steps (step j moves by the action at
+        j, linear between rows as ``trajectory.densify`` hands it on)."""
+        act = layout.actions(traj)
+        k = stride
+        return ((k + 1) * act[:, :-1] + (k - 1) * act[:, 1:]) / (2 * k)
+
+
+Body = PointMass | KinematicPoint
+"""What moves a plan's position, the environment's: PointMaze's point mass or a kinematic point."""
+
+
+def _require_velocity(layout: Layout, residual: str) -> None:
+    """PointMaze's point mass moves by its velocity: refuse a layout without one (a mistake of the caller's)."""
+    if not layout.has_velocity:
+        raise BridgeplanError(f"the {residual} residual of PointMaze's point mass needs velocities, and the "
+                              f"{layout.name} layout has none")
 
 
 def _physical(x0: torch.Tensor, normalizer: Normalizer) -> torch.Tensor:
     return normalizer.unnormalize(x0)
 
 
-def kinematics_error(traj: torch.Tensor, stride: int, body: PointMass = POINT_MASS) -> torch.Tensor:
-    """``[B, H - 1, 2]`` (m/s) of physical trajectories ``traj [B, H, 6]``: see the module docstring."""
-    pos, vel = traj[..., ACT_DIM:ACT_DIM + 2], traj[..., ACT_DIM + 2:]
-    k = stride
-    mean_vel = ((k - 1) * vel[:, :-1] + (k + 1) * vel[:, 1:]) / (2 * k)
-    return (pos[:, 1:] - pos[:, :-1]) / (k * body.step_seconds) - mean_vel
+def kinematics_error(traj: torch.Tensor, layout: Layout, stride: int, body: Body = POINT_MASS) -> torch.Tensor:
+    """``[B, H - 1, 2]`` of physical trajectories ``traj [B, H, D]`` in ``layout``, in the units of ``body``'s rate
+    (point mass: m/s; kinematic point: action units): see the module docstring."""
+    pos = layout.positions(traj)
+    return (pos[:, 1:] - pos[:, :-1]) / (stride * body.position_step) - body.mean_rate(traj, layout, stride)
 
 
-def dynamics_error(traj: torch.Tensor, stride: int, body: PointMass = POINT_MASS) -> torch.Tensor:
-    """``[B, H - 1, 4]`` (m/s) of physical trajectories ``traj [B, H, 6]``: see the module docstring."""
-    action, pos, vel = traj[:, :-1, :ACT_DIM], traj[:, :-1, ACT_DIM:ACT_DIM + 2], traj[:, :-1, ACT_DIM + 2:]
+def dynamics_error(traj: torch.Tensor, layout: Layout, stride: int, body: PointMass = POINT_MASS) -> torch.Tensor:
+    """``[B, H - 1, 4]`` (m/s) of physical trajectories ``traj [B, H, D]`` in ``layout`` (which needs the
+    velocity): see the module docstring."""
+    _require_velocity(layout, "dynamics")
+    prev = traj[:, :-1]
+    action, pos, vel = layout.actions(prev), layout.positions(prev), layout.velocities(prev)
     for _ in range(stride):
         pos, vel = body.step(pos, vel, action)
-    nxt = traj[:, 1:, ACT_DIM:]
-    return torch.cat([(nxt[..., :2] - pos) / (stride * body.step_seconds), nxt[..., 2:] - vel], dim=-1)
+    nxt = traj[:, 1:]
+    return torch.cat([(layout.positions(nxt) - pos) / (stride * body.step_seconds), layout.velocities(nxt) - vel],
+                     dim=-1)
 
 
-def conditions_error(traj: torch.Tensor, conditions: Conditions, normalizer: Normalizer) -> torch.Tensor:
-    """``[B, len(conditions), 4]`` the conditioned states minus ``traj``'s there (physical; 0 where a row is NaN)."""
+def conditions_error(traj: torch.Tensor, conditions: Conditions, normalizer: Normalizer,
+                     layout: Layout) -> torch.Tensor:
+    """``[B, len(conditions), obs_dim]`` the conditioned states minus ``traj``'s there (physical; 0 where a row is
+    NaN)."""
     if not conditions:
-        return traj.new_zeros(traj.shape[0], 0, traj.shape[2] - ACT_DIM)
+        return traj.new_zeros(traj.shape[0], 0, layout.obs_dim)
     index = sorted(conditions)
     wanted = torch.stack([conditions[t].to(traj.device, traj.dtype) for t in index], dim=1)
-    wanted = normalizer.unnormalize(wanted, slice(ACT_DIM, None))
-    have = traj[:, index, ACT_DIM:]
+    wanted = normalizer.unnormalize(wanted, layout.state_columns)
+    have = layout.states(traj[:, index])
     return torch.where(torch.isnan(wanted), torch.zeros_like(have), wanted - have)
 
 
-def residual(name: str, x0: torch.Tensor, normalizer: Normalizer, stride: int,
-             conditions: Conditions | None = None) -> torch.Tensor:
-    """``R = 1/2 sum e^2`` per plan ``[B]`` of the normalized trajectories ``x0 [B, H, 6]`` (differentiable)."""
+def residual(name: str, x0: torch.Tensor, normalizer: Normalizer, layout: Layout, stride: int,
+             conditions: Conditions | None = None, body: Body = POINT_MASS) -> torch.Tensor:
+    """``R = 1/2 sum e^2`` per plan ``[B]`` of the normalized trajectories ``x0 [B, H, D]`` in ``layout``
+    (differentiable); ``body`` moves the position in ``kinematics``."""
     traj = _physical(x0, normalizer)
     if name == "conditions":
-        err = conditions_error(traj, conditions or {}, normalizer)
+        err = conditions_error(traj, conditions or {}, normalizer, layout)
     elif name == "kinematics":
-        err = kinematics_error(traj, stride)
+        err = kinematics_error(traj, layout, stride, body)
     elif name == "dynamics":
-        err = dynamics_error(traj, stride)
+        err = dynamics_error(traj, layout, stride)
     else:
         raise BridgeplanError(f"unknown residual {name!r}: choose from {', '.join(RESIDUALS)}")
     return 0.5 * err.pow(2).flatten(1).sum(1)
 
 
-def plan_residuals(x0: torch.Tensor, normalizer: Normalizer, stride: int) -> dict[str, np.ndarray]:
+def plan_residuals(x0: torch.Tensor, normalizer: Normalizer, layout: Layout, stride: int) -> dict[str, np.ndarray]:
     """Root-mean-square ``kinematics`` and ``dynamics`` errors (m/s) per plan ``[B]`` of the normalized plans
     ``x0``: how far a sampled plan is from the point mass's motion (the ``conditions`` one is 0 on a sample)."""
     with torch.inference_mode(False), torch.no_grad():
         traj = _physical(x0.detach().clone().double(), normalizer)
-        return {f"{name}_rms": fn(traj, stride).pow(2).flatten(1).mean(1).sqrt().cpu().numpy()
+        return {f"{name}_rms": fn(traj, layout, stride).pow(2).flatten(1).mean(1).sqrt().cpu().numpy()
                 for name, fn in (("kinematics", kinematics_error), ("dynamics", dynamics_error))}
 
 
@@ -248,20 +303,21 @@ class Correction:
                 "backward_passes_per_plan": self.backward_passes(nfe),
                 "network_call_equivalents_per_plan": self.network_call_equivalents(nfe)}
 
-    def objective(self, conditions: Conditions, normalizer: Normalizer, stride: int) -> Objective:
+    def objective(self, conditions: Conditions, normalizer: Normalizer, layout: Layout, stride: int) -> Objective:
         """``x0 -> sum_r alpha_r R_r(x0)`` per plan, for one batch's conditions."""
         def total(x0: torch.Tensor) -> torch.Tensor:
-            return sum(alpha * residual(name, x0, normalizer, stride, conditions) for name, alpha in self.steps)
+            return sum(alpha * residual(name, x0, normalizer, layout, stride, conditions)
+                       for name, alpha in self.steps)
 
         return total
 
-    def wrap(self, conditions: Conditions, normalizer: Normalizer,
+    def wrap(self, conditions: Conditions, normalizer: Normalizer, layout: Layout,
              stride: int) -> Callable[[X0Predictor], X0Predictor]:
         """The predictor transform a process's ``sample(..., correct=...)`` takes, for one batch."""
         if conditions:  # inference tensors (a plan made under inference_mode) cannot enter autograd: copy them
             with torch.inference_mode(False):
                 conditions = {t: c.clone() for t, c in conditions.items()}
-        objective = self.objective(conditions, normalizer, stride)
+        objective = self.objective(conditions, normalizer, layout, stride)
         return lambda predict: corrected(predict, objective, self.form)
 
 

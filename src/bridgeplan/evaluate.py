@@ -34,6 +34,7 @@ from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import Execution, PlanSource, percentiles_ms
 from bridgeplan.runs import RunInfo, load_planner
+from bridgeplan.trajectory import MAZE2D
 
 
 @dataclass(frozen=True)
@@ -52,8 +53,8 @@ class Tasks:
 
     @property
     def start_states(self) -> np.ndarray:
-        """``[N, 4]`` (x, y, vx, vy) with zero velocity."""
-        return np.concatenate([self.starts_xy, np.zeros_like(self.starts_xy)], axis=1)
+        """``[N, 4]`` Maze2D states (x, y, vx, vy) with zero velocity."""
+        return MAZE2D.at_rest(self.starts_xy)
 
     def generator(self, device: torch.device) -> torch.Generator:
         """The planning generator of these tasks: the same plans for the same tasks, whatever ran before."""
@@ -94,7 +95,7 @@ def prior_only(planner: Planner, tasks: Tasks, prior_name: str | None = None,
     the planner's prior, or ``prior_name``."""
     execution = execution or Execution()
     if prior_name is not None:
-        planner = planner.with_prior(make_prior(prior_name, planner.normalizer, stride=planner.stride))
+        planner = planner.with_prior(make_prior(prior_name, planner.normalizer, planner.layout, stride=planner.stride))
     plan = planner.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
     result = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states,
                            follower=execution.follower(tasks.episodes))

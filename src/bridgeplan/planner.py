@@ -14,7 +14,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import Prior
 from bridgeplan.processes import Process
-from bridgeplan.trajectory import ACT_DIM, Conditions, densify
+from bridgeplan.trajectory import Conditions, Layout, densify
 
 
 @dataclass
@@ -22,16 +22,16 @@ class Plan:
     """Plans in physical units and what they cost."""
 
     states: np.ndarray
-    """``[N, S, 4]`` planned (x, y, vx, vy) at every environment step: ``S = (H - 1) * stride + 1`` (the
-    planned states, linearly interpolated between them at a stride)."""
+    """``[N, S, obs_dim]`` planned states (Maze2D: x, y, vx, vy) at every environment step:
+    ``S = (H - 1) * stride + 1`` (the planned states, linearly interpolated between them at a stride)."""
     actions: np.ndarray
-    """``[N, S, 2]`` planned actions (the tracking controller ignores them, as Diffuser's did)."""
+    """``[N, S, act_dim]`` planned actions (Maze2D's tracking controller ignores them, as Diffuser's did)."""
     prior_seconds: float
     """Wall time to sample the prior for the whole batch."""
     sample_seconds: float
     """Wall time of the sampler (the network calls, and the correction's work) for the whole batch."""
     sampled: torch.Tensor | None = None
-    """The plans as sampled ``[N, H, 6]``, normalized and not densified (``Planner.residuals`` measures them)."""
+    """The plans as sampled ``[N, H, D]``, normalized and not densified (``Planner.residuals`` measures them)."""
 
 
 @dataclass
@@ -42,6 +42,8 @@ class Planner:
     normalizer: Normalizer
     horizon: int
     device: torch.device
+    layout: Layout
+    """The columns of the plans: the run's environment's (``TrainConfig.layout``)."""
     stride: int = 1
     """Environment steps between planned states (``TrainConfig.stride``)."""
     correction: Correction | None = None
@@ -63,10 +65,11 @@ class Planner:
         return dataclasses.replace(self, prior=prior)
 
     def conditions(self, starts: np.ndarray, goals: np.ndarray, arrival: np.ndarray | None = None) -> Conditions:
-        """Normalized conditions: the start state at t=0, the goal with zero velocity at t=H-1 and, for a plan
-        with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every t >= a as well (held)."""
-        goal_states = np.concatenate([goals, np.zeros_like(goals)], axis=1)
-        state_dims = slice(ACT_DIM, None)
+        """Normalized conditions: the start state at t=0, the goal at rest (zero velocity, if the state has one)
+        at t=H-1 and, for a plan with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every
+        t >= a as well (held)."""
+        goal_states = self.layout.at_rest(goals)
+        state_dims = self.layout.state_columns
 
         def norm(s: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(self.normalizer.normalize(s, state_dims), dtype=torch.float32,
@@ -82,12 +85,12 @@ class Planner:
 
     def unnormalize(self, x: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
         traj = self.normalizer.unnormalize(x.double().cpu().numpy())
-        return traj[..., ACT_DIM:], traj[..., :ACT_DIM]
+        return self.layout.states(traj), self.layout.actions(traj)
 
     @torch.inference_mode()
     def plan(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator,
              prior_only: bool = False, arrival: np.ndarray | None = None) -> Plan:
-        """Plan from ``starts`` ``[N, 4]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
+        """Plan from ``starts`` ``[N, obs_dim]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
 
         ``prior_only`` returns the prior sample itself (the floor every model must beat). ``arrival`` ``[N]``
         (planned states): hold the goal from there on (:meth:`conditions`).
@@ -98,7 +101,7 @@ class Planner:
         t1 = _now(self.device)
         if not prior_only:
             extra = ({} if self.correction is None
-                     else {"correct": self.correction.wrap(conditions, self.normalizer, self.stride)})
+                     else {"correct": self.correction.wrap(conditions, self.normalizer, self.layout, self.stride)})
             x = self.process.sample(self.model, x, conditions, nfe, generator=generator, **extra)
         t2 = _now(self.device)
         states, actions = self.unnormalize(x)
@@ -107,7 +110,7 @@ class Planner:
     def residuals(self, plan: Plan) -> dict[str, np.ndarray]:
         """``kinematics_rms``, ``dynamics_rms`` ``[N]`` (m/s) of ``plan`` as sampled (``consistency.plan_residuals``;
         computed on request, off the planning path)."""
-        return plan_residuals(plan.sampled, self.normalizer, self.stride)
+        return plan_residuals(plan.sampled, self.normalizer, self.layout, self.stride)
 
 
 def _now(device: torch.device) -> float:

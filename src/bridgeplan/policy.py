@@ -26,6 +26,7 @@ from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD
 from bridgeplan.maze.layouts import Maze, get_maze
 from bridgeplan.maze.rollout import ClosedLoopController
 from bridgeplan.replan import Execution, PlanSource
+from bridgeplan.trajectory import MAZE2D
 
 
 class PlannerPolicy:
@@ -81,7 +82,7 @@ class PlannerPolicy:
         try:
             if not isinstance(obs, Mapping):
                 raise TypeError("not a mapping")
-            state = np.asarray(obs["observation"], dtype=np.float64).reshape(1, 4)
+            state = np.asarray(obs["observation"], dtype=np.float64).reshape(1, MAZE2D.obs_dim)
             goal = np.asarray(obs["desired_goal"], dtype=np.float64).reshape(1, 2)
         except (KeyError, TypeError, ValueError) as e:
             raise BridgeplanError("a PointMaze observation dict with 'observation' (x, y, vx, vy) and "

@@ -3,7 +3,8 @@
 A prior is a small class with a ``name`` and ``sample(conditions, horizon, batch, generator=None)``;
 ``conditions`` are the planner's normalized ``{0: start, horizon - 1: goal}`` states ``[B, obs_dim]``.
 Every prior returns its sample with the start and goal inpainted (``apply_conditions``).
-A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, net, stride)``).
+Priors build trajectories in the run's :class:`~bridgeplan.trajectory.Layout` (the environment's columns).
+A new prior is one class plus one entry in ``PRIORS`` (name -> builder from ``(normalizer, layout, net, stride)``).
 Priors in ``REPLAN_ONLY`` (``warm``: the previous plan, shifted) exist only while executing closed loop;
 they cannot be trained with and cannot make a first plan.
 """
@@ -16,7 +17,7 @@ import torch
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
-from bridgeplan.trajectory import ACT_DIM, TRANSITION_DIM, Conditions, apply_conditions, span
+from bridgeplan.trajectory import Conditions, Layout, apply_conditions, span
 
 SIM_DT = 0.01
 """Seconds per environment step (MuJoCo timestep, one step per action): converts positions to velocities."""
@@ -42,18 +43,22 @@ def _endpoints(conditions: Conditions, horizon: int, batch: int) -> tuple[torch.
     return start, goal
 
 
-def straight_segment(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
-    """Physical trajectory ``[B, T, 6]`` along the straight line from ``start`` to ``goal`` (``[B, 2]``) at the
-    fractions ``frac`` ``[B or 1, T]`` of the way: positions on the line, the constant velocity that covers it
-    in ``steps`` ``[B, 1]`` environment steps (the data's velocities are per second; each component clipped
-    to the simulator's ``MAX_SPEED``), and the unit vector toward the goal as the action (zero when start ==
-    goal): the data's actions come from a saturating controller, so their magnitude is about 1."""
+def straight_segment(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor, steps: torch.Tensor,
+                     layout: Layout) -> torch.Tensor:
+    """Physical trajectory ``[B, T, D]`` in ``layout`` along the straight line from ``start`` to ``goal``
+    (``[B, 2]``) at the fractions ``frac`` ``[B or 1, T]`` of the way: positions on the line, where the state has
+    a velocity the constant one that covers the line in ``steps`` ``[B, 1]`` environment steps (the data's
+    velocities are per second; each component clipped to the simulator's ``MAX_SPEED``), and the unit vector
+    toward the goal as the action (zero when start == goal): the data's actions come from a saturating
+    controller, so their magnitude is about 1."""
     delta = goal - start
     horizon = frac.shape[1]
-    pos = start[:, None] + frac[..., None] * delta[:, None]
-    vel = (delta[:, None] / (steps[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED).expand(-1, horizon, -1)
-    direction = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None].expand(-1, horizon, -1)
-    return torch.cat([direction, pos, vel], dim=-1)
+    traj = delta.new_zeros(len(delta), horizon, layout.transition_dim)
+    layout.positions(traj)[...] = start[:, None] + frac[..., None] * delta[:, None]
+    if layout.has_velocity:
+        layout.velocities(traj)[...] = (delta[:, None] / (steps[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED)
+    layout.actions(traj)[...] = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None]
+    return traj
 
 
 class GaussianPrior:
@@ -61,10 +66,13 @@ class GaussianPrior:
 
     name = "gaussian"
 
+    def __init__(self, layout: Layout):
+        self.layout = layout
+
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
         start, _ = _endpoints(conditions, horizon, batch)
-        x = torch.randn((batch, horizon, TRANSITION_DIM), generator=generator, device=start.device,
+        x = torch.randn((batch, horizon, self.layout.transition_dim), generator=generator, device=start.device,
                         dtype=start.dtype)
         return apply_conditions(x, conditions)
 
@@ -72,9 +80,10 @@ class GaussianPrior:
 class LinePrior:
     """The thesis's analytical prior: a straight line from start to goal in position, walls ignored.
 
-    In physical units: positions evenly spaced over the H planned states (``start`` at t=0, ``goal`` at
-    t=H-1); the constant velocity that covers the line in ``(H - 1) * stride * SIM_DT`` seconds (the plan's
-    span; the data's velocities are per second), each component clipped to the simulator's ``MAX_SPEED``;
+    In physical units, in the run's layout: positions evenly spaced over the H planned states (``start`` at t=0,
+    ``goal`` at t=H-1); where the state has a velocity, the constant one that covers the line in
+    ``(H - 1) * stride * SIM_DT`` seconds (the plan's span; the data's velocities are per second), each component
+    clipped to the simulator's ``MAX_SPEED``;
     the constant action is the unit vector toward the goal (zero when start == goal): the data's actions come
     from a saturating waypoint controller, so their magnitude is about 1, and the tracking controller ignores
     planned actions anyway. The result is normalized with the normalizer of the data, then the start state
@@ -83,19 +92,19 @@ class LinePrior:
 
     name = "line"
 
-    def __init__(self, normalizer: Normalizer, stride: int = 1):
-        self.normalizer, self.stride = normalizer, int(stride)
+    def __init__(self, normalizer: Normalizer, layout: Layout, stride: int = 1):
+        self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, goal_n = _endpoints(conditions, horizon, batch)
-        state = slice(ACT_DIM, None)
-        start = self.normalizer.unnormalize(start_n.double(), state)[:, :2]
-        goal = self.normalizer.unnormalize(goal_n.double(), state)[:, :2]
+        layout = self.layout
+        start = layout.state_positions(self.normalizer.unnormalize(start_n.double(), layout.state_columns))
+        goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
         frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
         steps = float(max(horizon - 1, 1) * self.stride)
         traj = straight_segment(start, goal, frac, torch.full((batch, 1), steps, dtype=torch.float64,
-                                                              device=start.device))
+                                                              device=start.device), layout)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -126,12 +135,12 @@ class WarmPrior:
     """Warm start for replanning: the previous plan of each episode, shifted by the steps elapsed since it was
     made, its tail extended toward the goal with the line prior's rule, the conditions re-applied.
 
-    ``previous`` ``[B, S, 6]`` are the previous plans as executed, in physical units (actions, x, y, vx, vy),
+    ``previous`` ``[B, S, D]`` are the previous plans as executed, in physical units (``layout``'s columns),
     one row per environment step (``S = (H - 1) * stride + 1``), and ``elapsed`` ``[B]`` the steps since each
     was made (``with_previous``). The sample at planned index ``t`` is the previous plan at step
     ``t * stride + elapsed`` while that is inside it; after its end (the last ``elapsed`` steps) positions go
-    in a straight line from the previous plan's last position to the goal condition at ``t = H - 1``, at the
-    constant velocity that covers it (clipped to ``MAX_SPEED``), actions the unit vector toward the goal: the
+    in a straight line from the previous plan's last position to the goal condition at ``t = H - 1`` (as
+    :func:`straight_segment` draws it, velocity clipped to ``MAX_SPEED``), actions the unit vector toward the goal: the
     previous plan ended at the goal, so this holds the goal with zero velocity and action, unless the goal has
     moved. Then the current state is inpainted at ``t = 0`` and the goal at ``t = H - 1``
     (``apply_conditions``). Built without previous plans (``make_prior("warm", ...)``), it refuses to
@@ -140,20 +149,20 @@ class WarmPrior:
 
     name = "warm"
 
-    def __init__(self, normalizer: Normalizer, previous=None, elapsed=None, stride: int = 1):
-        self.normalizer, self.stride = normalizer, int(stride)
+    def __init__(self, normalizer: Normalizer, layout: Layout, previous=None, elapsed=None, stride: int = 1):
+        self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
         self.previous = None if previous is None else torch.as_tensor(previous, dtype=torch.float64)
         self.elapsed = None if elapsed is None else torch.as_tensor(elapsed, dtype=torch.int64).reshape(-1)
         if self.previous is not None:
-            if self.previous.ndim != 3 or self.previous.shape[2] != TRANSITION_DIM:
-                raise BridgeplanError(f"previous plans must be [B, S, {TRANSITION_DIM}], "
-                                      f"got {list(self.previous.shape)}")
+            if self.previous.ndim != 3 or self.previous.shape[2] != layout.transition_dim:
+                raise BridgeplanError(f"previous plans must be [B, S, {layout.transition_dim}] ({layout.name} "
+                                      f"layout), got {list(self.previous.shape)}")
             if self.elapsed is None or len(self.elapsed) != len(self.previous) or bool((self.elapsed < 0).any()):
                 raise BridgeplanError("the warm prior needs one elapsed step count >= 0 per previous plan")
 
     def with_previous(self, previous, elapsed) -> WarmPrior:
-        """This prior starting from ``previous`` plans ``[B, S, 6]`` made ``elapsed [B]`` steps ago."""
-        return WarmPrior(self.normalizer, previous, elapsed, self.stride)
+        """This prior starting from ``previous`` plans ``[B, S, D]`` made ``elapsed [B]`` steps ago."""
+        return WarmPrior(self.normalizer, self.layout, previous, elapsed, self.stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
@@ -171,22 +180,23 @@ class WarmPrior:
         elapsed = self.elapsed.to(device)[:, None]
         t = torch.arange(horizon, device=device)[None, :]
         src = (t * self.stride + elapsed).clamp(max=steps - 1)
-        traj = torch.gather(prev, 1, src[..., None].expand(-1, -1, TRANSITION_DIM)).clone()
+        layout = self.layout
+        traj = torch.gather(prev, 1, src[..., None].expand(-1, -1, layout.transition_dim)).clone()
         # the tail after the previous plan's end (planned index `end`, fractional at a stride): a straight
         # line from its last position to the goal
         end = (steps - 1 - elapsed).clamp(min=0).double() / self.stride
         left = (horizon - 1 - end).clamp(min=1e-9)
-        goal = self.normalizer.unnormalize(goal_n.double(), slice(ACT_DIM, None))[:, :2]
-        line = straight_segment(prev[:, -1, ACT_DIM:ACT_DIM + 2], goal, (t - end).clamp(min=0) / left,
-                                (left * self.stride).clamp(min=1))
+        goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
+        line = straight_segment(layout.positions(prev[:, -1]), goal, (t - end).clamp(min=0) / left,
+                                (left * self.stride).clamp(min=1), layout)
         traj = torch.where((t > end)[..., None], line, traj)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
 
-def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor) -> torch.Tensor:
+def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor, layout: Layout) -> torch.Tensor:
     """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``."""
-    out = net(x0[:, 0, ACT_DIM:], x0[:, -1, ACT_DIM:])
+    out = net(layout.states(x0[:, 0]), layout.states(x0[:, -1]))
     return torch.mean((out - x0) ** 2)
 
 
@@ -196,19 +206,20 @@ def _learned(net: torch.nn.Module | None) -> LearnedPrior:
     return LearnedPrior(net)
 
 
-PRIORS: dict[str, Callable[[Normalizer, torch.nn.Module | None, int], Prior]] = {
-    "gaussian": lambda normalizer, net, stride: GaussianPrior(),
-    "line": lambda normalizer, net, stride: LinePrior(normalizer, stride),
-    "learned": lambda normalizer, net, stride: _learned(net),
-    "warm": lambda normalizer, net, stride: WarmPrior(normalizer, stride=stride),
+PRIORS: dict[str, Callable[[Normalizer, Layout, torch.nn.Module | None, int], Prior]] = {
+    "gaussian": lambda normalizer, layout, net, stride: GaussianPrior(layout),
+    "line": lambda normalizer, layout, net, stride: LinePrior(normalizer, layout, stride),
+    "learned": lambda normalizer, layout, net, stride: _learned(net),
+    "warm": lambda normalizer, layout, net, stride: WarmPrior(normalizer, layout, stride=stride),
 }
 REPLAN_ONLY = frozenset({"warm"})
 """Priors that start from a previous plan: valid on replans only (never for training or a first plan)."""
 
 
-def make_prior(name: str, normalizer: Normalizer, net: torch.nn.Module | None = None, stride: int = 1) -> Prior:
-    """Build a prior by name for plans whose states are ``stride`` steps apart; ``learned`` needs its trained
-    ``net``."""
+def make_prior(name: str, normalizer: Normalizer, layout: Layout, net: torch.nn.Module | None = None,
+               stride: int = 1) -> Prior:
+    """Build a prior by name for plans in ``layout`` whose states are ``stride`` steps apart; ``learned`` needs its
+    trained ``net``."""
     if name not in PRIORS:
         raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
-    return PRIORS[name](normalizer, net, stride)
+    return PRIORS[name](normalizer, layout, net, stride)

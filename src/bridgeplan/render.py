@@ -55,7 +55,7 @@ def save_figure(fig, path: Path) -> None:
 
 def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: Path, title: str = "",
                          goals: np.ndarray | None = None, columns: int = 4) -> None:
-    """One panel per episode; each layer ``(trajectories [N, T, >=2], colormap, label)`` drawn over the maze.
+    """One panel per episode; each layer ``(positions [N, T, 2], colormap, label)`` drawn over the maze.
 
     Used for plans vs executed states (``bridgeplan render``) and prior/target pairs (the thesis's figures).
     """
@@ -70,7 +70,7 @@ def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: 
             continue
         draw_maze(ax, maze)
         for size, (trajs, cmap, label) in zip((6, 3, 3), layers):
-            draw_path(ax, trajs[k][:, :2], cmap, label, size=size)
+            draw_path(ax, trajs[k], cmap, label, size=size)
         if goals is not None:
             ax.scatter(*goals[k], marker="x", s=80, color="m", zorder=5)
     axes.flat[0].legend(loc="lower left", fontsize=6)
@@ -129,8 +129,9 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
     title = (f"{maze.name}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} step={info.step}, "
              f"{execution.tag() or 'open loop'}")
-    plot_trajectory_grid(maze, [(plan_states, "winter", "plan" if execution.plans_once else "first plan"),
-                                (result.states, "autumn", "executed")],
+    positions = planner.layout.state_positions
+    plot_trajectory_grid(maze, [(positions(plan_states), "winter", "plan" if execution.plans_once else "first plan"),
+                                (positions(result.states), "autumn", "executed")],
                          base, title, goals=tasks.goals_xy)
     written = [base]
     if pairs:
@@ -138,12 +139,13 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
         idx = torch.randint(len(windows), (episodes,), generator=torch.Generator().manual_seed(seed))
         x0 = windows.batch(idx).to(planner.device)
         with torch.inference_mode():
-            x1 = planner.prior.sample(window_conditions(x0), config.horizon, episodes, generator=gen)
+            x1 = planner.prior.sample(window_conditions(x0, planner.layout), config.horizon, episodes, generator=gen)
         prior_states, _ = planner.unnormalize(x1)
         target_states, _ = planner.unnormalize(x0)
         path = base.with_name(base.stem + "-pairs.png")
-        plot_trajectory_grid(maze, [(prior_states, "cool", f"prior ({planner.prior.name})"),
-                                    (target_states, "viridis", "target")], path, f"{maze.name}: prior/target pairs")
+        plot_trajectory_grid(maze, [(positions(prior_states), "cool", f"prior ({planner.prior.name})"),
+                                    (positions(target_states), "viridis", "target")],
+                             path, f"{maze.name}: prior/target pairs")
         written.append(path)
     if video:
         path = base.with_suffix(".gif")
@@ -157,6 +159,7 @@ def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, ev
     from PIL import Image
 
     from bridgeplan.maze.sim import make_gym_env
+    from bridgeplan.trajectory import MAZE2D
 
     env = make_gym_env(maze, render_mode="rgb_array", width=320, height=320)
     env.reset(seed=0)
@@ -165,7 +168,8 @@ def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, ev
     env.unwrapped.update_target_site_pos()
     frames = []
     for s in states[::every]:
-        point.set_state(np.asarray(s[:2], dtype=np.float64), np.asarray(s[2:4], dtype=np.float64))
+        point.set_state(np.asarray(MAZE2D.state_positions(s), dtype=np.float64),
+                        np.asarray(MAZE2D.state_velocities(s), dtype=np.float64))
         frames.append(Image.fromarray(env.render()))
     env.close()
     buf = io.BytesIO()

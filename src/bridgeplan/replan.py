@@ -52,7 +52,7 @@ from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower, check_contr
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.rollout import check_replanning
 from bridgeplan.priors import WarmPrior
-from bridgeplan.trajectory import ACT_DIM
+from bridgeplan.trajectory import Layout
 
 SELECTIONS = ("arrival", "agreement", "walls")
 ARRIVALS = ("end", "truncate", "keep")
@@ -146,34 +146,36 @@ class Execution:
         return "-".join(parts)
 
 
-def truncate_at_arrival(traj: np.ndarray, goals: np.ndarray,
+def truncate_at_arrival(traj: np.ndarray, goals: np.ndarray, layout: Layout,
                         radius: float = GOAL_RADIUS) -> tuple[np.ndarray, np.ndarray]:
-    """Cut each plan ``traj [N, H, 6]`` (physical; actions, x, y, vx, vy) at its first state within ``radius``
-    of its goal ``goals [N, 2]`` and hold the goal from the next step on (zero velocity, zero action).
+    """Cut each plan ``traj [N, H, D]`` (physical, in ``layout``) at its first state within ``radius`` of its
+    goal ``goals [N, 2]`` and hold the goal from the next step on (zero velocity, zero action).
 
     Returns ``(truncated copy, arrival [N])``: the index of that first state (``H - 1`` when none is closer
     before the end; the goal is inpainted there, so every plan arrives by then).
     """
     traj = np.array(traj, dtype=np.float64)
     horizon = traj.shape[1]
-    arrival = arrival_index(traj, goals, radius)
+    arrival = arrival_index(traj, goals, layout, radius)
     after = np.arange(horizon)[None, :] > arrival[:, None]
     hold = np.zeros_like(traj)
-    hold[..., ACT_DIM:ACT_DIM + 2] = np.asarray(goals, np.float64)[:, None]
+    layout.positions(hold)[...] = np.asarray(goals, np.float64)[:, None]
     traj[after] = hold[after]
     return traj, arrival
 
 
-def arrival_index(traj: np.ndarray, goals: np.ndarray, radius: float = GOAL_RADIUS) -> np.ndarray:
-    """``[N]`` the first index at which plan ``traj [N, H, 6]`` is within ``radius`` of its goal (else H-1)."""
+def arrival_index(traj: np.ndarray, goals: np.ndarray, layout: Layout, radius: float = GOAL_RADIUS) -> np.ndarray:
+    """``[N]`` the first index at which plan ``traj [N, H, D]`` (in ``layout``) is within ``radius`` of its goal
+    (else H-1)."""
     traj = np.asarray(traj, dtype=np.float64)
-    dist = np.linalg.norm(traj[..., ACT_DIM:ACT_DIM + 2] - np.asarray(goals, np.float64)[:, None], axis=2)
+    dist = np.linalg.norm(layout.positions(traj) - np.asarray(goals, np.float64)[:, None], axis=2)
     inside = dist <= radius
     return np.where(inside.any(axis=1), inside.argmax(axis=1), traj.shape[1] - 1)
 
 
-def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, maze: Maze | None = None) -> np.ndarray:
-    """The index ``[N]`` of the chosen candidate among ``traj [N, M, H, 6]`` (goals ``[N, 2]``).
+def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, layout: Layout,
+                      maze: Maze | None = None) -> np.ndarray:
+    """The index ``[N]`` of the chosen candidate among ``traj [N, M, H, D]`` (in ``layout``; goals ``[N, 2]``).
 
     ``arrival``: the earliest first state within 0.45 of the goal (ties: the first candidate).
     ``agreement``: the candidate with the smallest mean position distance to the other candidates
@@ -185,10 +187,10 @@ def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, maze: Maze 
     n, m, horizon, _ = traj.shape
     if m == 1:
         return np.zeros(n, dtype=np.int64)
-    arrival = arrival_index(traj.reshape(n * m, horizon, -1), np.repeat(goals, m, axis=0)).reshape(n, m)
+    arrival = arrival_index(traj.reshape(n * m, horizon, -1), np.repeat(goals, m, axis=0), layout).reshape(n, m)
     if how == "arrival":
         return arrival.argmin(axis=1)
-    pos = traj[..., ACT_DIM:ACT_DIM + 2]
+    pos = layout.positions(traj)
     if how == "agreement":
         dist = np.linalg.norm(pos[:, :, None] - pos[:, None, :], axis=-1).mean(axis=-1)  # [n, m, m]
         return dist.sum(axis=2).argmin(axis=1)
@@ -258,8 +260,8 @@ class PlanSource:
         for lo in range(0, total, batch):
             sub = planner
             if warm:  # the warm prior over this chunk's previous plans
-                sub = planner.with_prior(WarmPrior(planner.normalizer, prev[lo:lo + batch], elapsed[lo:lo + batch],
-                                                   planner.stride))
+                sub = planner.with_prior(WarmPrior(planner.normalizer, planner.layout, prev[lo:lo + batch],
+                                                   elapsed[lo:lo + batch], planner.stride))
             plan = sub.plan(starts[lo:lo + batch], goals_m[lo:lo + batch], self.nfe, self.generator,
                             arrival=None if arrival is None else arrival[lo:lo + batch])
             parts.append(np.concatenate([plan.actions, plan.states], axis=2))
@@ -268,20 +270,20 @@ class PlanSource:
         traj = np.concatenate(parts)
         self.plans_sampled += total
         if ex.arrival_rule in ("truncate", "keep"):
-            traj, _ = truncate_at_arrival(traj, goals_m)
+            traj, _ = truncate_at_arrival(traj, goals_m, planner.layout)
         horizon = traj.shape[1]
         traj = traj.reshape(len(states), m, horizon, -1)
-        pick = select_candidates(traj, goals, ex.select, self.maze)
+        pick = select_candidates(traj, goals, ex.select, planner.layout, self.maze)
         chosen = traj[np.arange(len(states)), pick]
         if self.previous is None:
             self.previous = np.zeros((self.n, horizon, chosen.shape[2]))
             self.previous_at = np.zeros(self.n, dtype=np.int64)
-            self.deadline = t + arrival_index(chosen, goals)
+            self.deadline = t + arrival_index(chosen, goals, planner.layout)
         self.previous[episodes] = chosen
         self.previous_at[episodes] = t
         self.decision_seconds.append(time.perf_counter() - t0)
         self.decision_batch.append(len(states))
-        return chosen[..., ACT_DIM:]
+        return planner.layout.states(chosen)
 
 
 def percentiles_ms(seconds: list[float]) -> dict:

@@ -21,7 +21,7 @@ from bridgeplan.nets.unet import TemporalUNet
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
-from bridgeplan.trajectory import OBS_DIM, TRANSITION_DIM
+from bridgeplan.trajectory import Layout
 
 
 def windows_of(stream, horizon: int, stride: int = 1):
@@ -45,18 +45,18 @@ def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
-    return TemporalUNet.from_config(config.model, TRANSITION_DIM, horizon=config.horizon)
+    return TemporalUNet.from_config(config.model, config.layout.transition_dim, horizon=config.horizon)
 
 
-def build_prior_net(horizon: int) -> PriorMLP:
-    return PriorMLP(OBS_DIM, horizon, TRANSITION_DIM)
+def build_prior_net(layout: Layout, horizon: int) -> PriorMLP:
+    return PriorMLP(layout.obs_dim, horizon, layout.transition_dim)
 
 
 def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.device,
                 prior_net: torch.nn.Module | None = None):
     """The prior ``config.prior``; ``learned`` loads its net from ``config.prior_run`` unless given one."""
     if config.prior != "learned" or prior_net is not None:
-        return make_prior(config.prior, normalizer, net=prior_net, stride=config.stride)
+        return make_prior(config.prior, normalizer, config.layout, net=prior_net, stride=config.stride)
     if not config.prior_run:
         raise BridgeplanError("the learned prior needs --prior-run (a run of `bridgeplan train-prior`)")
     state = load_checkpoint(Path(config.prior_run))
@@ -70,16 +70,16 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
                                   f"not {getattr(config, name)!r}")
     if state["normalizer"] != normalizer.to_dict():
         raise BridgeplanError(f"learned prior {config.prior_run} was trained on a different dataset")
-    net = build_prior_net(config.horizon)
+    net = build_prior_net(config.layout, config.horizon)
     net.load_state_dict(state["model"])
-    return make_prior("learned", normalizer, net=net.to(device).eval())
+    return make_prior("learned", normalizer, config.layout, net=net.to(device).eval())
 
 
 def build_planner(config: cfg.TrainConfig, model: torch.nn.Module, normalizer: Normalizer,
                   device: torch.device, prior_net: torch.nn.Module | None = None) -> Planner:
     """The planner of ``config`` around a network (trained or not)."""
     prior = build_prior(config, normalizer, device, prior_net)
-    return Planner(model, config.process, prior, normalizer, config.horizon, device, config.stride)
+    return Planner(model, config.process, prior, normalizer, config.horizon, device, config.layout, config.stride)
 
 
 @dataclass(frozen=True)

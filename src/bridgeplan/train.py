@@ -31,7 +31,7 @@ from bridgeplan.layout import checkpoint_path, config_path, snapshot_path
 from bridgeplan.locks import LOCK_NAME, run_lock
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
-from bridgeplan.trajectory import TRANSITION_DIM, window_conditions
+from bridgeplan.trajectory import window_conditions
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
 _RESUMABLE_FIELDS = {"steps", "minutes", "device", "threads", "log_every", "checkpoint_every", "compile"}
@@ -111,12 +111,13 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
     net = torch.compile(model) if config.compile else model  # shares model's parameters
     process = config.process
     prior = build_prior(config, normalizer, device)
-    rest = torch.as_tensor(normalizer.normalize(np.zeros(TRANSITION_DIM)), dtype=torch.float32, device=device)
+    layout = config.layout
+    rest = torch.as_tensor(normalizer.normalize(np.zeros(layout.transition_dim)), dtype=torch.float32, device=device)
 
     def loss(x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
         if config.hold_share:  # drawn only then, so runs without holds keep their random stream
-            x0 = hold_tails(x0, config.hold_share, rest, gen)
-        conditions = window_conditions(x0)
+            x0 = hold_tails(x0, config.hold_share, rest, layout, gen)
+        conditions = window_conditions(x0, layout)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
         return process.training_loss(net, x0, x1, conditions, generator=gen)
 
@@ -129,8 +130,9 @@ def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = Fals
     """Train the learned prior (the thesis's MLP on start and goal) on the same windows and loss."""
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
-    net = build_prior_net(config.horizon).to(device)
-    job = TrainJob("prior", config, net, lambda x0, gen: train_prior_loss(net, x0), normalizer.to_dict())
+    net = build_prior_net(config.layout, config.horizon).to(device)
+    job = TrainJob("prior", config, net, lambda x0, gen: train_prior_loss(net, x0, config.layout),
+                   normalizer.to_dict())
     return _fit(job, windows.to(device), run_dir, resume, device, progress)
 
 

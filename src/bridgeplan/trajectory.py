@@ -1,40 +1,140 @@
 """The trajectory layout shared by data, networks, processes and planner.
 
-A trajectory is a tensor ``[batch, horizon, transition_dim]`` whose columns are
-``(actions, state)`` = ``(ax, ay, x, y, vx, vy)`` (Diffuser's layout). Goal reaching is
-inpainting: ``conditions`` maps a time index to the state (normalized) that the trajectory must
-have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``; a row of NaN leaves that
+A trajectory is a tensor ``[batch, horizon, transition_dim]`` whose columns are ``(actions, state)``: the
+environment's :class:`Layout` says how many of each and which state columns are the position and the
+velocity. Maze2D's (:data:`MAZE2D`) is Diffuser's ``(ax, ay, x, y, vx, vy)``; OGBench pointmaze's kinematic
+point (:data:`KINEMATIC_POINT`) is ``(ax, ay, x, y)``; :func:`layout_for` names the one of an environment.
+Goal reaching is inpainting: ``conditions`` maps a time index to the state (normalized) that the trajectory
+must have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``; a row of NaN leaves that
 trajectory free at that index (conditions that hold for some episodes of a batch only).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
-ACT_DIM = 2
-OBS_DIM = 4
-TRANSITION_DIM = ACT_DIM + OBS_DIM
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.maze.layouts import MAZE_NAMES
 
 Conditions = dict[int, torch.Tensor]
 
 
-def apply_conditions(x: torch.Tensor, conditions: Conditions, act_dim: int = ACT_DIM) -> torch.Tensor:
+@dataclass(frozen=True)
+class Layout:
+    """The columns of one transition: ``act_dim`` actions, then ``obs_dim`` state columns, of which two are the
+    position (x, y) and two, if the environment observes it, the velocity (vx, vy).
+
+    The accessors take ``[..., transition_dim]`` transitions (``actions``, ``states``, ``positions``,
+    ``velocities``) or ``[..., obs_dim]`` states alone (``state_positions``, ``state_velocities``), numpy or
+    torch, and return views: assigning into them writes the trajectory.
+    """
+
+    name: str
+    """How errors and docs name it (``maze2d``, ``kinematic point``)."""
+    act_dim: int
+    """Action columns, the first of a transition."""
+    obs_dim: int
+    """State columns, after the actions; a condition is a whole state."""
+    position: int
+    """Index in the state of the position's first column (x; y follows)."""
+    velocity: int | None
+    """Index in the state of the velocity's first column (vx; vy follows), or None: the state has none."""
+
+    def __post_init__(self):
+        # the priors and conditions build a state from a position and a velocity alone: nothing else may be in it
+        parts = [self.position] + ([] if self.velocity is None else [self.velocity])
+        columns = sorted(c for start in parts for c in (start, start + 1))
+        if self.act_dim < 1 or columns != list(range(self.obs_dim)):
+            raise ValueError(f"layout {self.name}: a state is a position and optionally a velocity, two columns "
+                             f"each, and a transition has actions; got act_dim {self.act_dim}, obs_dim "
+                             f"{self.obs_dim}, position at {self.position}, velocity at {self.velocity}")
+
+    @property
+    def transition_dim(self) -> int:
+        return self.act_dim + self.obs_dim
+
+    @property
+    def has_velocity(self) -> bool:
+        return self.velocity is not None
+
+    @property
+    def state_columns(self) -> slice:
+        """The state's columns in a transition (the normalizer's ``dims`` for states)."""
+        return slice(self.act_dim, None)
+
+    def actions(self, x):
+        return x[..., :self.act_dim]
+
+    def states(self, x):
+        return x[..., self.act_dim:]
+
+    def positions(self, x):
+        return x[..., self.act_dim + self.position:self.act_dim + self.position + 2]
+
+    def velocities(self, x):
+        return self.states(x)[..., self._velocity_columns()]
+
+    def state_positions(self, s):
+        return s[..., self.position:self.position + 2]
+
+    def state_velocities(self, s):
+        return s[..., self._velocity_columns()]
+
+    def _velocity_columns(self) -> slice:
+        if self.velocity is None:
+            raise BridgeplanError(f"the {self.name} layout has no velocity columns (its state is the position)")
+        return slice(self.velocity, self.velocity + 2)
+
+    def at_rest(self, positions: np.ndarray) -> np.ndarray:
+        """States ``[..., obs_dim]`` at ``positions [..., 2]``, with zero velocity where the state has one."""
+        positions = np.asarray(positions)
+        states = np.zeros((*positions.shape[:-1], self.obs_dim), dtype=positions.dtype)
+        self.state_positions(states)[...] = positions
+        return states
+
+
+MAZE2D = Layout("maze2d", act_dim=2, obs_dim=4, position=0, velocity=2)
+"""Maze2D (gymnasium-robotics PointMaze): actions are forces, the state ``(x, y, vx, vy)``."""
+KINEMATIC_POINT = Layout("kinematic point", act_dim=2, obs_dim=2, position=0, velocity=None)
+"""OGBench pointmaze: actions are position steps (scaled by the environment's gain), the state ``(x, y)``."""
+
+POINTMAZE_PREFIX = "pointmaze-"
+"""OGBench's pointmaze dataset names start with it (``pointmaze-medium-navigate-v0``)."""
+
+
+def layout_for(environment: str) -> Layout:
+    """The layout of ``environment``'s transitions: a Maze2D maze name (``umaze``, ...) or an OGBench pointmaze
+    dataset name (``pointmaze-...``)."""
+    if environment in MAZE_NAMES:
+        return MAZE2D
+    if environment.startswith(POINTMAZE_PREFIX):
+        return KINEMATIC_POINT
+    raise BridgeplanError(f"unknown environment {environment!r}: a Maze2D maze ({', '.join(MAZE_NAMES)}) or an "
+                          f"OGBench dataset name starting with {POINTMAZE_PREFIX!r}")
+
+
+def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
     """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor); rows of
     ``state`` that are NaN leave theirs as they are.
 
-    Used by training and by every sampler step alike, so conditions hold exactly in every sample.
+    Used by training and by every sampler step alike, so conditions hold exactly in every sample. A condition
+    is a whole state and every layout puts the state last, so its width says which columns it covers: the
+    processes stay free of layouts.
     """
     x = x.clone()
     for t, state in conditions.items():
         state = state.to(x.dtype)
-        x[:, t, act_dim:] = torch.where(torch.isnan(state), x[:, t, act_dim:], state)
+        columns = slice(x.shape[-1] - state.shape[-1], None)
+        x[:, t, columns] = torch.where(torch.isnan(state), x[:, t, columns], state)
     return x
 
 
-def window_conditions(x0: torch.Tensor) -> Conditions:
+def window_conditions(x0: torch.Tensor, layout: Layout) -> Conditions:
     """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser)."""
-    return {0: x0[:, 0, ACT_DIM:], x0.shape[1] - 1: x0[:, -1, ACT_DIM:]}
+    return {0: layout.states(x0[:, 0]), x0.shape[1] - 1: layout.states(x0[:, -1])}
 
 
 def span(horizon: int, stride: int) -> int:

@@ -23,7 +23,6 @@ from bridgeplan.config import TrainConfig, preset_config
 from bridgeplan.planner import Planner
 from bridgeplan.processes import DDPM, Bridge
 from bridgeplan.runs import build_model, build_planner, build_prior_net, windows_of
-from bridgeplan.trajectory import TRANSITION_DIM
 
 DIFFUSION_STEPS = 16
 """N of the untrained networks timed here (the ``cpu-small`` default); timings depend on NFE, not on N."""
@@ -55,7 +54,8 @@ def method_configs(preset: str) -> dict[str, TrainConfig]:
 def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device) -> dict[str, Planner]:
     """Every method's planner around one (untrained) network; the learned prior's net is untrained too."""
     configs = method_configs(preset)
-    prior_net = build_prior_net(next(iter(configs.values())).horizon).to(device).eval()
+    first = next(iter(configs.values()))
+    prior_net = build_prior_net(first.layout, first.horizon).to(device).eval()
     return {name: build_planner(c, model, normalizer, device, prior_net=prior_net) for name, c in configs.items()}
 
 
@@ -88,7 +88,7 @@ def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device) -> di
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
-    x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+    x = torch.randn(batch, config.horizon, config.layout.transition_dim, device=dev)
     t = torch.zeros(batch, device=dev)
     starts, goals = _tasks(batch)
     gen = torch.Generator(device=dev).manual_seed(0)
@@ -190,7 +190,7 @@ def compile_speedup(preset: str, batch_sizes, rounds: int, dev: torch.device) ->
     rows = []
     with empty_inductor_cache(), torch.inference_mode():
         for batch in batch_sizes:
-            x = torch.randn(batch, config.horizon, TRANSITION_DIM, device=dev)
+            x = torch.randn(batch, config.horizon, config.layout.transition_dim, device=dev)
             t = torch.zeros(batch, device=dev)
             first_call_s = {}
             for cache in ("cold", "cached"):
@@ -306,7 +306,7 @@ def step_flops(config: TrainConfig, dev: torch.device) -> float:
     from torch.utils.flop_counter import FlopCounterMode
 
     model = build_model(config).to(dev)
-    x = torch.randn(config.batch_size, config.horizon, TRANSITION_DIM, device=dev)
+    x = torch.randn(config.batch_size, config.horizon, config.layout.transition_dim, device=dev)
     with FlopCounterMode(display=False) as counter:
         model(x, torch.zeros(config.batch_size, device=dev)).square().mean().backward()
     return float(counter.get_total_flops())

@@ -12,7 +12,7 @@ def visited_cells(stream: Stream) -> np.ndarray:
     """``[rows, cols]`` bool: the maze cells that some state of ``stream`` lies in."""
     maze = get_maze(stream.maze)
     rows, cols = maze.shape
-    cells = maze.xy_to_cell(stream.states[:, :2])
+    cells = maze.xy_to_cell(stream.layout.state_positions(stream.states))
     inside = (cells[:, 0] >= 0) & (cells[:, 0] < rows) & (cells[:, 1] >= 0) & (cells[:, 1] < cols)
     visited = np.zeros((rows, cols), dtype=bool)
     visited[cells[inside, 0], cells[inside, 1]] = True

@@ -27,6 +27,7 @@ from bridgeplan.data.generate import DATA_VERSION, GeneratedStream
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import MAZE_NAMES, Maze, get_maze
+from bridgeplan.trajectory import MAZE2D
 
 DATA_FILE = Path("data") / "main_data.hdf5"
 METADATA_FILE = Path("data") / "metadata.json"
@@ -48,7 +49,7 @@ def _episode_buffers(streams: list[GeneratedStream], seed: int):
             steps = len(act)
             truncations = np.zeros(steps, dtype=bool)
             truncations[-1] = True
-            observations = {"observation": obs, "achieved_goal": obs[:, :2].copy(),
+            observations = {"observation": obs, "achieved_goal": MAZE2D.state_positions(obs).copy(),
                             "desired_goal": np.repeat(np.asarray(goal, np.float64)[None], steps + 1, axis=0)}
             yield EpisodeBuffer(id=k, seed=seed if k == 0 else None, observations=observations, actions=act,
                                 rewards=rew, terminations=np.zeros(steps, dtype=bool),
@@ -156,7 +157,7 @@ def read_minari(path: Path, maze_name: str | None = None) -> Stream:
                 obs = group["observations"]
                 obs = obs["observation"][()] if isinstance(obs, h5py.Group) else obs[()]
                 act = group["actions"][()]
-                if obs.ndim != 2 or obs.shape[1] != 4 or act.shape != (len(obs) - 1, 2):
+                if obs.ndim != 2 or obs.shape[1] != MAZE2D.obs_dim or act.shape != (len(obs) - 1, MAZE2D.act_dim):
                     raise BridgeplanError(f"{path}: {name} has observations {list(obs.shape)} and actions "
                                           f"{list(act.shape)}, not a PointMaze episode")
                 if "rewards" in group and len(act):

@@ -13,17 +13,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bridgeplan.trajectory import ACT_DIM, OBS_DIM
+from bridgeplan.trajectory import Layout, layout_for
 
 
 @dataclass
 class Stream:
     maze: str
-    """Maze name (open, umaze, medium, large)."""
+    """Maze name (open, umaze, medium, large): it names the environment, and so the layout."""
     states: np.ndarray
-    """``[T, 4]`` (x, y, vx, vy) before each action, gymnasium-robotics coordinates, float64."""
+    """``[T, obs_dim]`` the state before each action (Maze2D: x, y, vx, vy in gymnasium-robotics coordinates),
+    float64."""
     actions: np.ndarray
-    """``[T, 2]`` the action taken in that state."""
+    """``[T, act_dim]`` the action taken in that state."""
     segment_starts: np.ndarray
     """``[S]`` start index of every continuous segment (increasing, the first is 0)."""
     episodes: int
@@ -38,15 +39,20 @@ class Stream:
 
     def __post_init__(self):
         self.segment_starts = np.asarray(self.segment_starts, dtype=np.int64)
-        shape_ok = self.states.ndim == 2 and self.states.shape[1] == OBS_DIM
-        if not shape_ok or self.actions.shape != (len(self.states), ACT_DIM):
+        layout = self.layout
+        shape_ok = self.states.ndim == 2 and self.states.shape[1] == layout.obs_dim
+        if not shape_ok or self.actions.shape != (len(self.states), layout.act_dim):
             raise ValueError(f"states {self.states.shape} / actions {self.actions.shape} are not "
-                             f"[T, 4] / [T, 2]")
+                             f"[T, {layout.obs_dim}] / [T, {layout.act_dim}] ({self.maze}'s {layout.name} layout)")
         if len(self.states) and (len(self.segment_starts) == 0 or self.segment_starts[0] != 0
                                  or np.any(np.diff(self.segment_starts) <= 0)
                                  or self.segment_starts[-1] >= len(self.states)):
             raise ValueError(f"bad segment starts {self.segment_starts[:10]} for {len(self.states)} "
                              f"transitions")
+
+    @property
+    def layout(self) -> Layout:
+        return layout_for(self.maze)
 
     def __len__(self) -> int:
         return len(self.states)
@@ -57,11 +63,11 @@ class Stream:
         return list(zip(self.segment_starts.tolist(), ends))
 
     def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """``[(states [T_k, 4], actions [T_k, 2]), ...]`` (views) of the continuous segments."""
+        """``[(states [T_k, obs_dim], actions [T_k, act_dim]), ...]`` (views) of the continuous segments."""
         return [(self.states[lo:hi], self.actions[lo:hi]) for lo, hi in self.segment_bounds()]
 
     def transitions(self) -> np.ndarray:
-        """``[T, 6]`` in the trajectory layout: actions, then state."""
+        """``[T, transition_dim]`` in the trajectory layout: actions, then state."""
         return np.concatenate([self.actions, self.states], axis=1).astype(np.float64)
 
 
@@ -87,7 +93,8 @@ def join_episodes(observations: list[np.ndarray], actions: list[np.ndarray]
         acts.append(act)
         n += len(act)
         previous_last = obs[-1]
-    if not states:
-        return np.zeros((0, OBS_DIM)), np.zeros((0, ACT_DIM)), np.zeros(0, dtype=np.int64)
+    if not states:  # no transitions: empty arrays as wide as the episodes' own (the layout is the caller's)
+        width = (observations[0].shape[1:], actions[0].shape[1:]) if observations else ((0,), (0,))
+        return np.zeros((0, *width[0])), np.zeros((0, *width[1])), np.zeros(0, dtype=np.int64)
     return (np.concatenate(states).astype(np.float64), np.concatenate(acts).astype(np.float64),
             np.asarray(starts, dtype=np.int64))

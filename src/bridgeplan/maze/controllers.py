@@ -21,6 +21,10 @@ import numpy as np
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.expert import pd_action
+from bridgeplan.trajectory import MAZE2D
+
+# Maze2D's controllers read Maze2D states (x, y, vx, vy): the point mass's position and velocity
+_position, _velocity = MAZE2D.state_positions, MAZE2D.state_velocities
 
 CONTROLLERS = ("track", "pursuit")
 DEFAULT_LOOKAHEAD = 1.0
@@ -32,7 +36,7 @@ depends on the planner and its NFE (noisier plans want a longer one): choose it 
 def tracking_action(state: np.ndarray, planned_next_state: np.ndarray) -> np.ndarray:
     """``clip((p_next - p) + (v_next - v), -1, 1)`` for ``state [N, 4]`` and ``planned_next_state [N, 4]``."""
     state, target = np.asarray(state, np.float64), np.asarray(planned_next_state, np.float64)
-    return np.clip((target[:, :2] - state[:, :2]) + (target[:, 2:] - state[:, 2:]), -1.0, 1.0)
+    return np.clip((_position(target) - _position(state)) + (_velocity(target) - _velocity(state)), -1.0, 1.0)
 
 
 def planned_target(plans: np.ndarray, t: int) -> np.ndarray:
@@ -41,7 +45,7 @@ def planned_target(plans: np.ndarray, t: int) -> np.ndarray:
     plans = np.asarray(plans, np.float64)
     if t + 1 < plans.shape[1]:
         return plans[:, t + 1]
-    return np.concatenate([plans[:, -1, :2], np.zeros_like(plans[:, -1, 2:])], axis=1)
+    return MAZE2D.at_rest(_position(plans[:, -1]))
 
 
 def planned_targets(plans: np.ndarray, steps_into_plan: np.ndarray) -> np.ndarray:
@@ -53,7 +57,7 @@ def planned_targets(plans: np.ndarray, steps_into_plan: np.ndarray) -> np.ndarra
     rows = np.arange(len(plans))
     target = plans[rows, np.minimum(steps + 1, horizon - 1)].copy()
     ended = steps + 1 >= horizon
-    target[ended, 2:] = 0.0
+    _velocity(target)[ended] = 0.0
     return target
 
 
@@ -70,7 +74,7 @@ def pursuit_waypoints(plans: np.ndarray, positions: np.ndarray, passed: np.ndarr
     when there is none."""
     plans = np.asarray(plans, np.float64)
     horizon = plans.shape[1]
-    far = np.linalg.norm(plans[:, :, :2] - np.asarray(positions, np.float64)[:, None], axis=2) >= lookahead
+    far = np.linalg.norm(_position(plans) - np.asarray(positions, np.float64)[:, None], axis=2) >= lookahead
     far &= np.arange(horizon)[None, :] >= np.asarray(passed)[:, None]
     return np.where(far.any(axis=1), far.argmax(axis=1), horizon - 1)
 
@@ -93,16 +97,16 @@ class Follower:
         states = np.asarray(states, np.float64)
         if self.kind == "track":
             return tracking_action(states, planned_targets(plans, age))
-        self.passed = pursuit_waypoints(plans, states[:, :2], self.passed, self.lookahead)
-        waypoint = np.asarray(plans, np.float64)[np.arange(len(states)), self.passed, :2]
+        self.passed = pursuit_waypoints(plans, _position(states), self.passed, self.lookahead)
+        waypoint = _position(np.asarray(plans, np.float64)[np.arange(len(states)), self.passed])
         return np.clip(pd_action(waypoint, states), -1.0, 1.0)
 
     def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
-        positions = np.asarray(states, np.float64)[:, None, :2]
+        positions = _position(np.asarray(states, np.float64))[:, None]
         if self.kind == "track":
-            expected = plans[np.arange(len(plans)), np.minimum(age, plans.shape[1] - 1), :2]
+            expected = _position(plans[np.arange(len(plans)), np.minimum(age, plans.shape[1] - 1)])
             return np.linalg.norm(positions[:, 0] - expected, axis=1)
-        return np.linalg.norm(np.asarray(plans, np.float64)[:, :, :2] - positions, axis=2).min(axis=1)
+        return np.linalg.norm(_position(np.asarray(plans, np.float64)) - positions, axis=2).min(axis=1)
 
 
 def check_controller(kind: str, lookahead: float) -> None:

@@ -20,6 +20,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.controllers import Follower
 from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 from bridgeplan.maze.sim import BatchedPointMaze
+from bridgeplan.trajectory import MAZE2D
 
 Policy = Callable[[int, np.ndarray], np.ndarray]
 """``policy(step_index, obs [N, 4]) -> actions [N, 2]``."""
@@ -46,8 +47,8 @@ def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None =
     sim = BatchedPointMaze(maze, len(np.asarray(starts_xy)))
     obs = sim.reset(starts_xy, goals_xy)
     n = len(obs)
-    states = np.empty((n, steps + 1, 4))
-    actions = np.empty((n, steps, 2))
+    states = np.empty((n, steps + 1, MAZE2D.obs_dim))
+    actions = np.empty((n, steps, MAZE2D.act_dim))
     states[:, 0] = obs
     returns = np.zeros(n)
     for t in range(steps):
@@ -56,7 +57,7 @@ def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None =
         obs, reward = sim.step(act)
         states[:, t + 1] = obs
         returns += reward
-    dist = np.linalg.norm(states[:, 1:, :2] - sim.goals[:, None], axis=2)
+    dist = np.linalg.norm(MAZE2D.state_positions(states[:, 1:]) - sim.goals[:, None], axis=2)
     return RolloutResult(returns, (dist <= GOAL_RADIUS).any(axis=1), states, actions)
 
 
@@ -65,8 +66,8 @@ def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = No
     """Execute planned states ``plans [N, H, 4]`` open loop for ``steps`` (default: the maze's episode length)
     with ``follower`` (:mod:`bridgeplan.maze.controllers`; default Diffuser's tracking controller)."""
     plans = np.asarray(plans, dtype=np.float64)
-    if plans.ndim != 3 or plans.shape[2] != 4 or len(plans) != len(np.asarray(starts_xy)):
-        raise BridgeplanError(f"plans must have shape [N, H, 4] with N = {len(np.asarray(starts_xy))} "
+    if plans.ndim != 3 or plans.shape[2] != MAZE2D.obs_dim or len(plans) != len(np.asarray(starts_xy)):
+        raise BridgeplanError(f"plans must have shape [N, H, {MAZE2D.obs_dim}] with N = {len(np.asarray(starts_xy))} "
                               f"episodes, got {list(plans.shape)}")
     follower = follower or Follower(len(plans))
     return rollout(maze, lambda t, obs: follower.actions(obs, plans, np.full(len(plans), t)), starts_xy, goals_xy,
