@@ -678,6 +678,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench_command(sub)
     _add_demo_command(sub)
     _add_study_commands(sub)
+    from bridgeplan.ogbench_pointmaze.commands import add_ogbench_commands
+
+    add_ogbench_commands(sub)
     return parser
 
 

@@ -1,0 +1,178 @@
+"""OGBench's evaluation protocol on pointmaze: 5 fixed tasks per maze, 50 episodes each, 1000 steps.
+
+As ``impls/main.py`` and ``impls/utils/evaluation.py`` do it: for task ``i`` (1..5) the registered env is reset
+with ``options=dict(task_id=i)`` (start and goal: the task's cells plus the env's +-1 position noise), the
+policy gets the observation and ``info['goal']`` (the goal's observation, its xy), its action is clipped to
+[-1, 1], and the episode ends when the env terminates at the goal (within 1.0) or is truncated after
+:data:`~bridgeplan.ogbench_pointmaze.names.EVAL_EPISODE_STEPS` steps. An episode succeeds when its last step's
+``info['success']`` is 1; a task's success rate is the mean over its episodes and the overall rate the mean over
+the tasks. Episodes per task: :data:`EVAL_EPISODES_PER_TASK`.
+
+Episodes run batched: one env per episode of a batch, stepped in lockstep, the policy called once per step on
+the whole batch. Each episode has its own seed (from ``seed``, its task and its index), which seeds the env's
+``np_random`` and the global legacy RNG that ogbench draws the position noise (and teleports) from, swapped in
+around each of that episode's env calls; so an episode's outcome does not depend on the batch it ran in.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.ogbench_pointmaze.names import check_maze, env_id
+
+EVAL_EPISODES_PER_TASK = 50
+"""Every pointmaze line of OGBench's ``impls/hyperparameters.sh`` passes ``--eval_episodes=50`` (``main.py``'s
+own default, 20, is not what the paper's numbers use)."""
+TASK_IDS = (1, 2, 3, 4, 5)
+
+Policy = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``act(observations [N, 2], goals [N, 2]) -> actions [N, 2]``; row ``i`` is always the same episode of the
+batch; a finished episode's row stays at its last observation and its action is ignored."""
+
+
+@dataclass
+class TaskResult:
+    task_id: int
+    task_name: str
+    init_cell: tuple[int, int]
+    goal_cell: tuple[int, int]
+    episodes: int
+    successes: int
+    steps: list[int] = field(default_factory=list)
+    """Steps each episode ran (the step it reached the goal on, or the step limit)."""
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes
+
+
+@dataclass
+class ProtocolResult:
+    maze: str
+    env_id: str
+    episodes_per_task: int
+    seed: int
+    tasks: dict[int, TaskResult]
+    seconds: float = 0.0
+
+    @property
+    def success_rate(self) -> float:
+        """The mean of the per-task rates (OGBench's ``overall_success``)."""
+        return float(np.mean([t.success_rate for t in self.tasks.values()]))
+
+    @property
+    def successes(self) -> int:
+        return sum(t.successes for t in self.tasks.values())
+
+    @property
+    def episodes(self) -> int:
+        return sum(t.episodes for t in self.tasks.values())
+
+    def to_dict(self) -> dict:
+        return {"maze": self.maze, "env_id": self.env_id, "episodes_per_task": self.episodes_per_task,
+                "seed": self.seed, "success_rate": self.success_rate, "successes": self.successes,
+                "episodes": self.episodes, "seconds": self.seconds,
+                "tasks": {i: {**asdict(t), "success_rate": t.success_rate} for i, t in self.tasks.items()}}
+
+    def format(self) -> str:
+        lines = [f"{self.env_id}: {self.episodes_per_task} episodes per task, seed {self.seed}"]
+        for i, t in self.tasks.items():
+            lines.append(f"  task {i} {t.init_cell} -> {t.goal_cell}: {t.success_rate:6.1%} "
+                         f"({t.successes}/{t.episodes}), mean steps {np.mean(t.steps):.0f}")
+        lines.append(f"  overall: {self.success_rate:.1%} ({self.successes}/{self.episodes}) "
+                     f"in {self.seconds:.1f} s")
+        return "\n".join(lines)
+
+
+def episode_seed(seed: int, task_id: int, index: int) -> int:
+    """The seed of episode ``index`` of task ``task_id``."""
+    return int(np.random.SeedSequence([seed, task_id, index]).generate_state(1)[0])
+
+
+def oracle_policy(maze: str) -> Policy:
+    """The noise-free oracle: the unit direction to ``get_oracle_subgoal``'s subgoal (the datasets' expert
+    without its action noise)."""
+    oracle = Oracle(check_maze(maze))
+
+    def act(observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return np.stack([oracle.direction(o, g) for o, g in zip(observations, goals)])
+
+    return act
+
+
+def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISODES_PER_TASK, seed: int = 0,
+                    task_ids: Sequence[int] | None = None, batch_size: int = 250,
+                    progress: bool = False) -> ProtocolResult:
+    """Run the protocol for ``act`` on ``maze`` (tasks ``task_ids``, default all 5) and return per-task and
+    overall success rates with counts. At most ``batch_size`` episodes run at once (one env each)."""
+    from tqdm import tqdm
+
+    check_maze(maze)
+    if episodes_per_task <= 0 or batch_size <= 0:
+        raise BridgeplanError(f"episodes per task and batch size must be positive, got {episodes_per_task} "
+                              f"and {batch_size}")
+    task_ids = list(TASK_IDS if task_ids is None else task_ids)
+    probe = make_env(maze).unwrapped
+    infos = probe.task_infos
+    bad = [t for t in task_ids if not (isinstance(t, (int, np.integer)) and 1 <= t <= len(infos))]
+    if bad or not task_ids:
+        raise BridgeplanError(f"task ids must be in 1..{len(infos)}, got {list(task_ids)}")
+    episodes = [(int(t), k) for t in task_ids for k in range(episodes_per_task)]
+    envs = [make_env(maze) for _ in range(min(batch_size, len(episodes)))]
+    success = np.zeros(len(episodes), dtype=bool)
+    steps = np.zeros(len(episodes), dtype=np.int64)
+    t0 = time.perf_counter()
+    with tqdm(total=len(episodes), disable=not progress, desc=f"evaluate {env_id(maze)}", unit="episode") as bar:
+        for lo in range(0, len(episodes), len(envs)):
+            batch = episodes[lo:lo + len(envs)]
+            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update)
+            success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
+    for env in envs:
+        env.close()
+    tasks = {}
+    for t in task_ids:
+        rows = [i for i, (task, _) in enumerate(episodes) if task == t]
+        info = infos[t - 1]
+        tasks[int(t)] = TaskResult(int(t), info["task_name"], tuple(map(int, info["init_ij"])),
+                                   tuple(map(int, info["goal_ij"])), len(rows), int(success[rows].sum()),
+                                   steps[rows].tolist())
+    return ProtocolResult(maze, env_id(maze), episodes_per_task, seed, tasks, time.perf_counter() - t0)
+
+
+def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
+               finished: Callable[[int], None]) -> tuple[np.ndarray, np.ndarray]:
+    n = len(batch)
+    seeds = [episode_seed(seed, t, k) for t, k in batch]
+    rngs = [np.random.RandomState(s) for s in seeds]
+    obs = np.empty((n, 2))
+    goals = np.empty((n, 2))
+    for i, (env, (task, _)) in enumerate(zip(envs, batch)):
+        with legacy_rng(rngs[i]):
+            ob, info = env.reset(seed=seeds[i], options=dict(task_id=task))
+        obs[i], goals[i] = ob, info["goal"]
+    active = np.ones(n, dtype=bool)
+    success = np.zeros(n, dtype=bool)
+    steps = np.zeros(n, dtype=np.int64)
+    while active.any():
+        actions = np.asarray(act(obs.copy(), goals.copy()), dtype=np.float64)
+        if actions.shape != (n, 2):
+            raise BridgeplanError(f"the policy returned actions of shape {actions.shape}, expected {(n, 2)}")
+        if not np.isfinite(actions[active]).all():
+            raise BridgeplanError("the policy returned non-finite actions")
+        actions = np.clip(actions, -1, 1)
+        for i in np.flatnonzero(active):
+            with legacy_rng(rngs[i]):
+                ob, _, terminated, truncated, info = envs[i].step(actions[i])
+            obs[i] = ob
+            steps[i] += 1
+            if terminated or truncated:
+                active[i] = False
+                success[i] = info["success"] == 1.0
+                finished(1)
+    return success, steps
