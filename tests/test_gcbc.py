@@ -191,3 +191,34 @@ def test_bad_dataset_files(tmp_path):
     with pytest.raises(BridgeplanError, match="no dataset file"):
         train_gcbc(GCBCConfig(dataset=str(tmp_path / "missing.npz"), **TINY), tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()  # refused before anything is written
+
+
+def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
+    """Through ``bridgeplan ogbench``: a tiny generated medium dataset, two snapshots, the protocol on each."""
+    import json
+
+    from bridgeplan.cli import main
+
+    assert main(["ogbench", "generate", "pointmaze-medium-navigate-v0", "--episodes", "4", "--steps", "40",
+                 "--out", str(tmp_path), "--no-progress"]) == 0
+    data, run = str(tmp_path / "pointmaze-medium-navigate-v0.npz"), tmp_path / "run"
+    train = ["ogbench", "gcbc-train", data, "--run-dir", str(run), "--maze", "medium", "--steps", "4",
+             "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "2", "--log-every", "2",
+             "--device", "cpu", "--no-progress"]
+    assert main(train) == 0
+    assert "step 4" in capsys.readouterr().out
+    assert main(["ogbench", "gcbc-eval", str(run), "--steps", "all", "--episodes", "1", "--no-progress",
+                 "--json"]) == 0
+    out = capsys.readouterr().out
+    assert out.count('"env_id": "pointmaze-medium-v0"') == 2
+    saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0.json").read_text())
+    assert saved["step"] == 4 and saved["episodes"] == 5 and set(saved["tasks"]) == {"1", "2", "3", "4", "5"}
+    # mistakes: one error line, exit 2
+    assert main(train) == 2
+    assert "pass --resume" in capsys.readouterr().err
+    assert main([*train[:-1], "--lr", "0", "--run-dir", str(tmp_path / "r2")]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == ["error: lr must be a positive, finite number, got 0.0"]
+    assert main(["ogbench", "gcbc-train", data, "--run-dir", str(tmp_path / "r3"), "--maze", "large"]) == 2
+    assert "not a pointmaze-large dataset" in capsys.readouterr().err
+    assert main(["ogbench", "gcbc-eval", str(run), "--steps", "3"]) == 2
+    assert "no snapshot at step 3" in capsys.readouterr().err

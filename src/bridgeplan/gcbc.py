@@ -65,6 +65,10 @@ class GCBCConfig:
 
     dataset: str = ""
     """Path to the training npz in OGBench's format (``observations``, ``actions``, ``terminals``)."""
+    maze: str = ""
+    """The OGBench pointmaze the data is of (``medium``, ...): the file is checked to be one
+    (:func:`bridgeplan.ogbench_pointmaze.reading.check_dataset`) and evaluation defaults to it. Empty: any
+    OGBench-format file, unchecked."""
     lr: float = 3e-4
     """Adam's learning rate (OGBench: 3e-4)."""
     batch_size: int = 1024
@@ -111,8 +115,12 @@ class GoalDataset:
     """An OGBench dataset in compact form with GCBC's batches: states, actions and goals, sampled on the host."""
 
     def __init__(self, path: str | Path, p_curgoal: float = 0.0, p_trajgoal: float = 1.0,
-                 p_randomgoal: float = 0.0, geom_sample: bool = False, discount: float = 0.99):
+                 p_randomgoal: float = 0.0, geom_sample: bool = False, discount: float = 0.99, maze: str = ""):
         self.path = Path(path)
+        if maze:
+            from bridgeplan.ogbench_pointmaze.reading import check_dataset
+
+            check_dataset(self.path, maze)
         self.p_curgoal, self.p_trajgoal, self.p_randomgoal = p_curgoal, p_trajgoal, p_randomgoal
         self.geom_sample, self.discount = geom_sample, discount
         data = _load_compact(self.path)
@@ -126,7 +134,7 @@ class GoalDataset:
     @classmethod
     def for_config(cls, config: GCBCConfig, path: str | Path | None = None) -> GoalDataset:
         return cls(path if path is not None else config.dataset, config.p_curgoal, config.p_trajgoal,
-                   config.p_randomgoal, config.geom_sample, config.discount)
+                   config.p_randomgoal, config.geom_sample, config.discount, config.maze)
 
     @property
     def obs_dim(self) -> int:
@@ -367,4 +375,37 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
     """The rows of a run's ``metrics.jsonl``."""
     path = Path(run_dir) / METRICS_NAME
     return [json.loads(ln) for ln in path.read_text().splitlines() if ln.strip()] if path.exists() else []
+
+
+
+def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None = None, episodes: int = 0,
+                  seed: int = 0, progress: bool = False) -> list[dict]:
+    """OGBench's evaluation protocol (:func:`bridgeplan.ogbench_pointmaze.protocol.evaluate_policy`: 5 tasks,
+    50 episodes each by default) for a run's policy snapshots at ``steps`` (default: its latest checkpoint).
+    Each result is also written to ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>.json``; returns them in order."""
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
+
+    run_dir = Path(run_dir)
+    episodes = episodes or EVAL_EPISODES_PER_TASK
+    available = dict(policy_snapshots(run_dir))
+    paths = [checkpoint_path(run_dir)] if steps is None else []
+    for s in steps or []:
+        if s not in available:
+            raise BridgeplanError(f"{run_dir} has no snapshot at step {s} (it has: "
+                                  f"{', '.join(map(str, available)) or 'none'})")
+        paths.append(available[s])
+    results = []
+    for path in paths:
+        policy = load_policy(path)
+        on = maze or policy.config.maze
+        if not on:
+            raise BridgeplanError(f"{run_dir} was trained without --maze: say which maze to evaluate in")
+        r = evaluate_policy(on, policy.act, episodes_per_task=episodes, seed=seed, progress=progress)
+        row = {"run": str(run_dir), "step": policy.step, "code_version": code_version(), **r.to_dict()}
+        atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{episodes}-seed{seed}.json",
+                          json.dumps(row, indent=2) + "\n")
+        results.append(row | {"text": r.format()})
+    return results
 
