@@ -58,7 +58,6 @@ def test_names():
 
 def test_env_ids_are_registered():
     import gymnasium
-
     import ogbench  # noqa: F401
 
     for maze in MAZES:
@@ -83,6 +82,8 @@ def test_oracle_equals_get_oracle_subgoal():
 def test_vertex_cells_exclude_hallways():
     g = geometry("medium")
     assert len(g.free_cells) == 26
+    # read off the medium map: the cells open on two opposite sides and walled on the other two
+    assert set(g.free_cells) - set(g.vertex_cells) == {(3, 3), (4, 5), (5, 1), (5, 6), (6, 2)}
     for i, j in set(g.free_cells) - set(g.vertex_cells):  # a hallway: open on two opposite sides only
         m = g.maze_map
         assert (m[i - 1, j], m[i + 1, j], m[i, j - 1], m[i, j + 1]) in ((0, 0, 1, 1), (1, 1, 0, 0))

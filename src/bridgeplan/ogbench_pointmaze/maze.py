@@ -22,7 +22,6 @@ from bridgeplan.ogbench_pointmaze.names import env_id
 def make_env(maze: str, **kwargs):
     """``gymnasium.make`` of ``maze``'s registered ogbench environment (``kwargs`` go to ``MazeEnv``)."""
     import gymnasium
-
     import ogbench.locomaze  # noqa: F401  (registers the environments)
 
     with warnings.catch_warnings():

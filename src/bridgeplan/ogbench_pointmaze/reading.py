@@ -47,7 +47,8 @@ class DatasetCheck:
     def summary(self) -> str:
         lengths = ", ".join(map(str, self.episode_lengths))
         return (f"{self.path}: pointmaze-{self.maze}, {self.transitions} steps in {self.episodes} "
-                f"episode{'s' if self.episodes != 1 else ''} of {lengths} steps, {self.cells_visited}/{self.free_cells} free cells visited, "
+                f"episode{'s' if self.episodes != 1 else ''} of {lengths} steps, "
+                f"{self.cells_visited}/{self.free_cells} free cells visited, "
                 f"arrays {', '.join(self.keys)}")
 
 

@@ -1,0 +1,125 @@
+"""OGBench pointmaze evaluation protocol: tasks, batching, seeds, errors, the oracle policy, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bridgeplan.cli import main
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.ogbench_pointmaze.protocol import (
+    EVAL_EPISODES_PER_TASK,
+    TASK_IDS,
+    episode_seed,
+    evaluate_policy,
+    oracle_policy,
+)
+
+
+def test_protocol_constants():
+    assert EVAL_EPISODES_PER_TASK == 50 and TASK_IDS == (1, 2, 3, 4, 5)
+    assert make_env("giant").spec.max_episode_steps == 1000
+
+
+def test_oracle_one_episode_per_task():
+    r = evaluate_policy("medium", oracle_policy("medium"), episodes_per_task=1, seed=0)
+    assert list(r.tasks) == [1, 2, 3, 4, 5]
+    assert r.tasks[1].init_cell == (1, 1) and r.tasks[1].goal_cell == (6, 6)
+    for t in r.tasks.values():
+        assert t.episodes == 1 and 0 <= t.success_rate <= 1 and t.successes in (0, 1)
+        assert 0 < t.steps[0] <= 1000
+        assert t.successes == (t.steps[0] < 1000)  # the env terminates at the goal
+    assert 0 <= r.success_rate <= 1 and r.episodes == 5
+    assert r.success_rate == np.mean([t.success_rate for t in r.tasks.values()])
+    d = r.to_dict()
+    assert json.loads(json.dumps(d))["tasks"]["1"]["episodes"] == 1
+
+
+def _plain_episode(maze: str, task: int, seed: int, act) -> tuple[bool, int]:
+    """One episode as OGBench's evaluate() runs it, with env.step one at a time."""
+    env = make_env(maze)
+    with legacy_rng(seed):
+        ob, info = env.reset(seed=seed, options=dict(task_id=task))
+        goal, done, steps = info["goal"], False, 0
+        while not done:
+            action = np.clip(act(ob[None], goal[None])[0], -1, 1)
+            ob, _, terminated, truncated, info = env.step(action)
+            done, steps = terminated or truncated, steps + 1
+    return info["success"] == 1.0, steps
+
+
+def test_batched_equals_one_env_at_a_time():
+    # teleport: its env draws from the global RNG inside step(), so interleaved episodes must not share it
+    act = oracle_policy("teleport")
+    r = evaluate_policy("teleport", act, episodes_per_task=2, seed=3, task_ids=[1, 3], batch_size=3)
+    for t in (1, 3):
+        plain = [_plain_episode("teleport", t, episode_seed(3, t, k), act) for k in range(2)]
+        assert r.tasks[t].steps == [s for _, s in plain]
+        assert r.tasks[t].successes == sum(ok for ok, _ in plain)
+    one = evaluate_policy("teleport", act, episodes_per_task=2, seed=3, task_ids=[1, 3], batch_size=1)
+    assert [t.steps for t in one.tasks.values()] == [t.steps for t in r.tasks.values()]
+    other = evaluate_policy("teleport", act, episodes_per_task=2, seed=4, task_ids=[1, 3])
+    assert [t.steps for t in other.tasks.values()] != [t.steps for t in r.tasks.values()]
+
+
+def test_actions_are_clipped():
+    oracle = oracle_policy("medium")
+
+    def act(obs, goals):
+        return 10 * oracle(obs, goals)
+
+    r = evaluate_policy("medium", act, episodes_per_task=1, seed=2, task_ids=[4])
+    assert r.tasks[4].steps == [_plain_episode("medium", 4, episode_seed(2, 4, 0), act)[1]]
+
+
+def test_policy_sees_goals_and_a_standing_policy_fails():
+    seen = []
+
+    def stand(obs, goals):
+        seen.append((obs.copy(), goals.copy()))
+        return np.zeros_like(obs)
+
+    r = evaluate_policy("large", stand, episodes_per_task=1, seed=0, task_ids=[1, 2])
+    assert r.success_rate == 0 and all(t.steps == [1000] for t in r.tasks.values())
+    obs, goals = seen[0]
+    assert obs.shape == goals.shape == (2, 2)
+    env = make_env("large").unwrapped
+    for row, task in enumerate((1, 2)):
+        info = env.task_infos[task - 1]
+        assert np.all(np.abs(goals[row] - np.array(info["goal_xy"])) <= 1.0)  # +-1 goal noise
+        assert np.all(np.abs(obs[row] - np.array(info["init_xy"])) <= 1.0)
+
+
+def test_errors():
+    act = oracle_policy("medium")
+    for bad in ([0], [6], [1, 7], []):
+        with pytest.raises(BridgeplanError, match="task ids"):
+            evaluate_policy("medium", act, episodes_per_task=1, task_ids=bad)
+    with pytest.raises(BridgeplanError, match="shape"):
+        evaluate_policy("medium", lambda o, g: np.zeros(2), episodes_per_task=1, task_ids=[1])
+    with pytest.raises(BridgeplanError, match="non-finite"):
+        evaluate_policy("medium", lambda o, g: np.full_like(o, np.nan), episodes_per_task=1, task_ids=[1])
+    with pytest.raises(BridgeplanError, match="unknown"):
+        oracle_policy("umaze")
+
+
+def test_oracle_policy_is_the_unit_direction():
+    act, oracle = oracle_policy("giant"), Oracle("giant")
+    obs = np.array([[0.3, 0.1], [9.0, 12.2]])
+    goals = np.array([[52.0, 36.0], [0.0, 0.0]])
+    a = act(obs, goals)
+    np.testing.assert_allclose(np.linalg.norm(a, axis=1), 1, atol=1e-5)
+    np.testing.assert_array_equal(a[1], oracle.direction(obs[1], goals[1]))
+
+
+def test_cli_evaluate_oracle(capsys):
+    assert main(["ogbench", "evaluate-oracle", "medium", "--episodes", "1", "--tasks", "4", "--json",
+                 "--no-progress"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert list(out["tasks"]) == ["4"] and out["episodes"] == 1
+    assert main(["ogbench", "evaluate-oracle", "medium", "--tasks", "9"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: task ids must be in 1..5") and err.count("\n") == 1
