@@ -41,6 +41,9 @@ def add_ogbench_commands(sub) -> None:
     e.add_argument("--json", action="store_true")
     e.add_argument("--no-progress", action="store_true")
     e.set_defaults(func=_cmd_evaluate_oracle)
+    from bridgeplan.gcbc_commands import add_gcbc_commands  # gcbc-train, gcbc-eval
+
+    add_gcbc_commands(og)
 
 
 def _cmd_generate(args) -> int:

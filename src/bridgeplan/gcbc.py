@@ -1,0 +1,411 @@
+"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline for pointmaze.
+
+What OGBench does (``impls/agents/gcbc.py``, ``impls/utils/datasets.py`` ``GCDataset``, ``impls/main.py``),
+re-implemented in PyTorch:
+
+- the dataset is read as OGBench's training script reads it, *compact* (``ogbench.utils.load_dataset(...,
+  compact_dataset=True)``): the last state of every trajectory is not a valid sample (it has no action
+  followed by a next state) and, as a consequence of how OGBench marks trajectory ends in that form, is
+  never a goal either: a trajectory's "final state" is its second-to-last;
+- a batch is ``batch_size`` uniform draws among the valid states; each gets a goal (:meth:`GoalDataset.sample_goals`):
+  with probability ``p_curgoal`` the state itself, with ``p_trajgoal`` a future state of the same trajectory,
+  with ``p_randomgoal`` a random valid state of the dataset. The future state is uniform on ``[t + 1, final]``
+  (OGBench's rounding of a uniform mix, so both ends carry half weight) or, with ``geom_sample``,
+  ``min(t + k, final)`` with ``k ~ Geometric(1 - discount)``. GCBC's defaults: always a future state, uniform;
+- the loss is the negative log-likelihood of the dataset's action under the policy's Gaussian
+  (:class:`bridgeplan.nets.policy.GoalPolicy`: constant std 1, so regression of the mean); Adam, lr 3e-4,
+  batch 1024, 1 M steps, no EMA, no observation normalisation;
+- evaluation acts with the mean clipped to ``[-1, 1]`` (temperature 0): :meth:`GCBCPolicy.act`.
+
+The random stream differs from OGBench's (numpy's ``Generator`` here, seeded from ``seed`` and saved in
+every checkpoint so a resumed run continues the same stream); the distributions are the same.
+
+On disk (:mod:`bridgeplan.layout`): ``RUN/checkpoint.pt`` resumes everything, ``RUN/config.json`` is the
+config beside it, ``RUN/snapshots/step_*.pt`` the policy's weights at every ``checkpoint_every`` steps (what
+evaluation loads), ``RUN/metrics.jsonl`` one line per ``log_every`` steps (loss, MSE, steps/s).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from bridgeplan import config as cfg
+from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
+from bridgeplan.device import configure_threads, resolve_device
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import code_version
+from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
+from bridgeplan.locks import run_lock
+from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
+from bridgeplan.train import make_optimizer
+
+KIND = "gcbc"
+METRICS_NAME = "metrics.jsonl"
+# Fields a resumed run may change: they do not change what is trained, only how long and where. The dataset's
+# path may change too (a moved file): its content is checked instead, by fingerprint.
+_RESUMABLE_FIELDS = frozenset({"steps", "minutes", "device", "threads", "log_every", "checkpoint_every",
+                               "dataset"})
+
+
+@dataclass(frozen=True)
+class GCBCConfig:
+    """One GCBC training run. Defaults are OGBench's for pointmaze (``impls/agents/gcbc.py``,
+    ``impls/main.py``; ``impls/hyperparameters.sh`` passes no GCBC overrides for pointmaze)."""
+
+    dataset: str = ""
+    """Path to the training npz in OGBench's format (``observations``, ``actions``, ``terminals``)."""
+    maze: str = ""
+    """The OGBench pointmaze the data is of (``medium``, ...): the file is checked to be one
+    (:func:`bridgeplan.ogbench_pointmaze.reading.check_dataset`) and evaluation defaults to it. Empty: any
+    OGBench-format file, unchecked."""
+    lr: float = 3e-4
+    """Adam's learning rate (OGBench: 3e-4)."""
+    batch_size: int = 1024
+    """Transitions per step (OGBench: 1024)."""
+    hidden_dims: tuple[int, ...] = (512, 512, 512)
+    """The policy MLP's hidden layer widths (OGBench: 512, 512, 512)."""
+    steps: int = 1_000_000
+    """Optimizer steps (OGBench: 1 M; a CPU core affords a few tens of thousands an hour, see the README)."""
+    minutes: float = 0.0
+    """Wall-clock budget in minutes across resumes (0: none); training stops at ``steps`` or this, first."""
+    p_curgoal: float = 0.0
+    """Probability that the goal is the current state (OGBench's ``actor_p_curgoal``: 0)."""
+    p_trajgoal: float = 1.0
+    """Probability that the goal is a future state of the same trajectory (``actor_p_trajgoal``: 1)."""
+    p_randomgoal: float = 0.0
+    """Probability that the goal is a random state of the dataset (``actor_p_randomgoal``: 0)."""
+    geom_sample: bool = False
+    """Future goals at a Geometric(1 - discount) offset instead of uniform (``actor_geom_sample``: False)."""
+    discount: float = 0.99
+    """Only used by ``geom_sample`` (OGBench: 0.99)."""
+    seed: int = 0
+    """Seeds the initial weights and the sampling stream."""
+    checkpoint_every: int = 100_000
+    """Steps between checkpoints and policy snapshots (OGBench evaluates every 100 k steps)."""
+    log_every: int = 5_000
+    """Steps between lines of ``metrics.jsonl`` (OGBench logs every 5 k steps)."""
+    device: str = "auto"
+    threads: int = 0
+    """Torch CPU threads (0: one on a CPU device, see :func:`bridgeplan.device.configure_threads`)."""
+
+    def __post_init__(self):
+        cfg.check_optimization(self)
+        if not self.hidden_dims or min(self.hidden_dims) <= 0:
+            raise BridgeplanError(f"hidden_dims must be positive widths, got {self.hidden_dims}")
+        probs = (self.p_curgoal, self.p_trajgoal, self.p_randomgoal)
+        if min(probs) < 0 or not math.isclose(sum(probs), 1.0):
+            raise BridgeplanError(f"goal probabilities (current, trajectory, random) must be >= 0 and sum to 1, "
+                                  f"got {probs}")
+        if self.geom_sample and not 0 < self.discount < 1:
+            raise BridgeplanError(f"discount must be in (0, 1) for geometric goal sampling, got {self.discount}")
+
+
+class GoalDataset:
+    """An OGBench dataset in compact form with GCBC's batches: states, actions and goals, sampled on the host."""
+
+    def __init__(self, path: str | Path, p_curgoal: float = 0.0, p_trajgoal: float = 1.0,
+                 p_randomgoal: float = 0.0, geom_sample: bool = False, discount: float = 0.99, maze: str = ""):
+        self.path = Path(path)
+        if maze:
+            from bridgeplan.ogbench_pointmaze.reading import check_dataset
+
+            check_dataset(self.path, maze)
+        self.p_curgoal, self.p_trajgoal, self.p_randomgoal = p_curgoal, p_trajgoal, p_randomgoal
+        self.geom_sample, self.discount = geom_sample, discount
+        data = _load_compact(self.path)
+        self.observations: np.ndarray = data["observations"]
+        self.actions: np.ndarray = data["actions"]
+        (self.valid_idxs,) = np.nonzero(data["valids"] > 0)
+        (self.terminal_locs,) = np.nonzero(data["terminals"] > 0)
+        if len(self.valid_idxs) == 0:
+            raise BridgeplanError(f"{self.path} has no transition (every trajectory is a single state)")
+
+    @classmethod
+    def for_config(cls, config: GCBCConfig, path: str | Path | None = None) -> GoalDataset:
+        return cls(path if path is not None else config.dataset, config.p_curgoal, config.p_trajgoal,
+                   config.p_randomgoal, config.geom_sample, config.discount, config.maze)
+
+    @property
+    def obs_dim(self) -> int:
+        return self.observations.shape[1]
+
+    @property
+    def action_dim(self) -> int:
+        return self.actions.shape[1]
+
+    def fingerprint(self) -> dict[str, Any]:
+        """What identifies the data a run was trained on (a resume must see the same)."""
+        digest = hashlib.sha256(self.observations.tobytes())
+        digest.update(self.actions.tobytes())
+        return {"size": int(len(self.observations)), "sha256": digest.hexdigest()[:16]}
+
+    def random_idxs(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` uniform draws among the valid states (every state but each trajectory's last)."""
+        return self.valid_idxs[rng.integers(len(self.valid_idxs), size=n)]
+
+    def sample_goals(self, idxs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The goal index for each state index, as OGBench's ``GCDataset.sample_goals`` draws it."""
+        n = len(idxs)
+        random_goals = self.random_idxs(n, rng)
+        final = self.terminal_locs[np.searchsorted(self.terminal_locs, idxs)]  # this trajectory's final state
+        if self.geom_sample:
+            traj_goals = np.minimum(idxs + rng.geometric(1.0 - self.discount, size=n), final)
+        else:
+            u = rng.random(n)  # in [0, 1): from final (u = 0) down to the next state (u -> 1)
+            traj_goals = np.round(np.minimum(idxs + 1, final) * u + final * (1.0 - u)).astype(np.int64)
+        if self.p_curgoal == 1.0:
+            return idxs.copy()
+        goals = np.where(rng.random(n) < self.p_trajgoal / (1.0 - self.p_curgoal), traj_goals, random_goals)
+        return np.where(rng.random(n) < self.p_curgoal, idxs, goals)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """A batch's indices: ``(states, goals)``; a state's index is also its action's."""
+        idxs = self.random_idxs(batch_size, rng)
+        return idxs, self.sample_goals(idxs, rng)
+
+
+def _load_compact(path: Path) -> dict[str, np.ndarray]:
+    """OGBench's compact form of the npz at ``path``, with its mistakes reported as :class:`BridgeplanError`."""
+    if not path.is_file():
+        raise BridgeplanError(f"no dataset file at {path}")
+    try:
+        with np.load(path) as f:
+            missing = [k for k in ("observations", "actions", "terminals") if k not in f.files]
+            raw_terminals = f["terminals"][...] if not missing else None
+    except (OSError, ValueError, zipfile.BadZipFile) as e:
+        raise BridgeplanError(f"cannot read dataset {path} (not an npz?): {e}") from None
+    if missing:
+        raise BridgeplanError(f"{path} lacks {', '.join(missing)} (OGBench's npz format)")
+    if len(raw_terminals) == 0 or not raw_terminals[-1]:
+        raise BridgeplanError(f"{path}: the last step must end a trajectory (terminals[-1] = 1)")
+    try:
+        from ogbench.utils import load_dataset
+    except ImportError:
+        raise BridgeplanError("reading OGBench datasets needs the ogbench package (pip install ogbench)") from None
+    data = load_dataset(str(path), compact_dataset=True)
+    obs, act = data["observations"], data["actions"]
+    if obs.ndim != 2 or act.ndim != 2 or not len(obs) == len(act) == len(data["terminals"]):
+        raise BridgeplanError(f"{path}: observations {obs.shape}, actions {act.shape} and terminals "
+                              f"{data['terminals'].shape} must be [N, d], [N, a], [N]")
+    return data
+
+
+def build_policy(config: GCBCConfig, obs_dim: int, action_dim: int) -> GoalPolicy:
+    """The policy network for ``config`` (goals are full observations, as in OGBench's state-based tasks)."""
+    return GoalPolicy(obs_dim, obs_dim, action_dim, config.hidden_dims)
+
+
+class GCBCPolicy:
+    """A trained GCBC policy behind the batched interface evaluation uses: numpy in, numpy out."""
+
+    def __init__(self, net: GoalPolicy, step: int, config: GCBCConfig, device: torch.device):
+        self.net, self.step, self.config, self.device = net.eval(), step, config, device
+
+    def act(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Actions ``[N, a]`` (the mean, clipped to [-1, 1]) for observations and goals ``[N, d]``."""
+        obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=self.device)
+        goal = torch.as_tensor(np.asarray(goals, dtype=np.float32), device=self.device)
+        return self.net.act(obs, goal).cpu().numpy()
+
+
+def load_policy(path: str | Path, device: str = "cpu") -> GCBCPolicy:
+    """The policy of a GCBC run directory (its latest checkpoint) or of one snapshot file."""
+    state = load_checkpoint(Path(path))
+    if state["kind"] != KIND:
+        raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a GCBC one")
+    config = cfg.from_dict(GCBCConfig, state["config"])
+    dev = resolve_device(device)
+    net = build_policy(config, state["obs_dim"], state["action_dim"]).to(dev)
+    net.load_state_dict(state["policy"])
+    return GCBCPolicy(net, state["step"], config, dev)
+
+
+def policy_snapshots(run_dir: str | Path) -> list[tuple[int, Path]]:
+    """``(step, path)`` of every policy snapshot of a run, ascending."""
+    return [(s, snapshot_path(run_dir, s)) for s in snapshot_steps(run_dir)]
+
+
+def _comparable(config_dict: dict) -> dict:
+    return {k: v for k, v in json.loads(json.dumps(config_dict)).items() if k not in _RESUMABLE_FIELDS}
+
+
+def train_gcbc(config: GCBCConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> Path:
+    """Train GCBC into ``run_dir`` (a fresh directory, or a run to continue with ``resume``); returns it.
+
+    A resumed run continues exactly: N steps in one go and N/2 + N/2 across a resume give the same weights.
+    """
+    run_dir = Path(run_dir)
+    ckpt = checkpoint_path(run_dir)
+    # refused before anything is created or read
+    if ckpt.exists() and not resume:
+        raise BridgeplanError(f"run directory {run_dir} already has a checkpoint; pass --resume to continue it")
+    if resume and not ckpt.exists():
+        raise BridgeplanError(f"--resume given but {ckpt} does not exist")
+    device = resolve_device(config.device)
+    data = GoalDataset.for_config(config)
+    with run_lock(run_dir):  # one trainer per run directory
+        configure_threads(config.threads, device)
+        return _train_locked(config, data, run_dir, resume, device, progress)
+
+
+def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: bool, device: torch.device,
+                  progress: bool) -> Path:
+    ckpt = checkpoint_path(run_dir)
+    config_dict = cfg.to_dict(config)
+    fingerprint = data.fingerprint()
+    torch.manual_seed(config.seed)  # the initial weights
+    net = build_policy(config, data.obs_dim, data.action_dim).to(device)
+    optimizer = make_optimizer(net, config.lr)
+    rng = np.random.default_rng(config.seed)
+    step, elapsed = 0, 0.0
+    # NLL and MSE summed since the log line at step log_from (saved: a resumed run writes the same lines)
+    sums, log_from = torch.zeros(2, device=device), 0
+    if resume:
+        state = load_checkpoint(ckpt)
+        if state["kind"] != KIND:
+            raise BridgeplanError(f"{ckpt} is a {state['kind']} checkpoint, not a GCBC one")
+        if _comparable(state["config"]) != _comparable(config_dict):
+            diff = sorted(k for k in _comparable(config_dict)
+                          if _comparable(state["config"]).get(k) != _comparable(config_dict)[k])
+            raise BridgeplanError(f"{ckpt} was trained with a different config ({', '.join(diff)} differ)")
+        if state["dataset"] != fingerprint:
+            raise BridgeplanError(f"{ckpt} was trained on different data than {config.dataset}")
+        net.load_state_dict(state["policy"])
+        optimizer.load_state_dict(state["optimizer"])
+        rng.bit_generator.state = state["rng"]
+        step, elapsed = state["step"], state["elapsed_seconds"]
+        sums.copy_(state["log_sums"])
+        log_from = state["log_from"]
+    write_config(run_dir, {"kind": KIND, "config": config_dict, "code_version": code_version()})
+    metrics = _Metrics(run_dir / METRICS_NAME, keep_until=step)
+
+    obs = torch.as_tensor(data.observations, device=device)
+    actions = torch.as_tensor(data.actions, device=device)
+
+    def snapshot_state() -> dict:
+        return {"kind": KIND, "config": config_dict, "dataset": fingerprint, "obs_dim": data.obs_dim,
+                "action_dim": data.action_dim, "step": step, "elapsed_seconds": elapsed,
+                "code_version": code_version(), "policy": net.state_dict()}
+
+    def save() -> None:
+        # the snapshot first: killed between the writes, the resumed run rewrites it (identically)
+        save_checkpoint(snapshot_path(run_dir, step), snapshot_state())
+        save_checkpoint(ckpt, snapshot_state() | {"optimizer": optimizer.state_dict(),
+                                                  "rng": rng.bit_generator.state, "log_sums": sums.cpu(),
+                                                  "log_from": log_from})
+
+    budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc="train gcbc", unit="step",
+               dynamic_ncols=True)
+    nonfinite = torch.zeros((), dtype=torch.bool, device=device)  # read only at logs and saves (a GPU sync)
+    last_saved, t_start = step, time.perf_counter()
+    t_log, step_rate, elapsed0 = t_start, step, elapsed
+    net.train()
+    try:
+        while step < config.steps and elapsed < budget:
+            idx, goal_idx = data.sample(config.batch_size, rng)
+            idx_t, goal_t = torch.from_numpy(idx).to(device), torch.from_numpy(goal_idx).to(device)
+            mean, a = net(obs[idx_t], obs[goal_t]), actions[idx_t]
+            loss = unit_gaussian_nll(mean, a).mean()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            step += 1
+            elapsed = elapsed0 + time.perf_counter() - t_start
+            bar.update(1)
+            with torch.no_grad():
+                nonfinite |= ~torch.isfinite(loss)
+                sums += torch.stack([loss.detach(), (mean - a).square().mean()])  # OGBench's "mse" too
+            log_due, save_due = step % config.log_every == 0, step % config.checkpoint_every == 0
+            if (log_due or save_due) and bool(nonfinite):
+                raise BridgeplanError(f"loss became non-finite before step {step}; stopped"
+                                      + (f" (last good checkpoint: step {last_saved})" if last_saved else ""))
+            if log_due:
+                now = time.perf_counter()
+                rate = (step - step_rate) / max(now - t_log, 1e-9)
+                nll, mse = (sums / (step - log_from)).tolist()
+                t_log, step_rate, log_from = now, step, step
+                sums.zero_()
+                bar.set_postfix(loss=f"{nll:.4f}", mse=f"{mse:.4f}", steps_per_s=f"{rate:.1f}")
+                metrics.write({"step": step, "loss": nll, "mse": mse, "steps_per_s": rate,
+                               "elapsed_seconds": elapsed})
+            if save_due:
+                save()
+                last_saved = step
+        if bool(nonfinite):
+            raise BridgeplanError(f"loss became non-finite before step {step}; stopped")
+        if step != last_saved:
+            save()
+    finally:
+        bar.close()
+        metrics.close()
+    return run_dir
+
+
+class _Metrics:
+    """``metrics.jsonl``: one JSON line per log; a resumed run drops the lines after its checkpoint's step
+    (the killed run's lines that training repeats)."""
+
+    def __init__(self, path: Path, keep_until: int):
+        lines = path.read_text().splitlines() if path.exists() and keep_until > 0 else []
+        kept = [ln for ln in lines if ln.strip() and json.loads(ln)["step"] <= keep_until]
+        path.write_text("".join(ln + "\n" for ln in kept))
+        self._file = path.open("a")
+
+    def write(self, row: dict) -> None:
+        self._file.write(json.dumps(row) + "\n")
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read_metrics(run_dir: str | Path) -> list[dict]:
+    """The rows of a run's ``metrics.jsonl``."""
+    path = Path(run_dir) / METRICS_NAME
+    return [json.loads(ln) for ln in path.read_text().splitlines() if ln.strip()] if path.exists() else []
+
+
+
+def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None = None, episodes: int = 0,
+                  seed: int = 0, progress: bool = False) -> list[dict]:
+    """OGBench's evaluation protocol (:func:`bridgeplan.ogbench_pointmaze.protocol.evaluate_policy`: 5 tasks,
+    50 episodes each by default) for a run's policy snapshots at ``steps`` (default: its latest checkpoint).
+    Each result is also written to ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>.json``; returns them in order."""
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
+
+    run_dir = Path(run_dir)
+    episodes = episodes or EVAL_EPISODES_PER_TASK
+    available = dict(policy_snapshots(run_dir))
+    paths = [checkpoint_path(run_dir)] if steps is None else []
+    for s in steps or []:
+        if s not in available:
+            raise BridgeplanError(f"{run_dir} has no snapshot at step {s} (it has: "
+                                  f"{', '.join(map(str, available)) or 'none'})")
+        paths.append(available[s])
+    results = []
+    for path in paths:
+        policy = load_policy(path)
+        on = maze or policy.config.maze
+        if not on:
+            raise BridgeplanError(f"{run_dir} was trained without --maze: say which maze to evaluate in")
+        r = evaluate_policy(on, policy.act, episodes_per_task=episodes, seed=seed, progress=progress)
+        row = {"run": str(run_dir), "step": policy.step, "code_version": code_version(), **r.to_dict()}
+        atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{episodes}-seed{seed}.json",
+                          json.dumps(row, indent=2) + "\n")
+        results.append(row | {"text": r.format()})
+    return results
+

@@ -1,0 +1,77 @@
+"""The ``bridgeplan ogbench gcbc-train`` and ``gcbc-eval`` commands (torch is imported only when one runs)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+
+
+def add_gcbc_commands(og) -> None:
+    """``bridgeplan ogbench gcbc-train`` and ``gcbc-eval`` on the ``ogbench`` group's subparsers ``og``."""
+    t = og.add_parser("gcbc-train", help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
+                      description="Defaults: OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py): "
+                                  "lr 3e-4, batch 1024, MLP 512x3, future-state goals, 1M steps.")
+    t.add_argument("dataset", help="training npz in OGBench's format")
+    t.add_argument("--run-dir", required=True)
+    t.add_argument("--maze", help="the pointmaze the data is of (checked; evaluation's default)")
+    for name, kind in (("steps", int), ("minutes", float), ("batch-size", int), ("lr", float), ("seed", int),
+                       ("p-curgoal", float), ("p-trajgoal", float), ("p-randomgoal", float), ("discount", float),
+                       ("checkpoint-every", int), ("log-every", int), ("threads", int)):
+        t.add_argument(f"--{name}", type=kind)
+    t.add_argument("--hidden-dims", help="comma-separated widths (default 512,512,512)")
+    t.add_argument("--geom-sample", action="store_true", help="future goals at geometric offsets")
+    t.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
+    t.add_argument("--resume", action="store_true")
+    t.add_argument("--no-progress", action="store_true")
+    t.set_defaults(func=_cmd_gcbc_train)
+    e = og.add_parser("gcbc-eval", help="a GCBC run on OGBench's 5-task evaluation protocol")
+    e.add_argument("run", help="a gcbc-train run directory")
+    e.add_argument("--maze", help="default: the maze the run was trained with")
+    e.add_argument("--steps", help="comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
+    e.add_argument("--episodes", type=int, default=0, help="episodes per task (default 50, as OGBench)")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--json", action="store_true")
+    e.add_argument("--no-progress", action="store_true")
+    e.set_defaults(func=_cmd_gcbc_eval)
+
+
+def _cmd_gcbc_train(args) -> int:
+    from bridgeplan.checkpoint import load_checkpoint
+    from bridgeplan.gcbc import GCBCConfig, train_gcbc
+    from bridgeplan.layout import checkpoint_path
+
+    given = {f: getattr(args, f) for f in ("maze", "steps", "minutes", "batch_size", "lr", "seed", "p_curgoal",
+                                           "p_trajgoal", "p_randomgoal", "discount", "checkpoint_every",
+                                           "log_every", "threads", "device")}
+    given = {k: v for k, v in given.items() if v is not None}
+    if args.hidden_dims:
+        try:
+            given["hidden_dims"] = tuple(int(v) for v in args.hidden_dims.split(","))
+        except ValueError:
+            raise BridgeplanError(f"--hidden-dims takes comma-separated integers, got {args.hidden_dims!r}") from None
+    if args.geom_sample:
+        given["geom_sample"] = True
+    run = train_gcbc(GCBCConfig(dataset=args.dataset, **given), Path(args.run_dir), resume=args.resume,
+                     progress=not args.no_progress)
+    print(f"trained {run} (step {load_checkpoint(checkpoint_path(run))['step']})")
+    return 0
+
+
+def _cmd_gcbc_eval(args) -> int:
+    from bridgeplan.gcbc import evaluate_gcbc, policy_snapshots
+
+    steps = None
+    if args.steps == "all":
+        steps = [s for s, _ in policy_snapshots(args.run)]
+    elif args.steps:
+        try:
+            steps = [int(v) for v in args.steps.split(",")]
+        except ValueError:
+            raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {args.steps!r}") from None
+    rows = evaluate_gcbc(args.run, args.maze or "", steps, args.episodes, args.seed, progress=not args.no_progress)
+    for row in rows:
+        text = row.pop("text")
+        print(json.dumps(row, indent=2) if args.json else f"step {row['step']}: {text}")
+    return 0
