@@ -69,6 +69,7 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_evaluate_oracle(args) -> int:
+    from bridgeplan.files import code_version
     from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy, oracle_policy
 
     tasks = None
@@ -80,5 +81,6 @@ def _cmd_evaluate_oracle(args) -> int:
     r = evaluate_policy(args.maze, oracle_policy(args.maze),
                         episodes_per_task=args.episodes or EVAL_EPISODES_PER_TASK, seed=args.seed,
                         task_ids=tasks, progress=not args.no_progress)
-    print(json.dumps(r.to_dict(), indent=2) if args.json else r.format())
+    print(json.dumps({**r.to_dict(), "policy": "oracle", "code_version": code_version()}, indent=2) if args.json
+          else r.format())
     return 0
