@@ -403,7 +403,10 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
         if not on:
             raise BridgeplanError(f"{run_dir} was trained without --maze: say which maze to evaluate in")
         r = evaluate_policy(on, policy.act, episodes_per_task=episodes, seed=seed, progress=progress)
-        row = {"run": str(run_dir), "step": policy.step, "code_version": code_version(), **r.to_dict()}
+        # the run and its dataset named by what they are (no path of this machine); the training seed beside
+        # the protocol's evaluation seed, so that rows over several training seeds can be averaged as OGBench does
+        row = {"run": run_dir.name, "dataset": Path(policy.config.dataset).stem, "train_seed": policy.config.seed,
+               "step": policy.step, "code_version": code_version(), **r.to_dict()}
         atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{episodes}-seed{seed}.json",
                           json.dumps(row, indent=2) + "\n")
         results.append(row | {"text": r.format()})

@@ -70,6 +70,9 @@ GENERATORS = {g.name: g for g in [
     Generator("headline", "bridgeplan.studies.reports.headline", "headline.md",
               "the best tracked and the best pursued planner per maze and task set, with the floors and the expert",
               ("README.md",)),
+    Generator("ogbench-calibration", "bridgeplan.studies.reports.ogbench_calibration", "ogbench-calibration.md",
+              "OGBench pointmaze: the oracle and GCBC on locally generated data by OGBench's protocol, beside "
+              "OGBench's published GCBC", ("docs/ogbench_pointmaze.md",)),
     Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("README.md",)),

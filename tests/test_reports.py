@@ -1,5 +1,5 @@
-"""The CDDB report (bridgeplan.studies.reports.cddb) on hand-made rows: settings are chosen on validation and
-reported on test, DDPM's bar is its best NFE, and the verdicts follow the paired differences."""
+"""Report generators on hand-made rows: the CDDB report (settings chosen on validation and reported on test,
+DDPM's bar its best NFE, verdicts from the paired differences) and the OGBench calibration's averaging."""
 
 from __future__ import annotations
 
@@ -76,3 +76,26 @@ def test_the_report_chooses_on_validation_and_judges_on_test(tmp_path):
     assert goal[2].startswith("- cddb-deep dynamics: chosen on validation cddb-deep dynamics=0.0001 at NFE 1")
     assert goal[2].endswith("yes (+1.0 ± 0.0)")
     assert goal[0].startswith("- uncorrected: chosen on validation uncorrected at NFE 1")
+
+
+def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_path):
+    """GCBC as OGBench averages it: per training seed the mean of its last 3 evaluations, then over seeds."""
+    from bridgeplan.studies.reports import ogbench_calibration as oc
+
+    def row(seed, step, rate, **extra):
+        tasks = {str(i): {"task_id": i, "success_rate": rate} for i in range(1, 6)}
+        return {"run": f"gcbc-s{seed}", "step": step, "code_version": "v", "maze": "large",
+                "env_id": "pointmaze-large-v0", "episodes_per_task": 50, "seed": 0, "success_rate": rate,
+                "tasks": tasks, **extra}
+
+    (tmp_path / oc.ORACLE).mkdir()
+    (tmp_path / oc.ORACLE / "large.json").write_text(json.dumps(row(0, 0, 0.9)))
+    (tmp_path / oc.GCBC).mkdir()
+    for seed, rates in ((0, (0.9, 0.1, 0.2, 0.3)), (1, (0.0, 0.3, 0.4, 0.5))):  # the first snapshot is left out
+        for step, rate in zip((1, 2, 3, 4), rates):
+            (tmp_path / oc.GCBC / f"s{seed}-{step}.json").write_text(json.dumps(
+                row(seed, step, rate, dataset="pointmaze-large-navigate-v0", train_seed=seed)))
+    text = oc.render(tmp_path)
+    # seed 0: mean(10, 20, 30) = 20; seed 1: mean(30, 40, 50) = 40; over seeds 30 ± 10
+    assert "**30.0 ± 10.0**; OGBench's published GCBC: 29" in text
+    assert "| pointmaze-large-v0 | 50 | 90 | 90 | 90 | 90 | 90 | 90.0 | v |" in text
