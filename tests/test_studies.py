@@ -105,7 +105,7 @@ def test_study_list(capsys):
     lines = {line.split("\t")[0]: line.split("\t")[1:] for line in capsys.readouterr().out.strip().splitlines()}
     assert {"findings", "prior-curves", "controllers", "medium-v2-curves", "umaze-v2-curves"} <= set(lines)
     assert lines["findings"][0] == "studies/findings.toml"
-    assert "docs/results/findings.md (feeds README.md, docs/results/README.md)" in lines["findings"][1]
+    assert "docs/results/findings.md (feeds README.md, docs/history.md)" in lines["findings"][1]
     assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop)"
 
 

@@ -36,7 +36,7 @@ early (detours through it, or candidates that do); for one that slows down, arri
 stretched. The step is fixed per episode: taking each replan's own (truncated) arrival instead compounds
 the 0.45 lead into ever earlier deadlines, until no plan can keep them. It puts the network on a held tail
 it never saw in training; planning over a shorter horizon instead (the U-Net is convolutional) was worse in
-a trial, because a plan too short for the path cuts through walls. Results: docs/results/README.md.
+a trial, because a plan too short for the path cuts through walls. Results: docs/results/controllers.md and findings.md.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ CONTROLLERS = ("track", "pursuit")
 DEFAULT_LOOKAHEAD = 1.0
 """Pursuit's default lookahead (maze units; a cell is 1): the middle of the measured 0.5-1.5; which is best
 depends on the planner and its NFE (noisier plans want a longer one): choose it on validation episodes
-(`experiment controllers --validation`; docs/results/README.md)."""
+(`experiment controllers --validation`; docs/results/controllers.md)."""
 
 
 def tracking_action(state: np.ndarray, planned_next_state: np.ndarray) -> np.ndarray:
