@@ -32,7 +32,8 @@ NAME = "pointmaze-medium-navigate-v0"
 # plans of 8 states 4 steps apart (29 steps): episodes of 60 steps hold windows, and tiny runs train in seconds
 SHAPE = ("--horizon", "8", "--stride", "4")
 PROCESSES = {"ddpm": ("--process", "ddpm"), "bridge": ("--process", "bridge", "--prior", "line"),
-             "flow": ("--process", "flow", "--prior", "line")}
+             "flow": ("--process", "flow", "--prior", "line"), "bridge-learned": ("--process", "bridge", "--prior",
+                                                                                   "learned", "--prior-run", "{prior}")}
 
 
 @pytest.fixture(scope="module")
@@ -46,10 +47,14 @@ def navigate(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def point_runs(navigate, tmp_path_factory) -> dict[str, Path]:
-    """One tiny run per process (3 optimizer steps), trained through the CLI."""
+    """One tiny run per process and prior (3 optimizer steps), and the learned prior's, trained through the CLI."""
     root = tmp_path_factory.mktemp("point-runs")
+    prior = tmp_path_factory.mktemp("point-prior") / "prior"
+    assert main(["train-prior", "--maze", NAME, "--dataset", str(navigate), "--preset", "cpu-small", *SHAPE,
+                 "--steps", "3", "--run-dir", str(prior), "--device", "cpu", "--no-progress"]) == 0
     runs = {}
     for name, flags in PROCESSES.items():
+        flags = [f.format(prior=prior) for f in flags]
         assert main(["train", "--maze", NAME, "--dataset", str(navigate), "--preset", "cpu-small", *SHAPE,
                      "--steps", "3", "--checkpoint-every", "3", "--runs-root", str(root), "--device", "cpu",
                      "--no-progress", *flags]) == 0
@@ -101,6 +106,7 @@ def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
     assert all(0 <= t["success_rate"] <= 1 and t["episodes"] == 1 for t in r["tasks"].values())
     assert 0 <= r["success_rate"] <= 1 and 0 <= r["floor_line"]["success_rate"] <= 1
     assert (r["nfe"], r["episodes_per_task"], r["dataset"], r["run"]) == (2, 1, NAME, point_runs[process].name)
+    assert r["prior"] == r["config"]["prior"] and "/" not in r["config"]["prior_run"]
     assert r["config"]["dataset"] == f"{NAME}.npz" and r["environment"]["code_version"]
     steps = [s for t in r["tasks"].values() for s in t["steps"]]
     k = r["execution"]["replan_every"]
@@ -120,6 +126,8 @@ def test_cross_family_is_one_error(point_runs, tiny_runs, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and "ogbench eval" in err
     assert not (point / "eval").exists() or not any(p.name.startswith("step") for p in (point / "eval").iterdir())
+    assert main(["render", str(point), "--episodes", "1", "--out", str(tmp_path / "r.png")]) == 2
+    assert "ogbench eval" in capsys.readouterr().err and not (tmp_path / "r.png").exists()
 
 
 def test_a_step_of_the_environment_is_gain_times_the_action():
