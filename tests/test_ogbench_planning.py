@@ -167,6 +167,9 @@ def test_actions_clip_and_pursuit_keeps_its_direction():
     assert f.passed.tolist() == [5]
     f.actions(np.array([[-2.0, 0.0]]), plans, np.ones(1))
     assert f.passed.tolist() == [5]
+    # a point that does not move (stopped by a wall) follows the plan's schedule: the waypoint moves on
+    f.actions(np.array([[-2.0, 0.0]]), plans, np.full(1, 11))
+    assert f.passed.tolist() == [12]
     with pytest.raises(BridgeplanError, match="--controller"):
         PointFollower(1, "hold")
 

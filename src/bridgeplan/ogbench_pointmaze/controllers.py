@@ -11,13 +11,17 @@ from a stride); their actions are ignored, as Maze2D's controllers ignore theirs
   the plan's end its last position (the goal). The plan's timing is executed as well as its path: a plan that
   moves at the data's pace reproduces itself exactly while it moves less than ``GAIN`` per axis per step.
 - ``pursuit``: the plan's path at the expert's pace. The waypoint is the first planned position, among those
-  not yet passed, at least ``lookahead`` from the point (the plan's last position once every other is passed),
+  not yet passed and not behind the plan's schedule (the tracking target's index), at least ``lookahead`` from
+  the point (the plan's last position once every other is passed),
   and the point steps toward it at the datasets' expert's speed, a unit action (the oracle's unit direction),
   i.e. :func:`step_action` toward the point one such step along the way; within one step of the waypoint it
   lands on it. Why not :func:`step_action` on the waypoint itself: a waypoint a lookahead away saturates both
   components, which would bend every move up to 45 degrees toward a diagonal. Why the expert's pace: the data's
   expert is slowed by its action noise (0.80-0.88 of the oracle's progress per step), so a plan that imitates
-  it arrives late however well it is tracked.
+  it arrives late however well it is tracked. Why never behind the schedule: a plan that cuts a wall corner
+  puts a waypoint behind the wall, the point stops against the wall, and a waypoint chosen by distance alone
+  would never change (measured: every episode of a task stuck so); with the schedule it moves on along the
+  plan, and the point slides along the wall after it, as under ``track``.
 """
 
 from __future__ import annotations
@@ -87,7 +91,8 @@ class PointFollower:
         """Actions ``[n, 2]`` for the points at ``positions [n, 2]`` executing ``plans [n, S, 2]``."""
         if self.kind == "track":
             return step_action(positions, tracking_targets(plans, age), self.gain)
-        self.passed = pursuit_waypoints(plans, positions, self.passed, self.lookahead)
+        schedule = np.minimum(np.asarray(age) + 1, np.asarray(plans).shape[1] - 1)  # track's target index
+        self.passed = pursuit_waypoints(plans, positions, np.maximum(self.passed, schedule), self.lookahead)
         waypoints = np.asarray(plans, np.float64)[np.arange(len(plans)), self.passed]
         return pursuit_action(positions, waypoints, self.gain)
 
