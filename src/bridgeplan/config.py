@@ -17,6 +17,7 @@ from typing import Any
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
+from bridgeplan.ogbench_pointmaze import plans as pointmaze_plans
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
 from bridgeplan.trajectory import POINTMAZE_PREFIX, Layout, layout_for, span
@@ -38,9 +39,7 @@ def is_pointmaze(maze: str) -> bool:
 def maze_horizon(maze: str) -> int:
     """The default planning horizon of ``maze`` (Diffuser's; an OGBench pointmaze dataset's ``diffuser`` one)."""
     if is_pointmaze(maze):
-        from bridgeplan.ogbench_pointmaze.plans import plan_shape as pointmaze_shape
-
-        return pointmaze_shape(maze, "diffuser")[0]
+        return pointmaze_plans.plan_shape(maze, "diffuser")[0]
     if maze not in _DIFFUSER_MAZE:
         raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)} or an OGBench "
                               f"dataset name ({POINTMAZE_PREFIX}...)")
@@ -53,9 +52,7 @@ def plan_shape(maze: str, preset: str) -> tuple[int, int]:
     the maze in minutes (measured in docs/results). OGBench pointmaze datasets have their own shapes, sized to
     their evaluation tasks (:mod:`bridgeplan.ogbench_pointmaze.plans`)."""
     if is_pointmaze(maze):
-        from bridgeplan.ogbench_pointmaze.plans import plan_shape as pointmaze_shape
-
-        return pointmaze_shape(maze, preset)
+        return pointmaze_plans.plan_shape(maze, preset)
     horizon = maze_horizon(maze)
     if preset == "diffuser":
         return horizon, 1
@@ -67,17 +64,13 @@ def plan_shape(maze: str, preset: str) -> tuple[int, int]:
 def _check_horizon(maze: str, horizon: int, stride: int) -> None:
     if stride < 1:
         raise BridgeplanError(f"stride must be >= 1 (environment steps between planned states), got {stride}")
-    if is_pointmaze(maze):
-        from bridgeplan.ogbench_pointmaze.plans import episode_steps
-
-        episode = episode_steps(maze)
-    else:
-        episode = get_maze(maze).episode_steps
+    # a pointmaze plan must also fit its dataset's episodes (a stitch dataset's are 201 steps)
+    episode = pointmaze_plans.episode_steps(maze) if is_pointmaze(maze) else get_maze(maze).episode_steps
     if horizon < 2 or span(horizon, stride) > episode:
         at = f" at stride {stride}" if stride > 1 else ""
         raise BridgeplanError(f"horizon {horizon}{at} does not fit {maze}: a plan spans (horizon - 1) * stride + 1 "
                               f"= {span(horizon, stride)} steps, at least 2 and at most {episode} (the maze's "
-                              f"episode length{'' if not is_pointmaze(maze) else ', or its data episodes if shorter'})")
+                              f"episode length)")
 
 
 @dataclass(frozen=True)
@@ -252,10 +245,7 @@ def _horizon_tag(horizon: int, stride: int) -> str:
 def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> TrainConfig:
     """Default training config for ``maze`` and ``preset``, with field ``overrides`` applied."""
     horizon, stride = plan_shape(maze, preset)
-    if is_pointmaze(maze):
-        from bridgeplan.ogbench_pointmaze.plans import DIFFUSION_STEPS as n_steps
-    else:
-        n_steps = _DIFFUSER_MAZE[maze][1]
+    n_steps = pointmaze_plans.DIFFUSION_STEPS if is_pointmaze(maze) else _DIFFUSER_MAZE[maze][1]
     if preset == "diffuser":
         base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
     else:
