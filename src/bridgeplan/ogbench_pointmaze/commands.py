@@ -127,7 +127,7 @@ def _cmd_eval(args) -> int:
         raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
     execution = PointExecution(args.controller, replan_every=args.replan_every,
                                **({} if args.lookahead is None else {"lookahead": args.lookahead}))
-    episodes = args.episodes_per_task or EVAL_EPISODES_PER_TASK
+    episodes = EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
     result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
                           seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
                           snapshot=args.snapshot, progress=not args.no_progress,
