@@ -10,7 +10,11 @@ the batch it was sampled in (the same run, settings and seed give the same resul
 
 Why no arrival rule as in Maze2D's closed loop (:mod:`bridgeplan.replan`): the evaluation environment ends an
 episode as soon as the point is within 1.0 of the goal, so a plan that passes the goal early ends the episode
-there, and nothing needs to hold it.
+there, and nothing needs to hold it. What replanning cannot fix is the one :mod:`bridgeplan.replan` describes: each
+plan is conditioned to arrive at its last state, a full span after it is made, so under ``track`` every replan
+stretches what is left of the path over another span (the point slows down), and a plan for a goal closer than
+a span of the data's motion spends the surplus moving (loops, detours), which a replan every K < span steps may
+cut off before it passes the goal.
 """
 
 from __future__ import annotations
