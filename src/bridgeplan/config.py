@@ -17,9 +17,10 @@ from typing import Any
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
+from bridgeplan.ogbench_pointmaze import plans as pointmaze_plans
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
-from bridgeplan.trajectory import Layout, layout_for, span
+from bridgeplan.trajectory import POINTMAZE_PREFIX, Layout, layout_for, span
 
 # Diffuser's Maze2D settings per maze: horizon and diffusion steps.
 _DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
@@ -29,17 +30,29 @@ _CPU_SMALL_SHAPE = {"umaze": (128, 1), "medium": (32, 8), "large": (48, 8), "ope
 PRESETS = ("diffuser", "cpu-small")
 
 
+def is_pointmaze(maze: str) -> bool:
+    """Whether ``maze`` names an OGBench pointmaze dataset (``pointmaze-medium-navigate-v0``) rather than a Maze2D
+    maze: the environment family, whose plan shapes, episodes and evaluation are its own."""
+    return maze.startswith(POINTMAZE_PREFIX)
+
+
 def maze_horizon(maze: str) -> int:
-    """The default planning horizon of ``maze`` (Diffuser's)."""
+    """The default planning horizon of ``maze`` (Diffuser's; an OGBench pointmaze dataset's ``diffuser`` one)."""
+    if is_pointmaze(maze):
+        return pointmaze_plans.plan_shape(maze, "diffuser")[0]
     if maze not in _DIFFUSER_MAZE:
-        raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)}")
+        raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)} or an OGBench "
+                              f"dataset name ({POINTMAZE_PREFIX}...)")
     return _DIFFUSER_MAZE[maze][0]
 
 
 def plan_shape(maze: str, preset: str) -> tuple[int, int]:
     """``(horizon, stride)`` of ``preset``'s plans in ``maze``: Diffuser's horizon at stride 1 for ``diffuser``;
     for ``cpu-small`` the same span planned every ``stride``-th step where that is what lets a CPU learn
-    the maze in minutes (measured in docs/results)."""
+    the maze in minutes (measured in docs/results). OGBench pointmaze datasets have their own shapes, sized to
+    their evaluation tasks (:mod:`bridgeplan.ogbench_pointmaze.plans`)."""
+    if is_pointmaze(maze):
+        return pointmaze_plans.plan_shape(maze, preset)
     horizon = maze_horizon(maze)
     if preset == "diffuser":
         return horizon, 1
@@ -51,7 +64,8 @@ def plan_shape(maze: str, preset: str) -> tuple[int, int]:
 def _check_horizon(maze: str, horizon: int, stride: int) -> None:
     if stride < 1:
         raise BridgeplanError(f"stride must be >= 1 (environment steps between planned states), got {stride}")
-    episode = get_maze(maze).episode_steps
+    # a pointmaze plan must also fit its dataset's episodes (a stitch dataset's are 201 steps)
+    episode = pointmaze_plans.episode_steps(maze) if is_pointmaze(maze) else get_maze(maze).episode_steps
     if horizon < 2 or span(horizon, stride) > episode:
         at = f" at stride {stride}" if stride > 1 else ""
         raise BridgeplanError(f"horizon {horizon}{at} does not fit {maze}: a plan spans (horizon - 1) * stride + 1 "
@@ -64,9 +78,11 @@ class TrainConfig:
     """Everything that defines a training run of a planner (or of a learned prior)."""
 
     maze: str = "umaze"
-    """Maze the data comes from and the planner is evaluated in."""
+    """Maze the data comes from and the planner is evaluated in: a Maze2D maze (``umaze``, ...) or an OGBench
+    pointmaze dataset's name (``pointmaze-medium-navigate-v0``: its maze, and the kind of data it holds)."""
     dataset: str = ""
-    """Path to the dataset directory (``bridgeplan data generate``) or a legacy D4RL hdf5 file."""
+    """Path to the dataset directory (``bridgeplan data generate``) or a legacy D4RL hdf5 file; for OGBench
+    pointmaze, the dataset's ``.npz`` file (``bridgeplan ogbench generate``, or an official one)."""
     horizon: int = 128
     """Planning horizon H (planned states); divisible by the U-Net's downsampling factor."""
     stride: int = 1
@@ -229,7 +245,7 @@ def _horizon_tag(horizon: int, stride: int) -> str:
 def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> TrainConfig:
     """Default training config for ``maze`` and ``preset``, with field ``overrides`` applied."""
     horizon, stride = plan_shape(maze, preset)
-    n_steps = _DIFFUSER_MAZE[maze][1]
+    n_steps = pointmaze_plans.DIFFUSION_STEPS if is_pointmaze(maze) else _DIFFUSER_MAZE[maze][1]
     if preset == "diffuser":
         base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
     else:

@@ -33,7 +33,7 @@ from bridgeplan.maze.tasks import sample_tasks
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import Execution, PlanSource, percentiles_ms
-from bridgeplan.runs import RunInfo, load_planner
+from bridgeplan.runs import RunInfo, load_planner, require_family
 from bridgeplan.trajectory import MAZE2D
 
 
@@ -330,6 +330,7 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
+    require_family(info, "maze2d")
     planner = planner.with_correction(correction)
     if multi_task:
         check_multi_task_data(info.config.maze, info.config.dataset)

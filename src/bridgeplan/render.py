@@ -90,11 +90,12 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     from bridgeplan.evaluate import check_multi_task_data, make_tasks
     from bridgeplan.layout import render_dir
     from bridgeplan.maze.rollout import execute_plans
-    from bridgeplan.runs import load_planner, load_windows
+    from bridgeplan.runs import load_planner, load_windows, require_family
     from bridgeplan.trajectory import window_conditions
 
     run = Path(run)
     planner, info = load_planner(run, device=device)
+    require_family(info, "maze2d")
     config = info.config
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)

@@ -33,11 +33,16 @@ def windows_of(stream, horizon: int, stride: int = 1):
 
 
 def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
-    """:func:`windows_of` the dataset at ``dataset``, checked to be from ``maze``."""
+    """:func:`windows_of` the dataset at ``dataset``, checked to be from ``maze`` (an OGBench pointmaze dataset
+    name reads an OGBench ``.npz`` file, checked to be of that name's maze)."""
     from bridgeplan.data import load_stream
 
     if not dataset:
         raise BridgeplanError("no dataset given: pass --dataset (see `bridgeplan data generate`)")
+    if cfg.is_pointmaze(maze):
+        from bridgeplan.ogbench_pointmaze.reading import load_stream as load_ogbench_stream
+
+        return windows_of(load_ogbench_stream(dataset, maze), horizon, stride)
     stream = load_stream(dataset)
     if stream.maze != maze:
         raise BridgeplanError(f"dataset {dataset} is from maze {stream.maze!r}, not {maze!r}")
@@ -139,6 +144,25 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     if sampler is not None:
         planner = planner.with_sampler(sampler, eta)
     return planner, RunInfo(run_dir_of(run), config, state["config"], state["step"], state["elapsed_seconds"])
+
+
+FAMILIES = {"maze2d": ("Maze2D", "bridgeplan eval"), "ogbench": ("OGBench pointmaze", "bridgeplan ogbench eval")}
+"""The environment families a run can be trained on: their names and the command that evaluates their runs."""
+
+
+def family_of(config: cfg.TrainConfig) -> str:
+    """``ogbench`` for a run trained on an OGBench pointmaze dataset, else ``maze2d``."""
+    return "ogbench" if cfg.is_pointmaze(config.maze) else "maze2d"
+
+
+def require_family(info: RunInfo, family: str) -> None:
+    """A :class:`BridgeplanError` unless ``info``'s run was trained on ``family`` (:data:`FAMILIES`): a planner
+    is evaluated in the environment family it learned (its layout, tasks and protocol are that family's)."""
+    ours = family_of(info.config)
+    if ours != family:
+        name, command = FAMILIES[ours]
+        raise BridgeplanError(f"{info.path} is a {name} planner (trained on {info.config.maze}), not a "
+                              f"{FAMILIES[family][0]} one: evaluate it with `{command}`")
 
 
 def run_dir_of(path: Path) -> Path:

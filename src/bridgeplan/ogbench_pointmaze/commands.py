@@ -41,6 +41,7 @@ def add_ogbench_commands(sub) -> None:
     e.add_argument("--json", action="store_true")
     e.add_argument("--no-progress", action="store_true")
     e.set_defaults(func=_cmd_evaluate_oracle)
+    _add_eval_command(og)
     from bridgeplan.gcbc_commands import add_gcbc_commands  # gcbc-train, gcbc-eval
 
     add_gcbc_commands(og)
@@ -83,4 +84,66 @@ def _cmd_evaluate_oracle(args) -> int:
                         task_ids=tasks, progress=not args.no_progress)
     print(json.dumps({**r.to_dict(), "policy": "oracle", "code_version": code_version()}, indent=2) if args.json
           else r.format())
+    return 0
+
+
+def _task_ids(text: str | None) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        return [int(t) for t in text.split(",")]
+    except ValueError:
+        raise BridgeplanError(f"--tasks takes comma-separated integers, got {text!r}") from None
+
+
+def _add_eval_command(og) -> None:
+    p = og.add_parser("eval", help="a trained planner (bridgeplan train on an OGBench dataset) on the 5-task protocol")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file)")
+    p.add_argument("--episodes-per-task", type=int, default=None, help="default 50, as OGBench")
+    p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
+    p.add_argument("--controller", default="track",
+                   help="track (the plan's next state at each step; default) or pursuit (the plan's path at the "
+                        "expert's pace, toward the first planned position --lookahead away)")
+    p.add_argument("--lookahead", type=float, default=None, metavar="R",
+                   help="pursuit: distance to the planned position stepped toward (default 2.0, half a cell)")
+    p.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help="plan again from the current position every K steps (default: open loop)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
+    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json)")
+    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: 1 on a CPU device)")
+    p.add_argument("--no-floor", action="store_true",
+                   help="skip the floor (the same episodes from the straight line, no network)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_eval)
+
+
+def _cmd_eval(args) -> int:
+    from bridgeplan.evaluate import write_result
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.ogbench_pointmaze.planning import PointExecution, evaluate_run, format_result
+    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK
+    from bridgeplan.runs import run_dir_of
+
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    execution = PointExecution(args.controller, replan_every=args.replan_every,
+                               **({} if args.lookahead is None else {"lookahead": args.lookahead}))
+    episodes = EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
+    result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
+                          seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
+                          snapshot=args.snapshot, progress=not args.no_progress,
+                          floor=not args.no_floor)
+    tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
+    name = f"ogbench-step{result['step']}-nfe{result['nfe']}-ep{episodes}-seed{args.seed}{tasks}-{execution.tag()}"
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
+    write_result(result, out)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_result(result))
+        print(f"wrote {out}")
     return 0

@@ -109,9 +109,15 @@ def oracle_policy(maze: str) -> Policy:
 
 def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISODES_PER_TASK, seed: int = 0,
                     task_ids: Sequence[int] | None = None, batch_size: int = 250,
-                    progress: bool = False) -> ProtocolResult:
+                    progress: bool = False, on_batch_start: Callable[[int], None] | None = None,
+                    on_episodes_end: Callable[[np.ndarray], None] | None = None) -> ProtocolResult:
     """Run the protocol for ``act`` on ``maze`` (tasks ``task_ids``, default all 5) and return per-task and
-    overall success rates with counts. At most ``batch_size`` episodes run at once (one env each)."""
+    overall success rates with counts. At most ``batch_size`` episodes run at once (one env each).
+
+    A policy with a state of its own per episode (a plan being executed) is told, if it asks, when a batch of
+    ``n`` new episodes starts (``on_batch_start(n)``, before its first call on them) and which rows of the
+    batch have just ended (``on_episodes_end(rows)``, after the step that ended them): their later rows are
+    ignored, so it need not work for them."""
     from tqdm import tqdm
 
     check_maze(maze)
@@ -132,7 +138,9 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
     with tqdm(total=len(episodes), disable=not progress, desc=f"evaluate {env_id(maze)}", unit="episode") as bar:
         for lo in range(0, len(episodes), len(envs)):
             batch = episodes[lo:lo + len(envs)]
-            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update)
+            if on_batch_start is not None:
+                on_batch_start(len(batch))
+            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update, on_episodes_end)
             success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
     for env in envs:
         env.close()
@@ -162,7 +170,8 @@ def _may_teleport(env) -> Callable[[np.ndarray], bool]:
 
 
 def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
-               finished: Callable[[int], None]) -> tuple[np.ndarray, np.ndarray]:
+               finished: Callable[[int], None], on_episodes_end: Callable[[np.ndarray], None] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     n = len(batch)
     may_teleport = _may_teleport(envs[0])
     seeds = [episode_seed(seed, t, k) for t, k in batch]
@@ -183,6 +192,7 @@ def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
         if not np.isfinite(actions[active]).all():
             raise BridgeplanError("the policy returned non-finite actions")
         actions = np.clip(actions, -1, 1)
+        was_active = active.copy()
         for i in np.flatnonzero(active):
             if may_teleport(obs[i]):
                 with legacy_rng(rngs[i]):
@@ -195,4 +205,6 @@ def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
                 active[i] = False
                 success[i] = info["success"] == 1.0
                 finished(1)
+        if on_episodes_end is not None and (ended := np.flatnonzero(was_active & ~active)).size:
+            on_episodes_end(ended)
     return success, steps

@@ -1,0 +1,269 @@
+"""A trained planner as a policy on OGBench's evaluation protocol (``bridgeplan ogbench eval``).
+
+:class:`PlanningPolicy` is the batched ``act(observations, goals)`` that
+:func:`~bridgeplan.ogbench_pointmaze.protocol.evaluate_policy` calls once per step: at an episode's first step it
+plans from the observed position to the goal (all the batch's episodes in one network batch), then executes
+the plan with a controller (:mod:`bridgeplan.ogbench_pointmaze.controllers`); with ``replan_every`` K it plans
+again from the current position every K steps, so an episode of T steps gets ``ceil(T / K)`` plans. Plans come
+from one torch generator seeded with the evaluation seed, so unlike the protocol's episodes a plan depends on
+the batch it was sampled in (the same run, settings and seed give the same result).
+
+Why no arrival rule as in Maze2D's closed loop (:mod:`bridgeplan.replan`): the evaluation environment ends an
+episode as soon as the point is within 1.0 of the goal, so a plan that passes the goal early ends the episode
+there, and nothing needs to hold it. What replanning cannot fix is the one :mod:`bridgeplan.replan` describes: each
+plan is conditioned to arrive at its last state, a full span after it is made, so under ``track`` every replan
+stretches what is left of the path over another span (the point slows down), and a plan for a goal closer than
+a span of the data's motion spends the surplus moving (loops, detours), which a replan every K < span steps may
+cut off before it passes the goal.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.controllers import DEFAULT_LOOKAHEAD, PointFollower, check_controller
+from bridgeplan.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
+from bridgeplan.planner import Planner
+from bridgeplan.trajectory import span
+
+
+@dataclass(frozen=True)
+class PointExecution:
+    """How plans are executed: ``controller`` (``track`` or ``pursuit``, with its ``lookahead``) and
+    ``replan_every`` (K steps; None: open loop, one plan per episode)."""
+
+    controller: str = "track"
+    lookahead: float = DEFAULT_LOOKAHEAD
+    replan_every: int | None = None
+
+    def validate(self) -> None:
+        check_controller(self.controller, self.lookahead)
+        if self.replan_every is not None and not 1 <= self.replan_every <= EVAL_EPISODE_STEPS:
+            raise BridgeplanError(f"--replan-every must be in 1..{EVAL_EPISODE_STEPS} (the episode length), "
+                                  f"got {self.replan_every}")
+
+    def to_dict(self) -> dict:
+        return {"mode": "open_loop" if self.replan_every is None else "closed_loop",
+                "replan_every": self.replan_every, "controller": self.controller,
+                "lookahead": self.lookahead if self.controller == "pursuit" else None}
+
+    def tag(self) -> str:
+        """A file-name part: ``track``, ``pursuit2``, ``track-replan50``."""
+        parts = [self.controller + (f"{self.lookahead:g}" if self.controller == "pursuit" else "")]
+        if self.replan_every is not None:
+            parts.append(f"replan{self.replan_every}")
+        return "-".join(parts)
+
+
+@dataclass
+class PlanningPolicy:
+    """``planner`` as a batched policy (``nfe`` network calls per plan), executing its plans as ``execution``
+    says. Pass :meth:`begin_batch` and :meth:`end_episodes` to ``evaluate_policy`` as its hooks."""
+
+    planner: Planner
+    nfe: int
+    execution: PointExecution
+    generator: torch.Generator
+    plans_per_episode: list[int] = field(default_factory=list)
+    """Plans made for each finished batch's episodes, in protocol order."""
+    plan_seconds: float = 0.0
+    """Prior and sampler wall time of every plan (summed over batches)."""
+    plans_sampled: int = 0
+    decision_seconds: list[float] = field(default_factory=list)
+    """Wall time of every call that planned (the whole call: plans, then actions)."""
+    decision_batch: list[int] = field(default_factory=list)
+    """Plans made in each of those calls."""
+    step_seconds: list[float] = field(default_factory=list)
+    """Wall time of every call (one per environment step of a batch)."""
+    prior_only: bool = False
+    """Execute the prior's sample itself (no network): the floor a planner must beat."""
+
+    def __post_init__(self):
+        self.execution.validate()
+        self.planner.process.validate_nfe(self.nfe)
+        self._n = 0
+
+    def begin_batch(self, n: int) -> None:
+        """A batch of ``n`` new episodes starts: each plans at its first step."""
+        self._flush()
+        self._n = n
+        self._plans: np.ndarray | None = None
+        self._age = np.zeros(n, dtype=np.int64)
+        self._active = np.ones(n, dtype=bool)
+        self._made = np.zeros(n, dtype=np.int64)
+        self._follower = PointFollower(n, self.execution.controller, self.execution.lookahead)
+
+    def end_episodes(self, rows: np.ndarray) -> None:
+        """Rows ``rows`` of the batch have ended: they plan no more."""
+        self._active[rows] = False
+
+    def finish(self) -> None:
+        """Record the last batch's plans per episode (after the protocol has run)."""
+        self._flush()
+        self._n = 0
+
+    def _flush(self) -> None:
+        if self._n:
+            self.plans_per_episode.extend(self._made.tolist())
+
+    def _due(self) -> np.ndarray:
+        if self._plans is None:
+            return np.arange(self._n)
+        every = self.execution.replan_every
+        return np.flatnonzero(self._active & (self._age >= every)) if every is not None else np.zeros(0, np.int64)
+
+    def __call__(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        if len(observations) != self._n:
+            raise BridgeplanError(f"the policy was called on {len(observations)} episodes, its batch has {self._n} "
+                                  f"(begin_batch was not called)")
+        t0 = time.perf_counter()
+        due = self._due()
+        if len(due):
+            positions = self.plan(observations[due], goals[due])
+            if self._plans is None:
+                self._plans = positions
+            else:  # a plan's span is fixed, so replans fit the same array
+                self._plans[due] = positions
+            self._age[due] = 0
+            self._made[due] += 1
+            self._follower.new_plans(due)
+        actions = self._follower.actions(observations, self._plans, self._age)
+        self._age += 1
+        seconds = time.perf_counter() - t0
+        self.step_seconds.append(seconds)
+        if len(due):
+            self.decision_seconds.append(seconds)
+            self.decision_batch.append(len(due))
+        return actions
+
+    def plan(self, positions: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Planned positions ``[N, S, 2]`` (one per step) from ``positions`` to ``goals`` ``[N, 2]``."""
+        layout = self.planner.layout
+        plan = self.planner.plan(layout.at_rest(positions), goals, self.nfe, self.generator,
+                                 prior_only=self.prior_only)
+        self.plan_seconds += plan.prior_seconds + plan.sample_seconds
+        self.plans_sampled += len(positions)
+        return np.array(layout.state_positions(plan.states), dtype=np.float64)
+
+
+def expected_plans(steps: int, replan_every: int | None) -> int:
+    """Plans an episode of ``steps`` steps gets: 1 open loop, else ``ceil(steps / K)`` (at steps 0, K, 2K, ...)."""
+    return 1 if replan_every is None else math.ceil(steps / replan_every)
+
+
+def batch1_latency(planner: Planner, nfe: int, start: np.ndarray, goal: np.ndarray, seed: int,
+                   repeats: int = 5) -> dict:
+    """One plan at batch 1 (a decision of a lone episode), timed ``repeats`` times after one untimed plan."""
+    from bridgeplan.replan import percentiles_ms
+
+    gen = torch.Generator(device=planner.device).manual_seed(seed + 1)
+    starts, goals = planner.layout.at_rest(start[None]), goal[None]
+    planner.plan(starts, goals, nfe, gen)
+    seconds = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        planner.plan(starts, goals, nfe, gen)
+        seconds.append(time.perf_counter() - t0)
+    return percentiles_ms(seconds)
+
+
+def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | None = None,
+                 episodes_per_task: int = 50, seed: int = 0, task_ids: list[int] | None = None,
+                 device: str = "auto", snapshot: int | None = None, progress: bool = False,
+                 floor: bool = True) -> dict:
+    """Load an OGBench pointmaze run and score it on its maze's protocol; returns the result as
+    ``bridgeplan ogbench eval`` writes it (every setting, success per task and overall, cost and latency, the
+    run's portable config and the code version).
+
+    ``floor``: also run the same episodes, executed the same way, from the straight line start -> goal with no
+    network (``floor_line``: its success per task and overall). Why: the kinematic point slides along walls, so
+    stepping toward the goal through them already solves some tasks; what the planner adds is over that."""
+    from bridgeplan.evaluate import _environment
+    from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+    from bridgeplan.priors import make_prior
+    from bridgeplan.replan import percentiles_ms
+    from bridgeplan.runs import load_planner, require_family
+
+    execution = execution or PointExecution()
+    execution.validate()
+    if episodes_per_task <= 0:
+        raise BridgeplanError(f"--episodes-per-task must be positive, got {episodes_per_task}")
+    planner, info = load_planner(run, snapshot=snapshot, device=device)
+    require_family(info, "ogbench")
+    nfe = planner.process.max_nfe if nfe is None else nfe
+    spec = parse_dataset_name(info.config.maze)
+    policy = PlanningPolicy(planner, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed))
+    first: list[np.ndarray] = []  # the first episode's start and goal: the batch-1 latency plans them
+
+    def act(observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        if not first:
+            first.extend([observations[0].copy(), goals[0].copy()])
+        return policy(observations, goals)
+
+    result = evaluate_policy(spec.maze, act, episodes_per_task=episodes_per_task, seed=seed, task_ids=task_ids,
+                             progress=progress, on_batch_start=policy.begin_batch, on_episodes_end=policy.end_episodes)
+    policy.finish()
+    floors = {}
+    if floor:
+        line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
+        floor_policy = PlanningPolicy(line, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed),
+                                      prior_only=True)
+        f = evaluate_policy(spec.maze, floor_policy, episodes_per_task=episodes_per_task, seed=seed,
+                            task_ids=task_ids, on_batch_start=floor_policy.begin_batch,
+                            on_episodes_end=floor_policy.end_episodes)
+        floors["floor_line"] = {"success_rate": f.success_rate,
+                                "tasks": {i: t.success_rate for i, t in f.tasks.items()}}
+    made = np.asarray(policy.plans_per_episode)
+    per_batch = percentiles_ms(policy.decision_seconds)
+    per_batch["mean_batch"] = float(np.mean(policy.decision_batch))
+    protocol = result.to_dict()
+    process, config = planner.process, info.config
+    return {
+        "run": info.name, "step": info.step, "train_seconds": info.elapsed_seconds,
+        "dataset": config.maze, "maze": spec.maze, "env_id": result.env_id, "method": config.label(),
+        "process": process.name, "prior": planner.prior.name, "process_params": process.to_dict(),
+        "diffusion_steps": process.steps, "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
+        "plan_span": span(planner.horizon, planner.stride),
+        "execution": execution.to_dict(), "episodes_per_task": episodes_per_task, "seed": seed,
+        "success_rate": protocol["success_rate"], "successes": protocol["successes"],
+        "episodes": protocol["episodes"], "tasks": protocol["tasks"],
+        "plans_per_episode": {"mean": float(made.mean()), "min": int(made.min()), "max": int(made.max())},
+        "calls_per_episode": float(nfe * made.mean()),
+        "plan_ms_per_plan": 1000.0 * policy.plan_seconds / policy.plans_sampled,
+        "decision_ms_per_batch": per_batch,
+        "decision_ms_batch1": batch1_latency(planner, nfe, first[0], first[1], seed),
+        "step_ms": percentiles_ms(policy.step_seconds), "protocol_seconds": result.seconds,
+        **floors, "environment": _environment(planner), "config": info.portable_config,
+    }
+
+
+def format_result(r: dict) -> str:
+    """The table ``bridgeplan ogbench eval`` prints."""
+    ex = r["execution"]
+    how = ex["controller"] + (f" (lookahead {ex['lookahead']:g})" if ex["lookahead"] is not None else "")
+    how += ", open loop" if ex["replan_every"] is None else f", replan every {ex['replan_every']} steps"
+    lines = [f"{r['run']} (step {r['step']}) on {r['env_id']}: {r['method']}, NFE {r['nfe']}, {how}",
+             f"  plans of {r['horizon']} states, stride {r['stride']} ({r['plan_span']} steps); "
+             f"{r['episodes_per_task']} episodes per task, seed {r['seed']}"]
+    for i, t in r["tasks"].items():
+        lines.append(f"  task {i} {tuple(t['init_cell'])} -> {tuple(t['goal_cell'])}: {t['success_rate']:6.1%} "
+                     f"({t['successes']}/{t['episodes']}), mean steps {np.mean(t['steps']):.0f}")
+    b1, pb, p = r["decision_ms_batch1"], r["decision_ms_per_batch"], r["plans_per_episode"]
+    lines += [f"  overall: {r['success_rate']:.1%} ({r['successes']}/{r['episodes']})",
+              f"  plans per episode {p['mean']:.1f} ({r['calls_per_episode']:.1f} network calls per episode); "
+              f"{r['plan_ms_per_plan']:.2f} ms per plan in batches",
+              f"  decision latency: batch 1 p50 {b1['p50']:.1f} ms; per batch ({pb['mean_batch']:.0f} plans) "
+              f"p50 {pb['p50']:.1f} ms; per step p50 {r['step_ms']['p50']:.2f} ms; protocol "
+              f"{r['protocol_seconds']:.0f} s"]
+    if "floor_line" in r:
+        f = r["floor_line"]
+        lines.append(f"  floor (the straight line, no network, executed alike): {f['success_rate']:.1%} "
+                     f"(tasks " + ", ".join(f"{v:.0%}" for v in f["tasks"].values()) + ")")
+    return "\n".join(lines)

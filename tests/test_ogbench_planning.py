@@ -1,0 +1,230 @@
+"""Planners on OGBench pointmaze: trained through the real CLI on a tiny generated navigate dataset, executed by
+the kinematic point's controllers, evaluated through OGBench's protocol (``bridgeplan ogbench eval``)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from bridgeplan import config as cfg
+from bridgeplan.cli import main
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.controllers import (
+    GAIN,
+    PointFollower,
+    pursuit_action,
+    step_action,
+    tracking_targets,
+)
+from bridgeplan.ogbench_pointmaze.maze import make_env
+from bridgeplan.ogbench_pointmaze.planning import PlanningPolicy, PointExecution, expected_plans
+from bridgeplan.ogbench_pointmaze.plans import plan_shape
+from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+from bridgeplan.processes import DDPM
+from bridgeplan.trajectory import KINEMATIC_POINT, span
+
+NAME = "pointmaze-medium-navigate-v0"
+# plans of 8 states 4 steps apart (29 steps): episodes of 60 steps hold windows, and tiny runs train in seconds
+SHAPE = ("--horizon", "8", "--stride", "4")
+PROCESSES = {"ddpm": ("--process", "ddpm"), "bridge": ("--process", "bridge", "--prior", "line"),
+             "flow": ("--process", "flow", "--prior", "line"), "bridge-learned": ("--process", "bridge", "--prior",
+                                                                                   "learned", "--prior-run", "{prior}")}
+
+
+@pytest.fixture(scope="module")
+def navigate(tmp_path_factory) -> Path:
+    """A tiny navigate dataset (4 episodes of 60 steps) written by the real generator."""
+    out = tmp_path_factory.mktemp("ogbench")
+    assert main(["ogbench", "generate", NAME, "--episodes", "4", "--steps", "60", "--out", str(out),
+                 "--no-progress"]) == 0
+    return out / f"{NAME}.npz"
+
+
+@pytest.fixture(scope="module")
+def point_runs(navigate, tmp_path_factory) -> dict[str, Path]:
+    """One tiny run per process and prior (3 optimizer steps), and the learned prior's, trained through the CLI."""
+    root = tmp_path_factory.mktemp("point-runs")
+    prior = tmp_path_factory.mktemp("point-prior") / "prior"
+    assert main(["train-prior", "--maze", NAME, "--dataset", str(navigate), "--preset", "cpu-small", *SHAPE,
+                 "--steps", "3", "--run-dir", str(prior), "--device", "cpu", "--no-progress"]) == 0
+    runs = {}
+    for name, flags in PROCESSES.items():
+        flags = [f.format(prior=prior) for f in flags]
+        assert main(["train", "--maze", NAME, "--dataset", str(navigate), "--preset", "cpu-small", *SHAPE,
+                     "--steps", "3", "--checkpoint-every", "3", "--runs-root", str(root), "--device", "cpu",
+                     "--no-progress", *flags]) == 0
+        (runs[name],) = [p for p in root.iterdir() if p not in runs.values()]
+    return runs
+
+
+def test_plan_shapes_cover_the_tasks():
+    for maze, longest in {"medium": 169, "large": 325, "giant": 511}.items():
+        horizon, stride = plan_shape(f"pointmaze-{maze}-navigate-v0", "cpu-small")
+        assert horizon % 4 == 0 and span(horizon, stride) >= 1.25 * longest  # the data's pace: see plans.py
+    assert cfg.plan_shape(NAME, "cpu-small") == (32, 8)
+    assert span(*cfg.plan_shape("pointmaze-large-stitch-v0", "cpu-small")) <= 201  # within a stitch episode
+    config = cfg.preset_config(NAME, "cpu-small")
+    assert config.layout is KINEMATIC_POINT and config.run_name().startswith(NAME + "-ddpm-")
+    assert cfg.preset_config(NAME, "diffuser").process == DDPM(steps=256)
+    with pytest.raises(BridgeplanError, match="does not fit pointmaze-medium-stitch-v0"):
+        cfg.preset_config("pointmaze-medium-stitch-v0", "cpu-small", horizon=32)  # 249 steps > 201
+    with pytest.raises(BridgeplanError, match="unknown OGBench pointmaze dataset"):
+        cfg.preset_config("pointmaze-small-navigate-v0", "cpu-small")
+
+
+def test_training_reads_the_episodes(navigate, point_runs):
+    from bridgeplan.ogbench_pointmaze.reading import load_stream
+
+    stream = load_stream(navigate, NAME)
+    assert stream.layout is KINEMATIC_POINT and stream.segment_starts.tolist() == [0, 60, 120, 180]
+    assert len(stream) == 240  # every row: windows never cross an episode's end
+    saved = json.loads((point_runs["flow"] / "config.json").read_text())["config"]
+    assert saved["maze"] == NAME and Path(saved["dataset"]).name == f"{NAME}.npz"
+    assert (saved["horizon"], saved["stride"], saved["prior"]) == (8, 4, "line")
+
+
+def test_training_refuses_a_maze2d_dataset(tiny_dataset, tmp_path, capsys):
+    assert main(["train", "--maze", NAME, "--dataset", tiny_dataset, "--preset", "cpu-small", *SHAPE, "--steps",
+                 "1", "--run-dir", str(tmp_path / "run"), "--no-progress"]) == 2
+    assert capsys.readouterr().err.startswith("error: ") and not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("process", list(PROCESSES))
+def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
+    out = tmp_path / "eval.json"
+    extra = ["--controller", "pursuit", "--replan-every", "300"] if process == "flow" else []
+    assert main(["ogbench", "eval", str(point_runs[process]), "--episodes-per-task", "1", "--nfe", "2",
+                 "--out", str(out), "--no-progress", "--device", "cpu", *extra]) == 0
+    assert "overall:" in capsys.readouterr().out
+    r = json.loads(out.read_text())
+    assert sorted(r["tasks"]) == ["1", "2", "3", "4", "5"]
+    assert all(0 <= t["success_rate"] <= 1 and t["episodes"] == 1 for t in r["tasks"].values())
+    assert 0 <= r["success_rate"] <= 1 and 0 <= r["floor_line"]["success_rate"] <= 1
+    assert (r["nfe"], r["episodes_per_task"], r["dataset"], r["run"]) == (2, 1, NAME, point_runs[process].name)
+    assert r["prior"] == r["config"]["prior"] and "/" not in r["config"]["prior_run"]
+    assert r["config"]["dataset"] == f"{NAME}.npz" and r["environment"]["code_version"]
+    steps = [s for t in r["tasks"].values() for s in t["steps"]]
+    k = r["execution"]["replan_every"]
+    assert r["plans_per_episode"]["max"] == max(expected_plans(s, k) for s in steps)
+    assert r["calls_per_episode"] == 2 * r["plans_per_episode"]["mean"] and r["plan_ms_per_plan"] > 0
+    assert "/" + "work" not in out.read_text().replace(str(tmp_path), "")  # no absolute path but the output's
+
+
+def test_cross_family_is_one_error(point_runs, tiny_runs, tmp_path, capsys):
+    maze2d = tiny_runs["ddpm"]
+    assert main(["ogbench", "eval", str(maze2d), "--episodes-per-task", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "bridgeplan eval" in err
+    assert not (maze2d / "eval").exists() or not any((maze2d / "eval").glob("ogbench-*"))
+    point = point_runs["ddpm"]
+    assert main(["eval", str(point), "--episodes", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "ogbench eval" in err
+    assert not (point / "eval").exists() or not any(p.name.startswith("step") for p in (point / "eval").iterdir())
+    assert main(["render", str(point), "--episodes", "1", "--out", str(tmp_path / "r.png")]) == 2
+    assert "ogbench eval" in capsys.readouterr().err and not (tmp_path / "r.png").exists()
+
+
+def test_a_step_of_the_environment_is_gain_times_the_action():
+    env = make_env("medium")
+    ob, _ = env.reset(seed=0, options=dict(task_id=1))
+    a = np.array([0.5, -0.25])
+    ob2, *_ = env.step(a)
+    np.testing.assert_allclose(ob2 - ob, GAIN * a, atol=1e-6)  # task 1 starts in a free cell, clear of walls
+
+
+def test_tracking_reproduces_a_straight_constant_speed_plan():
+    v = np.array([[0.15, -0.05], [0.0, 0.19]])  # per step, within one step's reach per axis
+    p0 = np.array([[1.0, 2.0], [-3.0, 0.5]])
+    plans = p0[:, None] + np.arange(20)[None, :, None] * v[:, None]
+    follower = PointFollower(2, "track")
+    p = p0.copy()
+    for t in range(19):
+        a = follower.actions(p, plans, np.full(2, t))
+        np.testing.assert_allclose(a, v / GAIN)
+        p = p + GAIN * a  # free space: the environment's step
+    np.testing.assert_allclose(p, plans[:, -1])
+    # past the plan's end the target is its last position
+    np.testing.assert_array_equal(tracking_targets(plans, np.array([40, 18])), plans[:, -1])
+
+
+def test_actions_clip_and_pursuit_keeps_its_direction():
+    np.testing.assert_allclose(step_action(np.zeros((1, 2)), np.array([[1.0, 0.1]])), [[1.0, 0.5]])
+    np.testing.assert_allclose(step_action(np.zeros((1, 2)), np.array([[-3.0, 3.0]])), [[-1.0, 1.0]])
+    far = pursuit_action(np.zeros((1, 2)), np.array([[3.0, 1.0]]))
+    np.testing.assert_allclose(far, [[3.0, 1.0]] / np.sqrt(10.0))  # a unit step toward it, not a diagonal
+    near = pursuit_action(np.zeros((1, 2)), np.array([[0.1, -0.05]]))
+    np.testing.assert_allclose(GAIN * near, [[0.1, -0.05]])  # lands on it
+    # the waypoint is the first planned position a lookahead away, and progress along the plan never goes back
+    plans = np.stack([np.linspace(0, 4, 21), np.zeros(21)], axis=1)[None]
+    f = PointFollower(1, "pursuit", lookahead=1.0)
+    np.testing.assert_allclose(f.actions(np.zeros((1, 2)), plans, np.zeros(1)), [[1.0, 0.0]])
+    assert f.passed.tolist() == [5]
+    f.actions(np.array([[-2.0, 0.0]]), plans, np.ones(1))
+    assert f.passed.tolist() == [5]
+    # a point that does not move (stopped by a wall) follows the plan's schedule: the waypoint moves on
+    f.actions(np.array([[-2.0, 0.0]]), plans, np.full(1, 11))
+    assert f.passed.tolist() == [12]
+    with pytest.raises(BridgeplanError, match="--controller"):
+        PointFollower(1, "hold")
+
+
+class _LinePlanner:
+    """A stand-in planner: a straight line from start to goal over a fixed span; counts its calls."""
+
+    layout = KINEMATIC_POINT
+    process = DDPM(steps=4)
+
+    def __init__(self, steps: int = 30):
+        self.steps, self.calls, self.planned = steps, 0, 0
+
+    def plan(self, starts, goals, nfe, generator, prior_only=False):
+        from bridgeplan.planner import Plan
+
+        self.calls += 1
+        self.planned += len(starts)
+        frac = np.linspace(0, 1, self.steps)[None, :, None]
+        states = starts[:, None] + frac * (goals - starts)[:, None]
+        return Plan(states, np.zeros_like(states), 0.0, 1e-3)
+
+
+@pytest.mark.parametrize("every", [None, 1, 7, 50])
+def test_replanning_plans_every_k_steps(every):
+    planner = _LinePlanner()
+    policy = PlanningPolicy(planner, 4, PointExecution(replan_every=every), torch.Generator())
+    policy.begin_batch(3)
+    obs, goals = np.zeros((3, 2)), np.full((3, 2), 100.0)  # never reached
+    for step in range(100):
+        if step == 40:
+            policy.end_episodes(np.array([2]))  # an episode that ended plans no more
+        policy(obs, goals)
+    policy.finish()
+    assert policy.plans_per_episode == [expected_plans(100, every)] * 2 + [expected_plans(40, every)]
+    assert planner.calls == expected_plans(100, every)  # the due episodes of a step share one batch
+    assert expected_plans(100, 7) == math.ceil(100 / 7) == 15
+
+
+def test_replanning_through_the_protocol():
+    planner = _LinePlanner()
+    policy = PlanningPolicy(planner, 4, PointExecution(replan_every=25), torch.Generator())
+    r = evaluate_policy("medium", policy, episodes_per_task=2, task_ids=[1, 3], on_batch_start=policy.begin_batch,
+                        on_episodes_end=policy.end_episodes)
+    policy.finish()
+    steps = [s for t in r.tasks.values() for s in t.steps]
+    assert min(steps) < 1000 == max(steps)  # the line reaches task 1's goal by sliding along walls, not task 3's
+    assert policy.plans_per_episode == [math.ceil(s / 25) for s in steps]
+    assert planner.planned == sum(policy.plans_per_episode)
+
+
+def test_eval_settings_are_checked(point_runs, capsys):
+    run = str(point_runs["ddpm"])
+    for flags in (["--replan-every", "0"], ["--controller", "hold"], ["--lookahead", "1"],
+                  ["--controller", "pursuit", "--lookahead", "0"], ["--episodes-per-task", "0"]):
+        assert main(["ogbench", "eval", run, "--no-progress", *flags]) == 2
+        assert capsys.readouterr().err.startswith("error: ")
+    assert not (point_runs["ddpm"] / "eval").exists()
