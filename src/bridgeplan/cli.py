@@ -622,18 +622,19 @@ def _cmd_study_report(args) -> int:
     studies = load_studies(root)
     chosen = select(studies, args.names, root)
     results = root / "docs" / "results"
-    texts = {}  # file (relative to root) -> (study, text): every report first, nothing written unless all render
+    texts = {}  # file (relative to root) -> (the studies that change it, text): nothing written unless all render
     for s in chosen:
         for r in s.reports:
             generator = GENERATORS[r.generator]
-            texts[f"docs/results/{r.output}"] = (s.name, generator.render(results))
+            texts[f"docs/results/{r.output}"] = ([s.name], generator.render(results))
             for feed in generator.feeds:  # the tables the README and docs show between the generator's markers
-                current = texts[feed][1] if feed in texts else _read_or_empty(root / feed)
+                names, current = texts.get(feed, ([], _read_or_empty(root / feed)))
                 filled = generator.fill_blocks(current, results)
                 if filled is not None:
-                    texts[feed] = (s.name, filled)
+                    texts[feed] = (names + [s.name] if filled != current else names, filled)
     differ = 0
-    for output, (name, text) in texts.items():
+    for output, (names, text) in texts.items():
+        name = ", ".join(names) or "its studies"
         path = root / output
         if args.check:
             if not path.exists() or path.read_text() != text:

@@ -73,6 +73,9 @@ GENERATORS = {g.name: g for g in [
     Generator("ogbench-calibration", "bridgeplan.studies.reports.ogbench_calibration", "ogbench-calibration.md",
               "OGBench pointmaze: the oracle and GCBC on locally generated data by OGBench's protocol, beside "
               "OGBench's published GCBC", ("docs/ogbench_pointmaze.md",)),
+    Generator("ogbench-planners", "bridgeplan.studies.reports.ogbench_planners", "ogbench-planners.md",
+              "OGBench pointmaze navigate: DDPM and flow by OGBench's protocol, the controller chosen on validation, "
+              "beside the line alone, the oracle and the published methods", ("README.md",)),
     Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("README.md",)),
