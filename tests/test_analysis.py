@@ -173,7 +173,8 @@ def test_first_row_of_an_evaluation_wins():
 
 def test_every_committed_csv_schema_is_read():
     headers = {tuple(next(csv.reader(path.open()))) for path in CSVS}
-    assert len(headers) == 3  # version 1, version 2, version 2 with a sampler column: all present below
+    # version 1, version 2, version 2 with a sampler column, version 4 with the plans' cost and residuals
+    assert len(headers) == 4
     schemas = set()
     for path in CSVS:
         raw = list(csv.DictReader(path.open()))
@@ -188,6 +189,9 @@ def test_every_committed_csv_schema_is_read():
             assert r.key.multi_task == bool(int(x.get("multi_task") or 0))
             assert r.key.steps == int(x["diffusion_steps"]) and r.key.process == x["process"]
             assert r.split == ("validation" if x["experiment"].endswith("-validation") else "test")
+            if "network_calls_per_plan" in x:
+                assert r.network_calls == float(x["network_calls_per_plan"]) >= r.nfe
+                assert r.plan_dynamics == float(x["plan_dynamics_rms"]) > 0
     assert schemas == headers
 
 
