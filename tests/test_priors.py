@@ -122,12 +122,12 @@ def test_learned_prior_is_the_net_output_and_trains():
 
 
 def test_registry_and_errors():
-    assert set(PRIORS) == {"gaussian", "line", "learned", "warm"}
+    assert set(PRIORS) == {"gaussian", "line", "learned", "coarse", "warm"}
     net = PriorMLP(OBS_DIM, H, TRANSITION_DIM)
     for name in PRIORS:
         prior = make_prior(name, NORMALIZER, MAZE2D, net=net)
         assert prior.name == name
-    with pytest.raises(BridgeplanError, match="unknown prior .spline.*gaussian, line, learned, warm"):
+    with pytest.raises(BridgeplanError, match="unknown prior .spline.*gaussian, line, learned, coarse, warm"):
         make_prior("spline", NORMALIZER, MAZE2D)
     with pytest.raises(BridgeplanError, match="learned prior needs"):
         make_prior("learned", NORMALIZER, MAZE2D)

@@ -99,3 +99,41 @@ def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_pa
     # seed 0: mean(10, 20, 30) = 20; seed 1: mean(30, 40, 50) = 40; over seeds 30 ± 10
     assert "**30.0 ± 10.0**; OGBench's published GCBC: 29" in text
     assert "| pointmaze-large-v0 | 50 | 90 | 90 | 90 | 90 | 90 | 90.0 | v |" in text
+
+
+def _hierarchy_row(seed, eval_seed, low, nfe_low, score, coarse, multi=False):
+    level = {"method": "flow (line)", "nfe": 4, "horizon": 32, "stride": 24, "step": 8000, "subgoal_every": 0,
+             "config": {"seed": seed}}
+    low_level = {"method": low, "nfe": nfe_low, "horizon": 16, "stride": 8, "step": 8000, "subgoal_every": 3,
+                 "config": {"seed": seed}}
+    def scored(minari, success):
+        return {"score": {"minari": {"mean": minari, "se": 1.0}}, "success_rate": {"mean": success, "se": 0.01}}
+    return {"kind": "hierarchy", "maze": "large", "episodes": 200, "seed": eval_seed, "multi_task": multi,
+            "high": level, "low": low_level, **scored(score, 0.9), "high_alone": scored(coarse, 0.7),
+            "floor_line": scored(40.0, 0.3), "calls_per_episode": 4 + 34 * nfe_low,
+            "execution": {"replan_every": 24, "controller": "pursuit", "lookahead": 1.5},
+            "decision_ms_batch1": {"p50": 1.5}, "environment": {"code_version": "0.1.0+test"}}
+
+
+def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(tmp_path):
+    from bridgeplan.studies.reports import hierarchy
+
+    folder = tmp_path / "large-hierarchy"
+    for nfe_low, test_score, validation_score in ((1, 90.0, 80.0), (4, 95.0, 70.0)):
+        for seed in SEEDS:
+            for eval_seed, score in ((seed, test_score + seed), (1000 + seed, validation_score)):
+                out = folder / f"flow-nfe{nfe_low}" / f"seed{eval_seed}.json"
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(json.dumps(_hierarchy_row(seed, eval_seed, "flow (coarse)", nfe_low, score,
+                                                         coarse=80.0 + 2 * seed)))
+    (tmp_path / "expert-on-eval-tasks.json").write_text(json.dumps({"rows": [
+        {"maze": "large", "multi_task": False, "seed": s, "score_minari": 104.0} for s in SEEDS]}))
+    rows = hierarchy.read_rows(tmp_path, "large")
+    chosen = hierarchy.chosen_settings(rows, False)
+    assert list(chosen) == ["flow (coarse)"] and "NFE 1 (H16k8" in chosen["flow (coarse)"]  # validation's 80 > 70
+    block = hierarchy.block(tmp_path)
+    # test 90, 91, 92 (91.0 ± 0.6) against the coarse plans' 80, 82, 84: differences 10, 9, 8 -> 9.0 ± 0.6, better
+    assert "91.0 ± 0.6 (success 0.90)" in block and "+9.0 ± 0.6 (better)" in block
+    assert "missed by 0.08 success and 13.0 points" in block
+    text = GENERATORS["hierarchy"].render(tmp_path)
+    assert "**91.0 ± 0.6**" in text and "The expert on the same test episodes: 104.0 ± 0.0" in text

@@ -115,7 +115,9 @@ def _add_train_commands(sub) -> None:
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
     p.add_argument("--process", default=None, help="ddpm, bridge or flow (default ddpm)")
     _process_param_flag(p)
-    p.add_argument("--prior", default=None, help="bridge prior: gaussian, line or learned (default gaussian)")
+    p.add_argument("--prior", default=None,
+                   help="bridge prior: gaussian, line, learned or coarse (a low level's: the line through its "
+                        "subgoals) (default gaussian)")
     p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
     p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
     p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
@@ -130,6 +132,9 @@ def _add_train_commands(sub) -> None:
     p.add_argument("--ema-every", type=int, default=None)
     p.add_argument("--ema-start", type=int, default=None)
     _hold_share_flag(p)
+    p.add_argument("--subgoal-every", type=int, default=None,
+                   help="train a hierarchy's low level: every J-th planned state is a condition (a high level's "
+                        "subgoals when planning; `bridgeplan hierarchy eval`)")
     p.add_argument("--precision", default=None,
                    help="bf16: forward and backward under bfloat16 autocast (refused where the device lacks it)")
     p.add_argument("--compile", action="store_true", default=None,
@@ -195,7 +200,7 @@ def _cmd_train(args) -> int:
 
     base = cfg.preset_config(args.maze, args.preset)
     over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
-                                       "hold_share", "precision", "compile"))
+                                       "hold_share", "precision", "compile", "subgoal_every"))
     process = _process_params(args, args.process or base.process.name)
     if args.process is not None:
         process["name"] = args.process
@@ -394,6 +399,69 @@ def _cmd_render(args) -> int:
                            multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
                            device=args.device, execution=_execution(args)):
         print(f"wrote {path}")
+    return 0
+
+
+def _add_hierarchy_commands(sub) -> None:
+    p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
+                                         "level (bridgeplan.hierarchy)")
+    h = p.add_subparsers(dest="hierarchy_command", required=True)
+    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together",
+                     description="The high level plans once per episode; the low level plans from the current "
+                                 "state through the coarse plan's next states every --replan-every steps.")
+    e.add_argument("high", help="the high level's run directory (a long --stride)")
+    e.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
+                               "the high level's stride)")
+    e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
+    e.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
+    e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
+    e.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
+    e.add_argument("--episodes", type=int, default=200)
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
+    e.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help="the low level plans again every K steps (default: the high level's stride)")
+    e.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
+                   help="and when the position is more than D from its plan (default: off)")
+    e.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
+    e.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
+    e.add_argument("--device", default="auto")
+    e.add_argument("--out", default=None, help="JSON path (default LOW/eval/hierarchy-<settings>.json)")
+    _threads_flag(e)
+    e.set_defaults(func=_cmd_hierarchy_eval)
+
+
+def _cmd_hierarchy_eval(args) -> int:
+    from bridgeplan.evaluate import check_multi_task_data, make_tasks, write_result
+    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.replan import Execution
+    from bridgeplan.runs import run_dir_of
+
+    _positive("--episodes", args.episodes)
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
+                                          args.device)
+    if args.multi_task:
+        check_multi_task_data(high.config.maze, high.config.dataset)
+    execution = Execution(replan_every=args.replan_every or hierarchy.high.stride, tolerance=args.replan_tolerance,
+                          controller=args.controller,
+                          **({} if args.lookahead is None else {"lookahead": args.lookahead}))
+    tasks = make_tasks(high.config.maze, args.episodes, args.seed, args.multi_task)
+    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution)
+    name = (f"hierarchy-{high.name}-step{high.step}-nfe{result['high']['nfe']}-step{low.step}-nfe"
+            f"{result['low']['nfe']}-ep{args.episodes}-seed{args.seed}" + ("-multi" if args.multi_task else "")
+            + f"-{execution.tag()}")
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
+    write_result(result, out)
+    minari = result["score"]["minari"]
+    print(f"{tasks.maze.name}: hierarchy {minari['mean']:.1f} ± {minari['se']:.1f} (Minari), success "
+          f"{result['success_rate']['mean']:.2f}; the coarse plans alone "
+          f"{result['high_alone']['score']['minari']['mean']:.1f}; the line alone "
+          f"{result['floor_line']['score']['minari']['mean']:.1f}; {result['calls_per_episode']:.0f} network calls "
+          f"per episode, decision p50 {result['decision_ms_batch1']['p50']:.1f} ms at batch 1")
+    print(f"wrote {out}")
     return 0
 
 
@@ -689,6 +757,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reference_commands(sub)
     _add_train_commands(sub)
     _add_eval_commands(sub)
+    _add_hierarchy_commands(sub)
     _add_experiment_commands(sub)
     _add_bench_command(sub)
     _add_demo_command(sub)

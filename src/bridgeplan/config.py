@@ -132,11 +132,16 @@ class TrainConfig:
     optimizer and loss stay float32); refused on a device without bfloat16 kernels."""
     compile: bool = False
     """Train through ``torch.compile``'d network (compiles at the first step; may be changed on resume)."""
+    subgoal_every: int = 0
+    """The low level of a hierarchy (:mod:`bridgeplan.hierarchy`): every ``subgoal_every``-th planned state
+    (``j, 2j, ..., H - 1``) is a condition besides the start, in training the window's own states, in planning
+    a high-level plan's (whose stride must be ``subgoal_every * stride``); 0: the start and the goal only."""
 
     def __post_init__(self):
         maze_horizon(self.maze)
         _check_horizon(self.maze, self.horizon, self.stride)
         check_prior(self.process, self.prior)
+        check_subgoals(self.horizon, self.subgoal_every, self.prior)
         check_optimization(self)
         if not 0 <= self.hold_share <= 1:
             raise BridgeplanError(f"hold_share must be in [0, 1], got {self.hold_share}")
@@ -157,8 +162,9 @@ class TrainConfig:
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
         hold = [f"hold{self.hold_share:g}"] if self.hold_share else []
+        subgoals = [f"sg{self.subgoal_every}"] if self.subgoal_every else []
         parts = [self.maze, *self.process.run_tag(self.prior), *hold, _horizon_tag(self.horizon, self.stride),
-                 self.preset, f"s{self.seed}"]
+                 *subgoals, self.preset, f"s{self.seed}"]
         return "-".join(parts)
 
     def label(self) -> str:
@@ -196,6 +202,18 @@ def check_prior(process: Process, prior: str) -> None:
     if not process.uses_prior and prior != "gaussian":
         raise BridgeplanError(f"{process.display_name} starts from Gaussian noise; --prior {prior} needs a "
                               f"process that takes a prior (bridge)")
+
+
+def check_subgoals(horizon: int, every: int, prior: str) -> None:
+    """A low level's subgoals fit its horizon (every ``every``-th state, the last at H - 1); the coarse prior, the
+    line through the subgoals, exists only where there are subgoals."""
+    if every < 0:
+        raise BridgeplanError(f"subgoal_every must be >= 0, got {every}")
+    if every and (every >= horizon - 1 or (horizon - 1) % every):
+        raise BridgeplanError(f"subgoal_every {every} does not divide the plan into whole pieces: (horizon - 1) = "
+                              f"{horizon - 1} must be a multiple of it, larger than it")
+    if prior == "coarse" and not every:
+        raise BridgeplanError("the coarse prior is the line through a hierarchy's subgoals: give --subgoal-every")
 
 
 @dataclass(frozen=True)

@@ -264,7 +264,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         prior_s += plan.prior_seconds
         sample_s += plan.sample_seconds
     result = execute_plans(tasks.maze, tasks.starts_xy, goals, np.concatenate(plans), follower=execution.follower(n))
-    environment = _environment(planner)
+    environment = environment_of(planner)
     return EvalResult(
         planner=planner, tasks=tasks, nfe=nfe, run=run,
         scores=score_returns(tasks.maze.name, result.returns, result.success),
@@ -275,7 +275,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         plan_residuals={k: _mean_se(np.concatenate(v)) for k, v in residuals.items()})
 
 
-def _environment(planner: Planner) -> dict:
+def environment_of(planner: Planner) -> dict:
     return {"device": str(planner.device), "torch": torch.__version__, "machine": platform.machine(),
             "processor": platform.processor() or platform.machine(),
             "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
@@ -316,7 +316,7 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
         floors=precomputed_floors if precomputed_floors is not None else floors(planner, tasks, execution),
         plan_ms_per_plan=1000.0 * (source.prior_seconds + source.sample_seconds) / source.plans_sampled,
         prior_ms_per_plan=1000.0 * source.prior_seconds / source.plans_sampled,
-        batch_size=min(batch_size or n * m, n * m), compile_seconds=compile_s, environment=_environment(planner),
+        batch_size=min(batch_size or n * m, n * m), compile_seconds=compile_s, environment=environment_of(planner),
         execution=execution, plans_made=result.plans_made, decisions=decisions)
 
 

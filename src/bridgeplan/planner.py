@@ -48,6 +48,9 @@ class Planner:
     """Environment steps between planned states (``TrainConfig.stride``)."""
     correction: Correction | None = None
     """A consistency correction of every x0 prediction (CDDB, ``consistency.py``); None: the process as trained."""
+    subgoal_every: int = 0
+    """A hierarchy's low level (``TrainConfig.subgoal_every``): it plans between subgoals, every this many planned
+    states (:meth:`plan`'s ``subgoals``); 0: from a start to a goal."""
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Planner:
         """The same network sampled another way (no reload): ``process.with_sampler``."""
@@ -64,18 +67,36 @@ class Planner:
     def with_prior(self, prior: Prior) -> Planner:
         return dataclasses.replace(self, prior=prior)
 
-    def conditions(self, starts: np.ndarray, goals: np.ndarray, arrival: np.ndarray | None = None) -> Conditions:
+    @property
+    def subgoals_per_plan(self) -> int:
+        """Subgoals a low level's plan is conditioned on (the last one at H - 1); 0 for a planner to a goal."""
+        return (self.horizon - 1) // self.subgoal_every if self.subgoal_every else 0
+
+    def conditions(self, starts: np.ndarray, goals: np.ndarray | None, arrival: np.ndarray | None = None,
+                   subgoals: np.ndarray | None = None) -> Conditions:
         """Normalized conditions: the start state at t=0, the goal at rest (zero velocity, if the state has one)
         at t=H-1 and, for a plan with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every
-        t >= a as well (held)."""
-        goal_states = self.layout.at_rest(goals)
+        t >= a as well (held). A low level takes ``subgoals`` ``[N, m, obs_dim]`` (whole states) at
+        ``j, 2j, ..., H - 1`` instead of a goal."""
         state_dims = self.layout.state_columns
 
         def norm(s: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(self.normalizer.normalize(s, state_dims), dtype=torch.float32,
                                    device=self.device)
 
-        goal = norm(goal_states)
+        if (subgoals is not None) != bool(self.subgoal_every):
+            raise BridgeplanError("this planner is a hierarchy's low level: it plans between a high level's "
+                                  "subgoals (bridgeplan hierarchy eval)" if self.subgoal_every else
+                                  "subgoals are for a hierarchy's low level (a run trained with --subgoal-every)")
+        if subgoals is not None:
+            subgoals = np.asarray(subgoals, dtype=np.float64)
+            want = (len(starts), self.subgoals_per_plan, self.layout.obs_dim)
+            if subgoals.shape != want or arrival is not None:
+                raise BridgeplanError(f"a low level plans to {list(want)} subgoals (no arrival hold), got "
+                                      f"{list(subgoals.shape)}")
+            every = self.subgoal_every
+            return {0: norm(starts), **{every * (i + 1): norm(subgoals[:, i]) for i in range(want[1])}}
+        goal = norm(self.layout.at_rest(goals))
         conditions = {0: norm(starts), self.horizon - 1: goal}
         if arrival is not None:
             arrival = torch.as_tensor(np.asarray(arrival), device=self.device)[:, None]
@@ -88,14 +109,16 @@ class Planner:
         return self.layout.states(traj), self.layout.actions(traj)
 
     @torch.inference_mode()
-    def plan(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator,
-             prior_only: bool = False, arrival: np.ndarray | None = None) -> Plan:
+    def plan(self, starts: np.ndarray, goals: np.ndarray | None, nfe: int, generator: torch.Generator,
+             prior_only: bool = False, arrival: np.ndarray | None = None,
+             subgoals: np.ndarray | None = None) -> Plan:
         """Plan from ``starts`` ``[N, obs_dim]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
 
         ``prior_only`` returns the prior sample itself (the floor every model must beat). ``arrival`` ``[N]``
-        (planned states): hold the goal from there on (:meth:`conditions`).
+        (planned states): hold the goal from there on (:meth:`conditions`). A low level plans through
+        ``subgoals`` instead of to ``goals`` (None).
         """
-        conditions = self.conditions(starts, goals, arrival)
+        conditions = self.conditions(starts, goals, arrival, subgoals)
         t0 = _now(self.device)
         x = self.prior.sample(conditions, self.horizon, len(starts), generator=generator)
         t1 = _now(self.device)

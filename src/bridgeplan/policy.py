@@ -32,18 +32,15 @@ from bridgeplan.trajectory import MAZE2D
 class PlannerPolicy:
     """One episode at a time: ``policy(obs_dict) -> action [2]``; ``reset()`` between episodes.
 
-    Attributes: ``planner``, ``maze`` (the run's maze: make the env with ``maze.gym_id``), ``execution``,
-    ``nfe``, ``steps`` (steps since the last reset) and ``plans_made`` (plans in this episode).
+    Built from a run (:meth:`from_run`) or from a hierarchy's two runs (:meth:`from_hierarchy`). Attributes:
+    ``source`` (the closed loop's ``plan_fn``: a ``replan.PlanSource`` or a ``hierarchy.HierarchySource``),
+    ``maze`` (the run's maze: make the env with ``maze.gym_id``), ``execution``, ``steps`` (steps since the
+    last reset) and ``plans_made`` (plans in this episode).
     """
 
-    def __init__(self, planner, maze: Maze, nfe: int = 1, execution: Execution | None = None, seed: int = 0):
-        execution = Execution(replan_every=8) if execution is None else execution
-        planner.process.validate_nfe(nfe)
-        execution.validate(planner.process, maze.episode_steps)
-        self.planner, self.maze, self.nfe, self.execution = planner, maze, nfe, execution
-        self.source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed),
-                                 1, maze)
-        self.controller = ClosedLoopController(self.source, 1, execution.replan_every, execution.tolerance,
+    def __init__(self, source, maze: Maze, execution: Execution):
+        self.source, self.maze, self.execution = source, maze, execution
+        self.controller = ClosedLoopController(source, 1, execution.replan_every, execution.tolerance,
                                                execution.follower(1))
         self.reset()
 
@@ -62,9 +59,35 @@ class PlannerPolicy:
         from bridgeplan.runs import load_planner
 
         planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
+        maze = get_maze(info.config.maze)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
                               warm=warm, arrival=arrival, controller=controller, lookahead=lookahead)
-        return cls(planner, get_maze(info.config.maze), nfe=nfe, execution=execution, seed=seed)
+        planner.process.validate_nfe(nfe)
+        execution.validate(planner.process, maze.episode_steps)
+        source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed), 1,
+                            maze)
+        return cls(source, maze, execution)
+
+    @classmethod
+    def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
+                       nfe_low: int | None = None, replan_every: int | None = None, tolerance: float | None = None,
+                       controller: str = "pursuit", lookahead: float = DEFAULT_LOOKAHEAD, device: str = "cpu",
+                       seed: int = 0) -> PlannerPolicy:
+        """A hierarchy as a policy (:mod:`bridgeplan.hierarchy`): the high level's coarse plan at an episode's
+        first step, the low level's plan through it every ``replan_every`` steps (default: the high level's
+        stride), as ``bridgeplan hierarchy eval`` executes them."""
+        from bridgeplan.hierarchy import HierarchySource, check_execution, load_hierarchy
+
+        hierarchy, high, _ = load_hierarchy(Path(high_run), Path(low_run), device=device)
+        maze = get_maze(high.config.maze)
+        execution = Execution(replan_every=replan_every or hierarchy.high.stride, tolerance=tolerance,
+                              controller=controller, lookahead=lookahead)
+        check_execution(execution, maze.episode_steps)
+        nfe_high = hierarchy.high.process.max_nfe if nfe_high is None else nfe_high
+        nfe_low = hierarchy.low.process.max_nfe if nfe_low is None else nfe_low
+        source = HierarchySource(hierarchy, nfe_high, nfe_low,
+                                 torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1)
+        return cls(source, maze, execution)
 
     def reset(self) -> None:
         """Start a new episode: the next call plans afresh."""
@@ -89,7 +112,8 @@ class PlannerPolicy:
                                   f"'desired_goal' (x, y) is needed, got {type(obs).__name__}: {e}") from None
         due = None
         if self.goal is not None and not np.array_equal(goal, self.goal):
-            due = np.ones(1, dtype=bool)  # the goal moved: plan for the new one now
+            due = np.ones(1, dtype=bool)  # the goal moved: plan for the new one now, from scratch
+            self.source.reset()
         self.goal = goal
         action = self.controller.act(self.steps, state, goal, due=due)
         self.steps += 1

@@ -109,6 +109,38 @@ class LinePrior:
         return apply_conditions(x, conditions)
 
 
+class CoarsePrior:
+    """A hierarchy's low-level prior (:mod:`bridgeplan.hierarchy`): the piecewise straight line through every
+    fully conditioned state (the start, the subgoals, the goal), each piece drawn as :class:`LinePrior` draws a
+    whole plan (velocity covering the piece in its steps, action toward its end), then the conditions inpainted.
+
+    With only the start and the goal conditioned it is the line prior. In training the subgoals are the
+    window's own states (``TrainConfig.subgoal_every``), so the prior is the window's coarse version; in
+    planning they are a high-level plan's states, so the prior is that coarse plan, densified. Conditions
+    with NaN rows (holds) are inpainted but are not knots.
+    """
+
+    name = "coarse"
+
+    def __init__(self, normalizer: Normalizer, layout: Layout, stride: int = 1):
+        self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
+
+    def sample(self, conditions: Conditions, horizon: int, batch: int,
+               generator: torch.Generator | None = None) -> torch.Tensor:
+        start_n, _ = _endpoints(conditions, horizon, batch)
+        layout = self.layout
+        knots = sorted(t for t, state in conditions.items() if not bool(torch.isnan(state).any()))
+        positions = {t: layout.state_positions(self.normalizer.unnormalize(conditions[t].double(),
+                                                                           layout.state_columns)) for t in knots}
+        traj = torch.zeros(batch, horizon, layout.transition_dim, dtype=torch.float64, device=start_n.device)
+        for a, b in zip(knots[:-1], knots[1:]):
+            frac = torch.linspace(0, 1, b - a + 1, dtype=torch.float64, device=start_n.device)[None, :]
+            steps = torch.full((batch, 1), float((b - a) * self.stride), dtype=torch.float64, device=start_n.device)
+            traj[:, a:b + 1] = straight_segment(positions[a], positions[b], frac, steps, layout)
+        x = self.normalizer.normalize(traj).to(start_n.dtype)
+        return apply_conditions(x, conditions)
+
+
 class LearnedPrior:
     """The thesis's learned prior: ``nets.prior_mlp.PriorMLP`` on (start, goal), deterministic.
 
@@ -210,6 +242,7 @@ PRIORS: dict[str, Callable[[Normalizer, Layout, torch.nn.Module | None, int], Pr
     "gaussian": lambda normalizer, layout, net, stride: GaussianPrior(layout),
     "line": lambda normalizer, layout, net, stride: LinePrior(normalizer, layout, stride),
     "learned": lambda normalizer, layout, net, stride: _learned(net),
+    "coarse": lambda normalizer, layout, net, stride: CoarsePrior(normalizer, layout, stride),
     "warm": lambda normalizer, layout, net, stride: WarmPrior(normalizer, layout, stride=stride),
 }
 REPLAN_ONLY = frozenset({"warm"})

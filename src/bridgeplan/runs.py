@@ -84,7 +84,8 @@ def build_planner(config: cfg.TrainConfig, model: torch.nn.Module, normalizer: N
                   device: torch.device, prior_net: torch.nn.Module | None = None) -> Planner:
     """The planner of ``config`` around a network (trained or not)."""
     prior = build_prior(config, normalizer, device, prior_net)
-    return Planner(model, config.process, prior, normalizer, config.horizon, device, config.layout, config.stride)
+    return Planner(model, config.process, prior, normalizer, config.horizon, device, config.layout, config.stride,
+                   subgoal_every=config.subgoal_every)
 
 
 @dataclass(frozen=True)

@@ -117,7 +117,7 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
     def loss(x0: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
         if config.hold_share:  # drawn only then, so runs without holds keep their random stream
             x0 = hold_tails(x0, config.hold_share, rest, layout, gen)
-        conditions = window_conditions(x0, layout)
+        conditions = window_conditions(x0, layout, config.subgoal_every)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
         return process.training_loss(net, x0, x1, conditions, generator=gen)
 

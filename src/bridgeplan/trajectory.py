@@ -132,9 +132,12 @@ def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
     return x
 
 
-def window_conditions(x0: torch.Tensor, layout: Layout) -> Conditions:
-    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser)."""
-    return {0: layout.states(x0[:, 0]), x0.shape[1] - 1: layout.states(x0[:, -1])}
+def window_conditions(x0: torch.Tensor, layout: Layout, subgoal_every: int = 0) -> Conditions:
+    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser); for a
+    hierarchy's low level (``subgoal_every`` j > 0) every j-th state as well (the last one is the goal)."""
+    last = x0.shape[1] - 1
+    indices = [0, *range(subgoal_every, last, subgoal_every), last] if subgoal_every else [0, last]
+    return {t: layout.states(x0[:, t]) for t in indices}
 
 
 def span(horizon: int, stride: int) -> int:

@@ -185,7 +185,7 @@ def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | 
     ``floor``: also run the same episodes, executed the same way, from the straight line start -> goal with no
     network (``floor_line``: its success per task and overall). Why: the kinematic point slides along walls, so
     stepping toward the goal through them already solves some tasks; what the planner adds is over that."""
-    from bridgeplan.evaluate import _environment
+    from bridgeplan.evaluate import environment_of
     from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
     from bridgeplan.priors import make_prior
     from bridgeplan.replan import percentiles_ms
@@ -240,7 +240,7 @@ def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | 
         "decision_ms_per_batch": per_batch,
         "decision_ms_batch1": batch1_latency(planner, nfe, first[0], first[1], seed),
         "step_ms": percentiles_ms(policy.step_seconds), "protocol_seconds": result.seconds,
-        **floors, "environment": _environment(planner), "config": info.portable_config,
+        **floors, "environment": environment_of(planner), "config": info.portable_config,
     }
 
 

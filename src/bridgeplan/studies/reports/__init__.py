@@ -76,6 +76,9 @@ GENERATORS = {g.name: g for g in [
     Generator("ogbench-planners", "bridgeplan.studies.reports.ogbench_planners", "ogbench-planners.md",
               "OGBench pointmaze navigate: DDPM and flow by OGBench's protocol, the controller chosen on validation, "
               "beside the line alone, the oracle and the published methods", ("README.md",)),
+    Generator("hierarchy", "bridgeplan.studies.reports.hierarchy", "hierarchy.md",
+              "hierarchical planning on large: a coarse plan refined by a low level, beside the coarse plans alone, "
+              "the best flat planner, the line and the expert", ("README.md",)),
     Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("README.md",)),

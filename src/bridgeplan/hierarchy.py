@@ -1,0 +1,235 @@
+"""Hierarchical planning: a coarse plan over the whole episode, refined stretch by stretch by a low level.
+
+The high level is an ordinary planner whose states lie far apart (a long ``stride``, Hierarchical Diffuser's
+jump): one plan spans the episode, from the start to the goal. The low level is a planner trained with
+``subgoal_every = j`` (``TrainConfig``): its every j-th planned state is a condition, so it plans from the
+current state through the next ``m = (H - 1) / j`` states of the coarse plan; its prior is either noise
+(DDPM inpainting the subgoals, as Hierarchical Diffuser does) or the coarse plan itself, densified
+(``coarse``: the line through the subgoals, which a bridge or flow refines). The levels fit when a low-level
+subgoal step is one high-level step: ``low.subgoal_every * low.stride == high.stride``.
+
+Executed closed loop (:class:`HierarchySource` is the ``plan_fn`` of ``maze.rollout.ClosedLoopController``):
+the high level plans once per episode, at its first step, and its plan holds the goal from its first arrival
+on (a plan conditioned to end at the goal fills its whole span, however short the way: a high level trained
+with holds, ``hold_share``, may arrive early instead); every decision, the low level plans
+from the current state through the coarse states that follow the one nearest the agent (searched forward
+from the last, so progress never runs back), the goal at rest repeating once the coarse plan runs out.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bridgeplan import config as cfg
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.evaluate import Tasks, environment_of, prior_only, score_returns
+from bridgeplan.maze.controllers import check_controller
+from bridgeplan.maze.rollout import check_replanning, execute_closed_loop, execute_plans
+from bridgeplan.planner import Planner
+from bridgeplan.replan import Execution, percentiles_ms, truncate_at_arrival
+from bridgeplan.runs import RunInfo, load_planner, require_family
+from bridgeplan.trajectory import densify, span
+
+
+@dataclass(frozen=True)
+class Hierarchy:
+    """Two planners that fit (:func:`check_levels`)."""
+
+    high: Planner
+    low: Planner
+
+    def __post_init__(self):
+        check_levels(self.high, self.low)
+
+    @property
+    def subgoals_per_plan(self) -> int:
+        return self.low.subgoals_per_plan
+
+    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator):
+        """The high level's plans ``[N, H_high, obs_dim]`` (physical states at its planned indices, not
+        densified), each cut at its first state within 0.45 of the goal and holding the goal from there on
+        (``replan.truncate_at_arrival``: a high level trained with holds may arrive early), and the
+        :class:`~bridgeplan.planner.Plan` they came from."""
+        plan = self.high.plan(starts, goals, nfe, generator)
+        traj = self.high.normalizer.unnormalize(plan.sampled.double().cpu().numpy())
+        traj, _ = truncate_at_arrival(traj, goals, self.high.layout)
+        return self.high.layout.states(traj), plan
+
+    def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
+        """``[N, m, obs_dim]``: the ``m`` coarse states after index ``progress [N]``, the last one repeated past
+        the plan's end (the goal at rest: the high level's last state is its goal condition)."""
+        index = np.minimum(progress[:, None] + 1 + np.arange(self.subgoals_per_plan)[None, :], coarse.shape[1] - 1)
+        return np.take_along_axis(coarse, index[..., None], axis=1)
+
+
+def check_levels(high: Planner, low: Planner) -> None:
+    """Levels whose shapes do not fit raise BridgeplanError (the CLI's one-line ``error:``)."""
+    if high.layout != low.layout:
+        raise BridgeplanError(f"the levels plan in different environments ({high.layout.name} and "
+                              f"{low.layout.name}): a hierarchy is two runs of one environment")
+    if high.subgoal_every:
+        raise BridgeplanError("the high level must plan from a start to a goal: it was trained with "
+                              f"--subgoal-every {high.subgoal_every} (that is a low level)")
+    if not low.subgoal_every:
+        raise BridgeplanError("the low level must plan between subgoals: train it with --subgoal-every J")
+    step = low.subgoal_every * low.stride
+    if step != high.stride:
+        raise BridgeplanError(f"the levels do not fit: the low level's subgoals are {low.subgoal_every} x stride "
+                              f"{low.stride} = {step} environment steps apart, the high level's states "
+                              f"{high.stride} (they must be equal)")
+    if span(low.horizon, low.stride) > span(high.horizon, high.stride):
+        raise BridgeplanError(f"the low level spans {span(low.horizon, low.stride)} steps, longer than the high "
+                              f"level's {span(high.horizon, high.stride)}")
+
+
+@dataclass
+class HierarchySource:
+    """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
+
+    Returns the low level's plans (densified, physical states). Counts network calls per episode
+    (``calls [n]``: ``nfe_high`` for the coarse plan, ``nfe_low`` per low-level plan) and times every decision.
+    """
+
+    hierarchy: Hierarchy
+    nfe_high: int
+    nfe_low: int
+    generator: torch.Generator
+    n: int
+    coarse: np.ndarray | None = None
+    """``[n, H_high, obs_dim]`` each episode's coarse plan (None before the first decision)."""
+    progress: np.ndarray | None = None
+    """``[n]`` the coarse index each episode has reached."""
+    calls: np.ndarray = field(init=False)
+    decision_seconds: list[float] = field(default_factory=list)
+    decision_batch: list[int] = field(default_factory=list)
+    high_seconds: float = 0.0
+    low_seconds: float = 0.0
+    low_plans: int = 0
+
+    def __post_init__(self):
+        self.hierarchy.high.process.validate_nfe(self.nfe_high)
+        self.hierarchy.low.process.validate_nfe(self.nfe_low)
+        self.calls = np.zeros(self.n, dtype=np.int64)
+
+    def reset(self) -> None:
+        """Forget the coarse plans (a new episode); counters and timings are kept."""
+        self.coarse = None
+        self.progress = None
+
+    def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+        """Move each episode's progress to the coarse state nearest its position among the next ``m + 1``."""
+        coarse, progress = self.coarse[episodes], self.progress[episodes]
+        window = progress[:, None] + np.arange(self.hierarchy.subgoals_per_plan + 1)[None, :]
+        window = np.minimum(window, coarse.shape[1] - 1)
+        layout = self.hierarchy.high.layout
+        near = np.take_along_axis(layout.state_positions(coarse), window[..., None], axis=1)
+        best = np.linalg.norm(near - positions[:, None], axis=2).argmin(axis=1)
+        self.progress[episodes] = window[np.arange(len(episodes)), best]
+        return self.progress[episodes]
+
+    def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
+        t0 = time.perf_counter()
+        h = self.hierarchy
+        if self.coarse is None:
+            if len(episodes) != self.n:
+                raise BridgeplanError("the first decision must be made for every episode")
+            self.coarse, plan = h.coarse_plans(states, goals, self.nfe_high, self.generator)
+            self.progress = np.zeros(self.n, dtype=np.int64)
+            self.calls[episodes] += self.nfe_high
+            self.high_seconds += plan.prior_seconds + plan.sample_seconds
+        progress = self.advance(h.low.layout.state_positions(states), episodes)
+        plan = h.low.plan(states, None, self.nfe_low, self.generator,
+                          subgoals=h.subgoals(self.coarse[episodes], progress))
+        self.calls[episodes] += self.nfe_low
+        self.low_seconds += plan.prior_seconds + plan.sample_seconds
+        self.low_plans += len(episodes)
+        self.decision_seconds.append(time.perf_counter() - t0)
+        self.decision_batch.append(len(episodes))
+        return plan.states
+
+
+def check_execution(execution: Execution, episode_steps: int) -> None:
+    """What a hierarchy executes: a low level replanned every K steps (and/or on drift), one candidate, plans
+    as sampled; bad settings raise BridgeplanError."""
+    check_replanning(execution.replan_every, execution.tolerance, episode_steps)
+    check_controller(execution.controller, execution.lookahead)
+    if not execution.replans:
+        raise BridgeplanError("a hierarchy replans its low level as the agent moves: give --replan-every K "
+                              "(one high-level step, the high level's stride, is the natural K)")
+    if execution.candidates != 1 or execution.warm or execution.arrival is not None:
+        raise BridgeplanError("a hierarchy plans one candidate per decision, from its own prior, as sampled "
+                              "(no --candidates, --prior warm or --arrival)")
+
+
+def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = None, low_snapshot: int | None = None,
+                   device: str = "auto") -> tuple[Hierarchy, RunInfo, RunInfo]:
+    """Two Maze2D runs as a :class:`Hierarchy` (EMA weights of their latest checkpoints or of the snapshots)."""
+    high, high_info = load_planner(Path(high_run), snapshot=high_snapshot, device=device)
+    low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
+    for info in (high_info, low_info):
+        require_family(info, "maze2d")
+    if high_info.config.maze != low_info.config.maze:
+        raise BridgeplanError(f"the levels were trained in different mazes ({high_info.config.maze} and "
+                              f"{low_info.config.maze})")
+    return Hierarchy(high, low), high_info, low_info
+
+
+def _level(planner: Planner, info: RunInfo, nfe: int) -> dict:
+    return {"run": info.name, "step": info.step, "method": cfg.method_label(planner.process, planner.prior.name),
+            "process": planner.process.name, "prior": planner.prior.name, "process_params": planner.process.to_dict(),
+            "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
+            "subgoal_every": planner.subgoal_every, "config": info.portable_config}
+
+
+def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunInfo, tasks: Tasks,
+                       nfe_high: int | None = None, nfe_low: int | None = None,
+                       execution: Execution | None = None) -> dict:
+    """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` writes.
+
+    Beside the hierarchy's score: ``high_alone``, the same coarse plans densified and executed open loop by the
+    same controller (what the low level adds), and ``floor_line``, the straight line so executed. Decisions are
+    timed in the evaluation's batches and, at batch 1, over the first episode run again alone after one
+    untimed decision.
+    """
+    high, low = hierarchy.high, hierarchy.low
+    nfe_high = high.process.max_nfe if nfe_high is None else nfe_high
+    nfe_low = low.process.max_nfe if nfe_low is None else nfe_low
+    maze, n = tasks.maze, tasks.episodes
+    execution = execution or Execution(replan_every=high.stride, controller="pursuit")
+    check_execution(execution, maze.episode_steps)
+    starts, goals = tasks.starts_xy, tasks.goals_xy
+    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n)
+    result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
+                                 follower=execution.follower(n))
+    alone = execute_plans(maze, starts, goals, densify(source.coarse, high.stride), follower=execution.follower(n))
+    single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device)
+                             .manual_seed(tasks.seed + 1), 1)
+    single(tasks.start_states[:1], goals[:1], np.zeros(1, dtype=np.int64), 0)
+    single.decision_seconds.clear()
+    single.reset()
+    execute_closed_loop(maze, starts[:1], goals[:1], single, execution.replan_every, execution.tolerance,
+                        follower=execution.follower(1))
+    per_batch = percentiles_ms(source.decision_seconds)
+    per_batch["mean_batch"] = float(np.mean(source.decision_batch))
+    return {
+        "kind": "hierarchy", "maze": maze.name, "episodes": n, "seed": tasks.seed, "multi_task": tasks.multi_task,
+        "episode_steps": maze.episode_steps,
+        "high": _level(high, high_info, nfe_high), "low": _level(low, low_info, nfe_low),
+        **score_returns(maze.name, result.returns, result.success),
+        "high_alone": score_returns(maze.name, alone.returns, alone.success),
+        "floor_line": prior_only(high, tasks, "line", Execution(controller=execution.controller,
+                                                                lookahead=execution.lookahead)),
+        "execution": execution.to_dict(low.prior.name),
+        "plans_per_episode": {"mean": float(result.plans_made.mean()), "min": int(result.plans_made.min()),
+                              "max": int(result.plans_made.max())},
+        "calls_per_episode": float(source.calls.mean()),
+        "high_ms_per_plan": 1000.0 * source.high_seconds / n,
+        "low_ms_per_plan": 1000.0 * source.low_seconds / max(source.low_plans, 1),
+        "decision_ms_batch1": percentiles_ms(single.decision_seconds), "decision_ms_per_batch": per_batch,
+        "environment": environment_of(high),
+    }

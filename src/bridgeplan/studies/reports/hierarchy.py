@@ -1,0 +1,187 @@
+"""Hierarchical planning on Maze2D (bridgeplan.hierarchy): a coarse plan over the whole episode refined by a low
+level, beside the same coarse plans executed alone, the best flat planner, the line alone and the expert.
+
+Rows: ``bridgeplan hierarchy eval`` JSONs in docs/results/<maze>-hierarchy/<setting>/ (one per training seed,
+task set and split; the test episodes are evaluation seed = training seed, the validation ones 1000 + it, as the
+study runner's). A setting is the two levels' methods and NFEs and the execution; per low-level method the
+setting with the best mean validation score is chosen and reported on the test episodes. "Coarse alone" is the
+same coarse plans, densified and pursued open loop: the paired difference says what the low level adds. The flat
+planner is the headline's best pursued one (docs/results/<maze>-v2-*/results.csv, chosen on validation, its
+final snapshot), paired by training seed on the same test episodes. Issue 26's goal on large: success >= 0.98
+and a Minari score >= 104.
+
+Made by `bridgeplan study report hierarchy` (studies/large-hierarchy.toml) into docs/results/hierarchy.md and
+the README's block.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from bridgeplan.analysis.load import load_csvs
+from bridgeplan.analysis.selection import best
+from bridgeplan.analysis.stats import compare, mean_se, paired
+from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
+from bridgeplan.studies.reports.headline import STORES, candidates, describe, expert_scores
+
+READS = ()
+"""Its rows are `bridgeplan hierarchy eval` JSONs (and the flat stores the headline reads)."""
+MAZES = ("large",)
+VALIDATION_OFFSET = 1000
+GOAL = {"large": (0.98, 104.0)}
+"""Issue 26's goal per maze: (success rate, Minari score)."""
+
+
+def read_rows(root: Path, maze: str) -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted((root / f"{maze}-hierarchy").glob("*/*.json"))]
+
+
+def setting_of(r: dict) -> str:
+    high, low, ex = r["high"], r["low"], r["execution"]
+    control = ex["controller"] + (f" {ex['lookahead']:g}" if ex.get("lookahead") else "")
+    return (f"{high['method']} NFE {high['nfe']} (H{high['horizon']}k{high['stride']}) -> {low['method']} NFE "
+            f"{low['nfe']} (H{low['horizon']}k{low['stride']}, subgoal every {low['subgoal_every']}); replan "
+            f"{ex['replan_every']}, {control}")
+
+
+def split_of(r: dict) -> str:
+    return "validation" if r["seed"] >= VALIDATION_OFFSET else "test"
+
+
+def by_seed(rows: list[dict], setting: str, split: str, multi_task: bool, value) -> dict[int, float]:
+    return {r["high"]["config"]["seed"]: value(r) for r in rows
+            if setting_of(r) == setting and split_of(r) == split and bool(r["multi_task"]) == multi_task}
+
+
+def minari(r: dict) -> float:
+    return r["score"]["minari"]["mean"]
+
+
+def alone(r: dict) -> float:
+    return r["high_alone"]["score"]["minari"]["mean"]
+
+
+def average(values: dict[int, float]) -> float:
+    return float(np.mean(list(values.values())))
+
+
+def cell(values: dict[int, float]) -> str:
+    return fmt_mean_se(values, one_seed="mean") if values else "-"
+
+
+def chosen_settings(rows: list[dict], multi_task: bool) -> dict[str, str]:
+    """Per low-level method, the setting with the best mean validation score."""
+    out: dict[str, tuple[float, str]] = {}
+    for setting in sorted({setting_of(r) for r in rows}):
+        low = next(r["low"]["method"] for r in rows if setting_of(r) == setting)
+        validation = by_seed(rows, setting, "validation", multi_task, minari)
+        if validation and (low not in out or np.mean(list(validation.values())) > out[low][0]):
+            out[low] = (float(np.mean(list(validation.values()))), setting)
+    return {low: setting for low, (_, setting) in out.items()}
+
+
+def flat_best(root: Path, maze: str, multi_task: bool):
+    """The headline's best pursued flat planner: (description, {seed: test score}, {seed: success})."""
+    results = load_csvs(p for store in STORES for p in [root / f"{maze}-v2-{store}" / "results.csv"] if p.exists())
+    point = best(results, candidates(results, multi_task, True))
+    if point is None:
+        return None
+    return (f"{describe(point.key, point.nfe)}, step {point.step}", results.values(point),
+            results.values(point, field="success"))
+
+
+def verdict(d) -> str:
+    return f"{fmt_diff(d)} ({compare(d)})" if d.n >= 2 else fmt_diff(d)
+
+
+def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> list[str]:
+    """Per low-level method, its chosen setting against the coarse plans alone, the flat planner and the goal."""
+    lines = []
+    flat = flat_best(root, maze, multi_task)
+    goal_success, goal_score = GOAL.get(maze, (None, None))
+    for low, setting in sorted(chosen_settings(rows, multi_task).items()):
+        test = by_seed(rows, setting, "test", multi_task, minari)
+        if not test:
+            continue
+        success = mean_se(by_seed(rows, setting, "test", multi_task, lambda r: r["success_rate"]["mean"]))
+        coarse = by_seed(rows, setting, "test", multi_task, alone)
+        parts = [f"{fmt_mean_se(test)} (success {success.mean:.2f})",
+                 f"minus the coarse plans alone {verdict(paired(test, coarse))}"]
+        if flat is not None:
+            parts.append(f"minus the best flat planner ({flat[0]}) {verdict(paired(test, flat[1], seeds='common'))}")
+        if goal_score is not None:
+            s = mean_se(test)
+            met = success.mean >= goal_success and s.mean >= goal_score
+            parts.append("goal (success >= " f"{goal_success}, Minari >= {goal_score:g}): " + (
+                "met" if met else f"missed by {max(goal_success - success.mean, 0):.2f} success and "
+                                  f"{max(goal_score - s.mean, 0):.1f} points"))
+        lines.append(f"- {maze} {'Multi2D' if multi_task else 'single-task'}, low level {low}: " + "; ".join(parts))
+    return lines
+
+
+def block(root: Path) -> str:
+    root = Path(root)
+    return "\n".join(line for maze in MAZES for multi in (False, True)
+                     for line in summary_lines(root, maze, read_rows(root, maze), multi))
+
+
+def maze_lines(root: Path, maze: str) -> list[str]:
+    rows = read_rows(root, maze)
+    if not rows:
+        return []
+    expert = expert_scores(root)
+    seeds = sorted({r["high"]["config"]["seed"] for r in rows})
+    steps = sorted({(r["high"]["step"], r["low"]["step"]) for r in rows})
+    versions = sorted({r["environment"]["code_version"] for r in rows})
+    out = [f"## {maze}", "",
+           f"Training seeds {', '.join(map(str, seeds))}; steps (high, low) {', '.join(map(str, steps))}; code "
+           f"{', '.join(versions)}; {rows[0]['episodes']} episodes per split.", ""]
+    for multi_task in (False, True):
+        settings = sorted({setting_of(r) for r in rows if bool(r["multi_task"]) == multi_task})
+        if not settings:
+            continue
+        chosen = set(chosen_settings(rows, multi_task).values())
+        body = []
+        for setting in settings:
+            def test(value, s=setting):
+                return by_seed(rows, s, "test", multi_task, value)
+            sc, co = test(minari), test(alone)
+            ms = test(lambda r: r["decision_ms_batch1"]["p50"])
+            body.append([bold(setting) if setting in chosen else setting,
+                         cell(by_seed(rows, setting, "validation", multi_task, minari)),
+                         bold(cell(sc)) if setting in chosen else cell(sc),
+                         f"{average(test(lambda r: r['success_rate']['mean'])):.2f}", cell(co),
+                         f"{average(test(lambda r: r['high_alone']['success_rate']['mean'])):.2f}",
+                         verdict(paired(sc, co)) if sc and co else "-",
+                         cell(test(lambda r: r["floor_line"]["score"]["minari"]["mean"])),
+                         f"{average(test(lambda r: r['calls_per_episode'])):.0f}",
+                         f"{average(ms):.1f}" if ms else "-"])
+        scores = expert.get((maze, multi_task))
+        flat = flat_best(root, maze, multi_task)
+        out += [f"### {'Multi2D' if multi_task else 'single-task'}", "",
+                *table(["setting", "validation", "test", "success", "coarse alone", "success", "hierarchy - coarse",
+                        "line alone", "calls / episode", "ms / decision"], body), "",
+                f"The expert on the same test episodes: {fmt_mean_se(scores) if scores else '-'}; the best flat "
+                f"pursued planner: " + (f"{flat[0]}, {fmt_mean_se(flat[1])} (success "
+                                        f"{average(flat[2]):.2f})" if flat else "-") + ".", "",
+                *summary_lines(root, maze, rows, multi_task), ""]
+    return out
+
+
+def render(root: Path) -> str:
+    root = Path(root)
+    lines = ["# Hierarchical planning: a coarse plan over the episode, refined by a low level", "",
+             "Generated by `bridgeplan study report hierarchy` from the `bridgeplan hierarchy eval` JSONs in "
+             "docs/results/<maze>-hierarchy/. The high level plans once per episode at a long stride; the low level "
+             "plans from the current state through the next coarse states every `replan` steps and is pursued. "
+             "Minari score, mean ± standard error over training seeds; bold: the setting the validation episodes "
+             "choose per low-level method, reported on the test episodes. Coarse alone: the same coarse plans, "
+             "densified, pursued open loop; hierarchy - coarse: the paired per-seed difference (better / worse / tie "
+             "at two standard errors). ms / decision: p50 at batch 1 (the first decision includes the coarse "
+             "plan).", ""]
+    for maze in MAZES:
+        lines += maze_lines(root, maze)
+    return "\n".join(lines).rstrip("\n")
