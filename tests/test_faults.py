@@ -428,7 +428,7 @@ def test_sweep_over_damaged_run(tiny_dataset, tmp_path, finished_sweep):
 
 def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     """A checkout whose only changes are a campaign's own outputs (reports under docs/results) records its
-    commit; a change to the package or to a campaign script marks the version ``.dirty``."""
+    commit; a change to the package or to a study file marks the version ``.dirty``."""
     import bridgeplan
 
     repo = tmp_path / "repo"
@@ -436,7 +436,8 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
                     ignore=shutil.ignore_patterns("__pycache__"))
     (repo / "docs" / "results" / "umaze").mkdir(parents=True)
     (repo / "docs" / "results" / "umaze" / "report.md").write_text("old\n")
-    (repo / "docs" / "results" / "run_x.sh").write_text("echo\n")
+    (repo / "studies").mkdir()
+    (repo / "studies" / "x.toml").write_text("title = 'x'\n")
     git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
     subprocess.run([*git, "init", "-q"], check=True)
     subprocess.run([*git, "add", "-A"], check=True)
@@ -451,8 +452,8 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     assert version() == f"{bridgeplan.__version__}+{sha}"
     (repo / "docs" / "results" / "umaze" / "report.md").write_text("new\n")
     assert version() == f"{bridgeplan.__version__}+{sha}"
-    (repo / "docs" / "results" / "run_x.sh").write_text("echo changed\n")
+    (repo / "studies" / "x.toml").write_text("title = 'changed'\n")
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
-    subprocess.run([*git, "checkout", "-q", "--", "docs/results/run_x.sh"], check=True)
+    subprocess.run([*git, "checkout", "-q", "--", "studies/x.toml"], check=True)
     (repo / "src" / "bridgeplan" / "files.py").write_text((repo / "src" / "bridgeplan" / "files.py").read_text() + "\n")
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"

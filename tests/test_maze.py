@@ -208,3 +208,28 @@ def test_normalized_score():
         normalized_score("nomaze", returns, "minari")
     with pytest.raises(BridgeplanError):
         normalized_score("umaze", [], "minari")
+
+
+def test_expert_on_tasks_scores_the_evaluation_episodes(tmp_path):
+    """The expert's rows on evaluation tasks: its score is the normalized mean return of those very episodes, and
+    the command writes them (with the code version) as the reports read them."""
+    import json
+
+    from bridgeplan.cli import main
+    from bridgeplan.maze.reference import expert_on_tasks
+
+    rows = expert_on_tasks(["umaze"], 6, (0, 3), multi_task=(False,))
+    assert [(r["maze"], r["multi_task"], r["seed"]) for r in rows] == [("umaze", False, 0), ("umaze", False, 3)]
+    maze = get_maze("umaze")
+    starts, goals = sample_tasks(maze, 6, 3)
+    expert = WaypointExpert(maze)
+    expert.plan(starts, goals)
+    returns = rollout(maze, lambda t, obs: expert(obs), starts, goals).returns
+    assert rows[1]["score_minari"] == pytest.approx(normalized_score("umaze", returns, "minari")[0])
+    assert rows[1]["success"] == 1.0
+    out = tmp_path / "expert.json"
+    assert main(["reference", "expert-on-tasks", "--maze", "umaze", "--episodes", "6", "--seeds", "0,3",
+                 "--out", str(out)]) == 0
+    written = json.loads(out.read_text())
+    assert written["episodes"] == 6 and [r["seed"] for r in written["rows"]] == [0, 3, 0, 3]  # single, Multi2D
+    assert written["rows"][1]["score_minari"] == pytest.approx(rows[1]["score_minari"])

@@ -76,6 +76,32 @@ def _add_reference_commands(sub) -> None:
     m.add_argument("--seed", type=int, default=123)
     m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
     m.set_defaults(func=_cmd_reference_measure)
+    e = ref.add_parser("expert-on-tasks", help="the expert's score on evaluation tasks themselves (what the reports "
+                                               "show beside the planners: docs/results/expert-on-eval-tasks.json)")
+    e.add_argument("--maze", action="append", default=None, help="a maze (repeatable; default umaze, medium, large)")
+    e.add_argument("--episodes", type=int, default=200)
+    e.add_argument("--seeds", default="0,1,2", help="task seeds (the test episodes of training seeds 0, 1, 2)")
+    e.add_argument("--out", required=True, help="the JSON file to write")
+    e.set_defaults(func=_cmd_reference_expert_on_tasks)
+
+
+def _cmd_reference_expert_on_tasks(args) -> int:
+    from bridgeplan.files import atomic_write_text, code_version
+    from bridgeplan.maze.reference import expert_on_tasks
+
+    _positive("--episodes", args.episodes)
+    try:
+        seeds = tuple(int(v) for v in args.seeds.split(","))
+    except ValueError:
+        raise BridgeplanError(f"--seeds takes comma-separated integers, got {args.seeds!r}") from None
+    rows = expert_on_tasks(args.maze or ("umaze", "medium", "large"), args.episodes, seeds)
+    for r in rows:
+        print(f"{r['maze']:<8} {'Multi2D' if r['multi_task'] else 'single-task':<12} seed {r['seed']}: "
+              f"{r['score_minari']:.1f} (Minari), success {r['success']:.2f}")
+    atomic_write_text(Path(args.out), json.dumps({"code_version": code_version(), "episodes": args.episodes,
+                                                  "rows": rows}, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def _reference_table(ref: dict) -> str:

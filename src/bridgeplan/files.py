@@ -31,9 +31,9 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, lambda f: f.write(text.encode()))
 
 
-CODE_PATHS = ("src", "pyproject.toml", "scripts", "studies", ":(glob)docs/results/*.sh", ":(glob)docs/results/*.py")
-"""What makes a result, relative to the repository root: the package, the study files and the committed scripts
-that run it. Their outputs (reports, CSVs, figures under docs/results) are not code: a campaign that writes its report
+CODE_PATHS = ("src", "pyproject.toml", "scripts", "studies")
+"""What makes a result, relative to the repository root: the package, the study files that declare the campaigns
+and the setup scripts. Their outputs (reports, CSVs, figures under docs/results) are not code: a campaign that writes its report
 between two of its evaluations does not make the second one's code dirty."""
 
 

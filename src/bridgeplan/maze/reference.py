@@ -84,3 +84,26 @@ def normalized_score(maze_name: str, returns, convention: str) -> tuple[float, f
     scores = 100.0 * (returns - low) / (high - low)
     se = float(scores.std(ddof=1) / np.sqrt(scores.size)) if scores.size > 1 else float("nan")
     return float(scores.mean()), se
+
+
+def expert_on_tasks(mazes, episodes: int, seeds, multi_task=(False, True)) -> list[dict]:
+    """The noise-free expert, planning afresh, on evaluation tasks themselves (``sample_tasks(maze, episodes,
+    seed)`` of each seed, single-task and Multi2D): its normalized score in both conventions and success rate,
+    one row per maze, task set and seed. Normalized scores divide by the expert's single-task return, so on
+    Multi2D's random goals, often near the start, a planner may pass 100; these rows say where the expert stands."""
+    if episodes <= 0:
+        raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    rows = []
+    for name in mazes:
+        maze = get_maze(name)
+        for multi in multi_task:
+            for seed in seeds:
+                starts, goals = sample_tasks(maze, episodes, seed, multi_task=multi)
+                expert = WaypointExpert(maze)
+                expert.plan(starts, goals)
+                result = rollout(maze, lambda t, obs: expert(obs), starts, goals)
+                rows.append({"maze": maze.name, "multi_task": multi, "seed": seed,
+                             **{f"score_{c}": normalized_score(maze.name, result.returns, c)[0] for c in CONVENTIONS},
+                             "success": float(result.success.mean())})
+    return rows
+

@@ -4,9 +4,10 @@ straight line alone executed the same ways, the expert on the same episodes and 
 
 Rows: docs/results/<maze>-v2-{curves,hold,consistent-priors}/results.csv, each run's final snapshot; candidates
 are every method (holds included), NFE and open-loop or replanned execution evaluated there on both splits. The
-expert: docs/results/expert-on-eval-tasks.json (the same test episodes). Diffuser's published scores (Janner et
-al. 2022, Table 1) use D4RL's normalization constants in the old environment (goal threshold 0.5): they are
-shown beside this project's scores converted to that convention (``score_d4rl``), not compared with them.
+expert: docs/results/expert-on-eval-tasks.json (`bridgeplan reference expert-on-tasks`, the same test episodes).
+Diffuser's published scores (Janner et al. 2022, Table 1) use D4RL's normalization constants in the old
+environment (goal threshold 0.5): they are shown beside this project's scores converted to that convention
+(``score_d4rl``), not compared with them.
 
 Made by `bridgeplan study report headline` (studies/headline.toml) into docs/results/headline.md and the README's
 generated block.

@@ -1,10 +1,10 @@
 """Issue 15's table: flow matching, the I2SB bridge and the consistent bridge from each prior across training,
 against DDPM, and the issue's goal checked at every snapshot (umaze and medium; the rows of `prior-curves` and
-`nfe-curves` in docs/results/<maze>-v2-curves/results.csv, made by run_flow_priors.sh, run_maze_variants.sh
-PARTS=consistent and run_maze_curves.sh, and in docs/results/<maze>-v2-consistent-priors/results.csv, made by
-run_maze_variants.sh PARTS=consistent-priors in a store of its own). The line prior's consistent runs are in
-both: the table takes the first, and says how closely the retrained runs reproduce it. On medium, a table checks
-the goal for the consistent bridge from the line sampled by its posterior means (run_bridge_sampler.sh), and a
+`nfe-curves` in docs/results/<maze>-v2-curves/results.csv, made by studies/<maze>-v2-curves.toml, and in
+docs/results/<maze>-v2-consistent-priors/results.csv, made by studies/<maze>-v2-consistent-priors.toml in a store
+of its own). The line prior's consistent runs are in both: the table takes the first, and says how closely the
+retrained runs reproduce it. On medium, a table checks the goal for the consistent bridge from the line sampled by
+its posterior means (evaluation JSONs in docs/results/medium-v2-consistent-samplers), and a
 last one checks it with 5 seeds and the bridge's setting declared in advance (:func:`declared_table`).
 
 Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
@@ -14,7 +14,7 @@ over seeds on these same (test) episodes, which favours DDPM and the bridges: th
 raised, not lowered. Per-seed differences (flow minus the other, Minari convention), mean ± standard error over
 seeds; "reaches": yes when the mean is not below, "within noise" when below by less than two standard errors;
 "clears": more than two above. The prior alone: the straight line's floor of each evaluation row, the learned
-prior's from docs/results/<maze>-v2-curves/learned-floor (run_learned_floor.sh).
+prior's from docs/results/<maze>-v2-curves/learned-floor (NFE-1 evaluation JSONs of the learned-prior runs).
 
 Made by `bridgeplan study report prior-curves` (studies/prior-curves.toml) into docs/results/prior-curves.md.
 """
@@ -44,7 +44,8 @@ READS = (DDPM, *(method(process, prior, steps=N, **params) for process, params i
                 (("flow", {}), ("bridge", {}), ("bridge", {"consistent": True})) for prior in PRIORS))
 """The trained methods the tables read (studies that make this report must train them)."""
 SWEEP = "sampler-sweep"
-"""The store of run_sampler_sweep.sh (docs/results/<maze>-v2-sampler-sweep): the samplers experiment, 5 seeds."""
+"""The store of studies/medium-v2-sampler-sweep.toml (docs/results/<maze>-v2-sampler-sweep): the samplers
+experiment, 5 seeds."""
 
 
 def load(root: Path, maze: str, stores=STORES) -> Results:
@@ -117,7 +118,7 @@ def reproduction(root: Path, maze: str) -> str:
 
 
 def mean_sampler_table(root: Path, results: Results, maze: str) -> list[str]:
-    """The consistent bridge from the line sampled by its posterior means at NFE 2 (run_bridge_sampler.sh's eval
+    """The consistent bridge from the line sampled by its posterior means at NFE 2 (evaluation
     JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
     DDPM's best NFE at each step, per seed, and against the line alone."""
     here = root / f"{maze}-v2-consistent-samplers"
@@ -142,7 +143,7 @@ def mean_sampler_table(root: Path, results: Results, maze: str) -> list[str]:
 def declared_table(root: Path, maze: str) -> list[str]:
     """The goal with the candidate's setting declared before the test episodes are read: the consistent bridge
     from the line at NFE 1 or 2, by posterior draws or by posterior means, whichever has the best mean over seeds
-    on the validation episodes (final snapshot; run_sampler_sweep.sh), scored on the test episodes at every
+    on the validation episodes (final snapshot; studies/medium-v2-sampler-sweep.toml), scored on the test episodes at every
     snapshot against DDPM's best sampler and NFE at that snapshot (picked on the test episodes: favours DDPM),
     the I2SB bridge's best NFE from the line (docs/results/<maze>-v2-curves, seeds 0-2, paired by seed) and
     the line alone; per-seed differences over the sweep's 5 seeds. A second table gives every candidate on the
@@ -197,7 +198,7 @@ def declared_table(root: Path, maze: str) -> list[str]:
             f"episodes at the final snapshot ({validation}): **{named(chosen)}**, then scored on the test episodes "
             f"at every snapshot. DDPM's best over its samplers (ancestral, DDIM) and NFE (1, 2, 4, 16) is picked on "
             f"the test episodes at each snapshot, which favours DDPM. I2SB's best from the line: seeds 0-2 of "
-            f"{maze}-v2-curves, paired by seed. (docs/results/{maze}-v2-{SWEEP}, run_sampler_sweep.sh.)", "",
+            f"{maze}-v2-curves, paired by seed. (docs/results/{maze}-v2-{SWEEP}, studies/{maze}-v2-{SWEEP}.toml.)", "",
             f"| step | consistent bridge ({named(chosen)}) | DDPM best (sampler, NFE) | I2SB best (line) | line alone "
             "| reaches DDPM's best | reaches I2SB's best | clears the line alone |", rule(8), *lines, "",
             "Every candidate on the test episodes and whether it reaches DDPM's best there, for reference (not a "
