@@ -33,8 +33,8 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 CODE_PATHS = ("src", "pyproject.toml", "scripts", "studies")
 """What makes a result, relative to the repository root: the package, the study files that declare the campaigns
-and the setup scripts. Their outputs (reports, CSVs, figures under docs/results) are not code: a campaign that writes its report
-between two of its evaluations does not make the second one's code dirty."""
+and the setup scripts. Their outputs (reports, CSVs, figures under docs/results) are not code: a campaign that
+writes its report between two of its evaluations does not make the second one's code dirty."""
 
 
 def code_version() -> str:

@@ -1,8 +1,8 @@
 """The controllers experiment's table (issue 13): each run executed by Diffuser's tracking controller and by pursuit
 at each lookahead, open loop and replanned, per maze and task set, from the `controllers` rows (test episodes) of
-docs/results/<maze>-v2-curves/results.csv (studies/<maze>-v2-curves.toml). Each cell: Minari score, mean ± standard error over
-training seeds, and the success rate; in bold the lookahead the validation episodes (`controllers-validation`)
-pick for that method and NFE, the one findings.md reports.
+docs/results/<maze>-v2-curves/results.csv (studies/<maze>-v2-curves.toml). Each cell: Minari score, mean ±
+standard error over training seeds, and the success rate; in bold the lookahead the validation episodes
+(`controllers-validation`) pick for that method and NFE, the one findings.md reports.
 
 Made by `bridgeplan study report controllers` (studies/controllers.toml) into docs/results/controllers.md.
 """
@@ -68,8 +68,9 @@ def render(root: Path) -> str:
     """controllers.md's text, from the committed results under ``root`` (docs/results)."""
     lines = ["# Executing plans: tracking against pursuit (issue 13)", "",
              "Made by `bridgeplan study report controllers` from the `controllers` rows of "
-             "docs/results/<maze>-v2-curves/results.csv (studies/<maze>-v2-curves.toml): each run's final snapshot, 3 training "
-             "seeds x 200 test episodes, Minari score mean ± standard error over seeds (success rate). `track`: "
+             "docs/results/<maze>-v2-curves/results.csv (studies/<maze>-v2-curves.toml): each run's final snapshot, "
+             "3 training seeds x 200 test episodes, Minari score mean ± standard error over seeds (success rate). "
+             "`track`: "
              "Diffuser's controller; `pursuit R`: the plan's path at the expert's pace, toward the first planned "
              "position R away; bold: the lookahead the validation episodes pick; `replan32 pursuit 1`: a new plan "
              "every 32 steps (bridge and flow from the warm prior).", ""]

@@ -143,8 +143,8 @@ def mean_sampler_table(root: Path, results: Results, maze: str) -> list[str]:
 def declared_table(root: Path, maze: str) -> list[str]:
     """The goal with the candidate's setting declared before the test episodes are read: the consistent bridge
     from the line at NFE 1 or 2, by posterior draws or by posterior means, whichever has the best mean over seeds
-    on the validation episodes (final snapshot; studies/medium-v2-sampler-sweep.toml), scored on the test episodes at every
-    snapshot against DDPM's best sampler and NFE at that snapshot (picked on the test episodes: favours DDPM),
+    on the validation episodes (final snapshot; studies/medium-v2-sampler-sweep.toml), scored on the test episodes
+    at every snapshot against DDPM's best sampler and NFE at that snapshot (picked on the test episodes: favours DDPM),
     the I2SB bridge's best NFE from the line (docs/results/<maze>-v2-curves, seeds 0-2, paired by seed) and
     the line alone; per-seed differences over the sweep's 5 seeds. A second table gives every candidate on the
     test episodes against DDPM's best, for reference."""
