@@ -297,18 +297,11 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
     source = PlanSource(planner, execution, nfe, tasks.generator(planner.device), n, maze, batch_size)
     result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
                                  follower=execution.follower(n))
-    # decision latency at batch 1: the first episode again, alone, after one untimed decision
     single = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(tasks.seed + 1),
                         1, maze)
-    single(tasks.start_states[:1], goals[:1], np.zeros(1, dtype=np.int64), 0)
-    single.decision_seconds.clear()
-    single.reset()
-    execute_closed_loop(maze, starts[:1], goals[:1], single, execution.replan_every, execution.tolerance,
-                        follower=execution.follower(1))
     per_batch = percentiles_ms(source.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(source.decision_batch)) * m
-    decisions = {"decision_ms_batch1": percentiles_ms(single.decision_seconds),
-                 "decision_ms_per_batch": per_batch}
+    decisions = {"decision_ms_batch1": batch1_latency(single, tasks, execution), "decision_ms_per_batch": per_batch}
     return EvalResult(
         planner=planner, tasks=tasks, nfe=nfe, run=run,
         scores=score_returns(maze.name, result.returns, result.success),
@@ -318,6 +311,19 @@ def _evaluate_closed_loop(planner: Planner, tasks: Tasks, nfe: int, run: RunInfo
         prior_ms_per_plan=1000.0 * source.prior_seconds / source.plans_sampled,
         batch_size=min(batch_size or n * m, n * m), compile_seconds=compile_s, environment=environment_of(planner),
         execution=execution, plans_made=result.plans_made, decisions=decisions)
+
+
+def batch1_latency(single, tasks: Tasks, execution: Execution) -> dict:
+    """Decision latency at batch 1 (p50/p95/mean ms): the first episode of ``tasks`` run again alone by
+    ``single`` (a closed loop's ``plan_fn`` for one episode, fresh, with ``decision_seconds`` and ``reset``),
+    after one untimed decision."""
+    goals = tasks.goals_xy[:1]
+    single(tasks.start_states[:1], goals, np.zeros(1, dtype=np.int64), 0)
+    single.decision_seconds.clear()
+    single.reset()
+    execute_closed_loop(tasks.maze, tasks.starts_xy[:1], goals, single, execution.replan_every, execution.tolerance,
+                        follower=execution.follower(1))
+    return percentiles_ms(single.decision_seconds)
 
 
 def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int = 0,
