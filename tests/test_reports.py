@@ -76,6 +76,9 @@ def test_the_report_chooses_on_validation_and_judges_on_test(tmp_path):
     assert goal[2].startswith("- cddb-deep dynamics: chosen on validation cddb-deep dynamics=0.0001 at NFE 1")
     assert goal[2].endswith("yes (+1.0 ± 0.0)")
     assert goal[0].startswith("- uncorrected: chosen on validation uncorrected at NFE 1")
+    # the README's block: the same verdicts, each naming its method, snapshot and seeds
+    block = cddb.block(tmp_path).splitlines()
+    assert block[1] == "- bridge (line; consistent=True), step 8000, 3 training seeds, " + goal[1][2:]
 
 
 def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_path):

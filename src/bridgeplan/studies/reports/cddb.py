@@ -148,6 +148,20 @@ def goal_lines(results: Results, base: MethodKey, step: int, bar: Point) -> list
     return lines
 
 
+def block(root: Path) -> str:
+    """The README's lines: per method and residual, the verdict at the final snapshot (goal_lines)."""
+    results = Results(read_csv(Path(root) / DATA / "results.csv"))
+    seeds = len({r.seed for r in results})
+    lines = []
+    for base in measured(results):
+        step = max(results.steps(base))
+        bar = ddpm_bar(results, step)
+        if bar is not None:
+            lines += [f"- {label(base)}, step {step}, {seeds} training seeds, {line[2:]}"
+                      for line in goal_lines(results, base, step, bar)]
+    return "\n".join(lines)
+
+
 def render(root: Path) -> str:
     results = Results(read_csv(Path(root) / DATA / "results.csv"))
     seeds = sorted({r.seed for r in results})
