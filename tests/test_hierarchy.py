@@ -175,3 +175,16 @@ def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
         a = arrival[k]
         assert np.allclose(coarse[k, :a + 1], raw[k, :a + 1])
         assert np.allclose(coarse[k, a + 1:, :2], goals[k]) and np.allclose(coarse[k, a + 1:, 2:], 0)
+
+
+def test_coarse_diagnostics_measure_walls_and_arrival():
+    from bridgeplan.hierarchy import coarse_diagnostics
+    from bridgeplan.maze.layouts import get_maze
+
+    maze = get_maze("umaze")  # cell (2, 2) is a wall; (1, 1) and (3, 1) are free
+    a, wall, b = maze.cell_to_xy(np.array([[1, 1], [2, 2], [3, 1]]))
+    dense = np.zeros((2, 5, 4))
+    dense[0, :, :2] = [a, a, wall, b, b]  # one of five positions in a wall, at the goal from step 3
+    dense[1, :, :2] = a                   # never arrives: the last step
+    out = coarse_diagnostics(dense, np.array([b, b]), maze, MAZE2D)
+    assert out == {"in_walls": 0.1, "crossing_walls": 0.5, "arrival_step": (3 + 4) / 2}

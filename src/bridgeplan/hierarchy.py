@@ -29,6 +29,7 @@ from bridgeplan import config as cfg
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import Tasks, batch1_latency, environment_of, prior_only, score_returns
 from bridgeplan.maze.controllers import check_controller
+from bridgeplan.maze.layouts import GOAL_RADIUS
 from bridgeplan.maze.rollout import check_replanning, execute_closed_loop, execute_plans
 from bridgeplan.planner import Planner
 from bridgeplan.replan import Execution, percentiles_ms, truncate_at_arrival
@@ -186,6 +187,18 @@ def _level(planner: Planner, info: RunInfo, nfe: int) -> dict:
             "subgoal_every": planner.subgoal_every, "config": info.portable_config}
 
 
+def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, maze, layout) -> dict:
+    """What limits the coarse plans ``dense [N, S, obs_dim]`` (densified, physical; measured with the maze's map,
+    which no planner reads): ``in_walls``, the share of their positions inside walls or outside the maze, and
+    ``arrival_step``, the mean step at which they first come within 0.45 of the goal (S - 1 when never)."""
+    positions = layout.state_positions(dense)
+    inside = ~maze.is_free_xy(positions.reshape(-1, 2)).reshape(positions.shape[:2])
+    near = np.linalg.norm(positions - goals[:, None], axis=2) <= GOAL_RADIUS
+    arrival = np.where(near.any(axis=1), near.argmax(axis=1), dense.shape[1] - 1)
+    return {"in_walls": float(inside.mean()), "crossing_walls": float(inside.any(axis=1).mean()),
+            "arrival_step": float(arrival.mean())}
+
+
 def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunInfo, tasks: Tasks,
                        nfe_high: int | None = None, nfe_low: int | None = None,
                        execution: Execution | None = None) -> dict:
@@ -206,7 +219,8 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
     source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n)
     result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
                                  follower=execution.follower(n))
-    alone = execute_plans(maze, starts, goals, densify(source.coarse, high.stride), follower=execution.follower(n))
+    dense = densify(source.coarse, high.stride)
+    alone = execute_plans(maze, starts, goals, dense, follower=execution.follower(n))
     single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device)
                              .manual_seed(tasks.seed + 1), 1)
     per_batch = percentiles_ms(source.decision_seconds)
@@ -217,6 +231,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
         "high": _level(high, high_info, nfe_high), "low": _level(low, low_info, nfe_low),
         **score_returns(maze.name, result.returns, result.success),
         "high_alone": score_returns(maze.name, alone.returns, alone.success),
+        "coarse_plans": coarse_diagnostics(dense, goals, maze, high.layout),
         "floor_line": prior_only(high, tasks, "line", Execution(controller=execution.controller,
                                                                 lookahead=execution.lookahead)),
         "execution": execution.to_dict(low.prior.name),
