@@ -133,7 +133,8 @@ def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(
         {"maze": "large", "multi_task": False, "seed": s, "score_minari": 104.0} for s in SEEDS]}))
     rows = hierarchy.read_rows(tmp_path, "large")
     chosen = hierarchy.chosen_settings(rows, False)
-    assert list(chosen) == ["flow (coarse)"] and "NFE 1 (H16k8" in chosen["flow (coarse)"]  # validation's 80 > 70
+    family = "flow (line) H32k24 -> flow (coarse) H16k8"
+    assert list(chosen) == [family] and "NFE 1 (H16k8" in chosen[family]  # validation's 80 > 70
     block = hierarchy.block(tmp_path)
     # test 90, 91, 92 (91.0 ± 0.6) against the coarse plans' 80, 82, 84: differences 10, 9, 8 -> 9.0 ± 0.6, better
     assert "91.0 ± 0.6 (success 0.90)" in block and "+9.0 ± 0.6 (better)" in block

@@ -1,14 +1,14 @@
-"""Hierarchical planning on Maze2D (bridgeplan.hierarchy): a coarse plan over the whole episode refined by a low
-level, beside the same coarse plans executed alone, the best flat planner, the line alone and the expert.
+"""Hierarchical planning on Maze2D (bridgeplan.hierarchy): a coarse plan refined by a low level, beside the same
+coarse plans executed alone, the best flat planner, the line alone and the expert.
 
 Rows: ``bridgeplan hierarchy eval`` JSONs in docs/results/<maze>-hierarchy/<setting>/ (one per training seed,
 task set and split; the test episodes are evaluation seed = training seed, the validation ones 1000 + it, as the
-study runner's). A setting is the two levels' methods and NFEs and the execution; per low-level method the
-setting with the best mean validation score is chosen and reported on the test episodes. "Coarse alone" is the
-same coarse plans, densified and pursued open loop: the paired difference says what the low level adds. The flat
-planner is the headline's best pursued one (docs/results/<maze>-v2-*/results.csv, chosen on validation, its
-final snapshot), paired by training seed on the same test episodes. Issue 26's goal on large: success >= 0.98
-and a Minari score >= 104.
+study runner's). A setting is the two levels' methods and NFEs and the execution; per family (the levels' methods
+and shapes) the setting with the best mean validation score is chosen and reported on the test episodes. "Coarse
+alone" is the same coarse plans, densified and pursued open loop: the paired difference says what the low level
+adds. The flat planner is the headline's best pursued one (docs/results/<maze>-v2-*/results.csv, chosen on
+validation, its final snapshot), paired by training seed on the same test episodes. Issue 26's goal on large:
+success >= 0.98 and a Minari score >= 104.
 
 Made by `bridgeplan study report hierarchy` (studies/large-hierarchy.toml) into docs/results/hierarchy.md and
 the README's block.
@@ -47,6 +47,12 @@ def setting_of(r: dict) -> str:
             f"{ex['replan_every']}, {control}")
 
 
+def family_of(r: dict) -> str:
+    """The two levels' methods and shapes: a setting is chosen on validation within each family."""
+    high, low = r["high"], r["low"]
+    return f"{high['method']} H{high['horizon']}k{high['stride']} -> {low['method']} H{low['horizon']}k{low['stride']}"
+
+
 def split_of(r: dict) -> str:
     return "validation" if r["seed"] >= VALIDATION_OFFSET else "test"
 
@@ -80,14 +86,14 @@ def cell(values: dict[int, float]) -> str:
 
 
 def chosen_settings(rows: list[dict], multi_task: bool) -> dict[str, str]:
-    """Per low-level method, the setting with the best mean validation score."""
+    """Per family (the levels' methods and shapes), the setting with the best mean validation score."""
     out: dict[str, tuple[float, str]] = {}
     for setting in sorted({setting_of(r) for r in rows}):
-        low = next(r["low"]["method"] for r in rows if setting_of(r) == setting)
+        family = next(family_of(r) for r in rows if setting_of(r) == setting)
         validation = by_seed(rows, setting, "validation", multi_task, minari)
-        if validation and (low not in out or np.mean(list(validation.values())) > out[low][0]):
-            out[low] = (float(np.mean(list(validation.values()))), setting)
-    return {low: setting for low, (_, setting) in out.items()}
+        if validation and (family not in out or average(validation) > out[family][0]):
+            out[family] = (average(validation), setting)
+    return {family: setting for family, (_, setting) in out.items()}
 
 
 def flat_best(root: Path, maze: str, multi_task: bool):
@@ -105,11 +111,11 @@ def verdict(d) -> str:
 
 
 def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> list[str]:
-    """Per low-level method, its chosen setting against the coarse plans alone, the flat planner and the goal."""
+    """Per family, its chosen setting against the coarse plans alone, the flat planner and the goal."""
     lines = []
     flat = flat_best(root, maze, multi_task)
     goal_success, goal_score = GOAL.get(maze, (None, None))
-    for low, setting in sorted(chosen_settings(rows, multi_task).items()):
+    for family, setting in sorted(chosen_settings(rows, multi_task).items()):
         test = by_seed(rows, setting, "test", multi_task, minari)
         if not test:
             continue
@@ -125,7 +131,7 @@ def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> 
             parts.append("goal (success >= " f"{goal_success}, Minari >= {goal_score:g}): " + (
                 "met" if met else f"missed by {max(goal_success - success.mean, 0):.2f} success and "
                                   f"{max(goal_score - s.mean, 0):.1f} points"))
-        lines.append(f"- {maze} {'Multi2D' if multi_task else 'single-task'}, low level {low}: " + "; ".join(parts))
+        lines.append(f"- {maze} {'Multi2D' if multi_task else 'single-task'}, {family}: " + "; ".join(parts))
     return lines
 
 
@@ -187,7 +193,8 @@ def render(root: Path) -> str:
              "docs/results/<maze>-hierarchy/. The high level plans once per episode at a long stride; the low level "
              "plans from the current state through the next coarse states every `replan` steps and is pursued. "
              "Minari score, mean ± standard error over training seeds; bold: the setting the validation episodes "
-             "choose per low-level method, reported on the test episodes. Coarse alone: the same coarse plans, "
+             "choose per family (the levels' methods and shapes), reported on the test episodes. Coarse alone: the "
+             "same coarse plans, "
              "densified, pursued open loop; hierarchy - coarse: the paired per-seed difference (better / worse / tie "
              "at two standard errors). Coarse in walls: the share of the densified coarse plans' positions inside "
              "walls; coarse arrival: the mean step at which they first come within 0.45 of the goal (both measured "
