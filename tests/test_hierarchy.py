@@ -113,6 +113,11 @@ def test_hierarchy_eval_end_to_end(levels, tmp_path):
     assert r["calls_per_episode"] == 2 + 25
     assert 0 <= r["success_rate"]["mean"] <= 1 and "score" in r["high_alone"] and "score" in r["floor_line"]
     assert "/" not in r["high"]["config"]["dataset"]
+    # the high level replanned every 60 steps: coarse plans at steps 0, 60, 120, 180 and 240 (2 calls each)
+    assert main(["hierarchy", "eval", str(levels["high"]), str(levels["low"]), "--episodes", "4", "--nfe-high", "2",
+                 "--nfe-low", "1", "--replan-high-every", "60", "--out", str(out), "--device", "cpu"]) == 0
+    r = json.loads(out.read_text())
+    assert r["execution"]["replan_high_every"] == 60 and r["calls_per_episode"] == 5 * 2 + 25
 
 
 def test_hierarchy_subgoals_follow_progress(levels):

@@ -449,6 +449,9 @@ def _add_hierarchy_commands(sub) -> None:
                    help="the low level plans again every K steps (default: the high level's stride)")
     e.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
                    help="and when the position is more than D from its plan (default: off)")
+    e.add_argument("--replan-high-every", type=int, default=None, metavar="K",
+                   help="the high level plans again from the current state every K steps (default: once per "
+                        "episode)")
     e.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
     e.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
     e.add_argument("--device", default="auto")
@@ -475,10 +478,11 @@ def _cmd_hierarchy_eval(args) -> int:
                           controller=args.controller,
                           **({} if args.lookahead is None else {"lookahead": args.lookahead}))
     tasks = make_tasks(high.config.maze, args.episodes, args.seed, args.multi_task)
-    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution)
+    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution,
+                                args.replan_high_every)
     name = (f"hierarchy-{high.name}-step{high.step}-nfe{result['high']['nfe']}-step{low.step}-nfe"
             f"{result['low']['nfe']}-ep{args.episodes}-seed{args.seed}" + ("-multi" if args.multi_task else "")
-            + f"-{execution.tag()}")
+            + f"-{execution.tag()}" + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
     out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
     write_result(result, out)
     minari = result["score"]["minari"]

@@ -92,8 +92,10 @@ def check_levels(high: Planner, low: Planner) -> None:
 class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
 
-    Returns the low level's plans (densified, physical states). Counts network calls per episode
-    (``calls [n]``: ``nfe_high`` for the coarse plan, ``nfe_low`` per low-level plan) and times every decision.
+    Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
+    plan is made again from its current state at its first decision K or more steps after the last one (its
+    progress back to 0). Counts network calls per episode (``calls [n]``: ``nfe_high`` per coarse plan,
+    ``nfe_low`` per low-level plan) and times every decision.
     """
 
     hierarchy: Hierarchy
@@ -101,8 +103,13 @@ class HierarchySource:
     nfe_low: int
     generator: torch.Generator
     n: int
+    replan_high_every: int | None = None
     coarse: np.ndarray | None = None
     """``[n, H_high, obs_dim]`` each episode's coarse plan (None before the first decision)."""
+    first_coarse: np.ndarray | None = None
+    """The coarse plans of the first decision (``coarse`` before any replan of the high level)."""
+    coarse_at: np.ndarray | None = None
+    """``[n]`` the step each episode's coarse plan was made at."""
     progress: np.ndarray | None = None
     """``[n]`` the coarse index each episode has reached."""
     calls: np.ndarray = field(init=False)
@@ -119,8 +126,18 @@ class HierarchySource:
 
     def reset(self) -> None:
         """Forget the coarse plans (a new episode); counters and timings are kept."""
-        self.coarse = None
-        self.progress = None
+        self.coarse = self.first_coarse = self.coarse_at = self.progress = None
+
+    def plan_coarse(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> None:
+        """New coarse plans for ``episodes`` from their ``states``; their progress starts again at 0."""
+        coarse, plan = self.hierarchy.coarse_plans(states, goals, self.nfe_high, self.generator)
+        if self.coarse is None:
+            self.coarse, self.first_coarse = coarse, coarse.copy()
+            self.progress = np.zeros(self.n, dtype=np.int64)
+            self.coarse_at = np.zeros(self.n, dtype=np.int64)
+        self.coarse[episodes], self.progress[episodes], self.coarse_at[episodes] = coarse, 0, t
+        self.calls[episodes] += self.nfe_high
+        self.high_seconds += plan.prior_seconds + plan.sample_seconds
 
     def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
         """Move each episode's progress to the coarse state nearest its position among the next ``m + 1``."""
@@ -139,10 +156,11 @@ class HierarchySource:
         if self.coarse is None:
             if len(episodes) != self.n:
                 raise BridgeplanError("the first decision must be made for every episode")
-            self.coarse, plan = h.coarse_plans(states, goals, self.nfe_high, self.generator)
-            self.progress = np.zeros(self.n, dtype=np.int64)
-            self.calls[episodes] += self.nfe_high
-            self.high_seconds += plan.prior_seconds + plan.sample_seconds
+            self.plan_coarse(states, goals, episodes, t)
+        elif self.replan_high_every is not None:
+            due = np.flatnonzero(t - self.coarse_at[episodes] >= self.replan_high_every)
+            if len(due):
+                self.plan_coarse(states[due], goals[due], episodes[due], t)
         progress = self.advance(h.low.layout.state_positions(states), episodes)
         plan = h.low.plan(states, None, self.nfe_low, self.generator,
                           subgoals=h.subgoals(self.coarse[episodes], progress))
@@ -165,6 +183,11 @@ def check_execution(execution: Execution, episode_steps: int) -> None:
     if execution.candidates != 1 or execution.warm or execution.arrival is not None:
         raise BridgeplanError("a hierarchy plans one candidate per decision, from its own prior, as sampled "
                               "(no --candidates, --prior warm or --arrival)")
+
+
+def check_high_replanning(every: int | None, episode_steps: int) -> None:
+    if every is not None and not 1 <= every <= episode_steps:
+        raise BridgeplanError(f"--replan-high-every must be in 1..{episode_steps} (the episode length), got {every}")
 
 
 def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = None, low_snapshot: int | None = None,
@@ -201,10 +224,11 @@ def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, maze, layout) -> di
 
 def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunInfo, tasks: Tasks,
                        nfe_high: int | None = None, nfe_low: int | None = None,
-                       execution: Execution | None = None) -> dict:
+                       execution: Execution | None = None, replan_high_every: int | None = None) -> dict:
     """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` writes.
 
-    Beside the hierarchy's score: ``high_alone``, the same coarse plans densified and executed open loop by the
+    ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the
+    hierarchy's score: ``high_alone``, the first coarse plans densified and executed open loop by the
     same controller (what the low level adds), and ``floor_line``, the straight line so executed. Decisions are
     timed in the evaluation's batches and, at batch 1, over the first episode run again alone after one
     untimed decision.
@@ -216,13 +240,14 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
     execution = execution or Execution(replan_every=high.stride, controller="pursuit")
     check_execution(execution, maze.episode_steps)
     starts, goals = tasks.starts_xy, tasks.goals_xy
-    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n)
+    check_high_replanning(replan_high_every, maze.episode_steps)
+    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n, replan_high_every)
     result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
                                  follower=execution.follower(n))
-    dense = densify(source.coarse, high.stride)
+    dense = densify(source.first_coarse, high.stride)
     alone = execute_plans(maze, starts, goals, dense, follower=execution.follower(n))
     single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device)
-                             .manual_seed(tasks.seed + 1), 1)
+                             .manual_seed(tasks.seed + 1), 1, replan_high_every)
     per_batch = percentiles_ms(source.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(source.decision_batch))
     return {
@@ -234,7 +259,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
         "coarse_plans": coarse_diagnostics(dense, goals, maze, high.layout),
         "floor_line": prior_only(high, tasks, "line", Execution(controller=execution.controller,
                                                                 lookahead=execution.lookahead)),
-        "execution": execution.to_dict(low.prior.name),
+        "execution": {**execution.to_dict(low.prior.name), "replan_high_every": replan_high_every},
         "plans_per_episode": {"mean": float(result.plans_made.mean()), "min": int(result.plans_made.min()),
                               "max": int(result.plans_made.max())},
         "calls_per_episode": float(source.calls.mean()),

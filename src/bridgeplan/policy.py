@@ -72,21 +72,23 @@ class PlannerPolicy:
     def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
                        nfe_low: int | None = None, replan_every: int | None = None, tolerance: float | None = None,
                        controller: str = "pursuit", lookahead: float = DEFAULT_LOOKAHEAD, device: str = "cpu",
-                       seed: int = 0) -> PlannerPolicy:
+                       seed: int = 0, replan_high_every: int | None = None) -> PlannerPolicy:
         """A hierarchy as a policy (:mod:`bridgeplan.hierarchy`): the high level's coarse plan at an episode's
         first step, the low level's plan through it every ``replan_every`` steps (default: the high level's
-        stride), as ``bridgeplan hierarchy eval`` executes them."""
-        from bridgeplan.hierarchy import HierarchySource, check_execution, load_hierarchy
+        stride; the high level again every ``replan_high_every`` steps, if given), as ``bridgeplan hierarchy eval``
+        executes them."""
+        from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning, load_hierarchy
 
         hierarchy, high, _ = load_hierarchy(Path(high_run), Path(low_run), device=device)
         maze = get_maze(high.config.maze)
         execution = Execution(replan_every=replan_every or hierarchy.high.stride, tolerance=tolerance,
                               controller=controller, lookahead=lookahead)
         check_execution(execution, maze.episode_steps)
+        check_high_replanning(replan_high_every, maze.episode_steps)
         nfe_high = hierarchy.high.process.max_nfe if nfe_high is None else nfe_high
         nfe_low = hierarchy.low.process.max_nfe if nfe_low is None else nfe_low
         source = HierarchySource(hierarchy, nfe_high, nfe_low,
-                                 torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1)
+                                 torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1, replan_high_every)
         return cls(source, maze, execution)
 
     def reset(self) -> None:

@@ -42,6 +42,8 @@ def read_rows(root: Path, maze: str) -> list[dict]:
 def setting_of(r: dict) -> str:
     high, low, ex = r["high"], r["low"], r["execution"]
     control = ex["controller"] + (f" {ex['lookahead']:g}" if ex.get("lookahead") else "")
+    if ex.get("replan_high_every"):
+        control += f", high level replanned every {ex['replan_high_every']}"
     return (f"{high['method']} NFE {high['nfe']} (H{high['horizon']}k{high['stride']}) -> {low['method']} NFE "
             f"{low['nfe']} (H{low['horizon']}k{low['stride']}, subgoal every {low['subgoal_every']}); replan "
             f"{ex['replan_every']}, {control}")
