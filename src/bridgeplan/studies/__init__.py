@@ -53,13 +53,15 @@ def load_studies(root: Path) -> dict[str, Study]:
 
 
 def select(studies: dict[str, Study], names: list[str], root: Path) -> list[Study]:
-    """The studies named (by name or by file), all when none is."""
+    """The studies named (by name, by file, or by a report generator's name: the studies whose reports it makes,
+    as the generated blocks' markers name them), all when none is."""
     if not names:
         return list(studies.values())
     out = []
     for name in names:
         match = [s for s in studies.values() if name in (s.name, str(s.file), str((root / s.file).resolve()))
                  or Path(name).resolve() == (root / s.file).resolve()]
+        match = match or [s for s in studies.values() if any(r.generator == name for r in s.reports)]
         if not match:
             raise BridgeplanError(f"unknown study {name!r}: choose from {', '.join(studies)}")
         out.append(match[0])
