@@ -141,3 +141,30 @@ def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(
     assert "missed by 0.08 success and 13.0 points" in block
     text = GENERATORS["hierarchy"].render(tmp_path)
     assert "**91.0 ± 0.6**" in text and "The expert on the same test episodes: 104.0 ± 0.0" in text
+
+
+def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_path):
+    from bridgeplan.studies.reports import hierarchy
+
+    for seed in SEEDS:
+        for eval_seed in (seed, 1000 + seed):
+            row = _hierarchy_row(seed, eval_seed, "flow (coarse)", 1, 90.0 + seed, coarse=60.0)
+            row["execution"]["replan_high_every"] = 96
+            row["high"].update(process="flow", nfe=4)
+            out = tmp_path / "large-hierarchy" / "replanned" / f"single-seed{eval_seed}.json"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(row))
+            alone = {"method": "flow (line)", "process": "flow", "nfe": 4, "horizon": 32, "stride": 24,
+                     "seed": eval_seed, "multi_task": False, "config": {"seed": seed},
+                     "execution": {"replan_every": 96, "controller": "pursuit", "lookahead": 1.5},
+                     "score": {"minari": {"mean": 80.0}}, "success_rate": {"mean": 0.8}, "calls_per_episode": 36,
+                     "decision_ms_batch1": {"p50": 2.0}}
+            out = tmp_path / "large-hierarchy-flat" / "replan96" / f"single-seed{eval_seed}.json"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(alone))
+    (tmp_path / "expert-on-eval-tasks.json").write_text(json.dumps({"rows": []}))
+    block = hierarchy.block(tmp_path)
+    # 90, 91, 92 against the high level alone replanned every 96 (80 each): +11.0 ± 0.6, better
+    assert "minus its high level alone, replanned as often, +11.0 ± 0.6 (better)" in block
+    text = GENERATORS["hierarchy"].render(tmp_path)
+    assert "| flow (line) NFE 4 (H32k24) alone; replan 96, pursuit 1.5 | 80.0 ± 0.0 | 80.0 ± 0.0 | 0.80 |" in text

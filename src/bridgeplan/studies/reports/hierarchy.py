@@ -39,6 +39,34 @@ def read_rows(root: Path, maze: str) -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted((root / f"{maze}-hierarchy").glob("*/*.json"))]
 
 
+def read_high_alone(root: Path, maze: str) -> list[dict]:
+    """``bridgeplan eval`` JSONs of high-level runs executed alone, replanned (docs/results/<maze>-hierarchy-flat)."""
+    return [json.loads(p.read_text()) for p in sorted((root / f"{maze}-hierarchy-flat").glob("*/*.json"))]
+
+
+def high_alone_setting(r: dict) -> str:
+    ex = r["execution"]
+    return (f"{r['method']} NFE {r['nfe']} (H{r['horizon']}k{r['stride']}) alone; replan {ex['replan_every']}, "
+            f"{ex['controller']} {ex['lookahead']:g}")
+
+
+def high_alone_values(rows: list[dict], setting: str, split: str, multi_task: bool, value) -> dict[int, float]:
+    return {r["config"]["seed"]: value(r) for r in rows
+            if high_alone_setting(r) == setting and split_of(r) == split and bool(r["multi_task"]) == multi_task}
+
+
+def matching_high_alone(r: dict, alone_rows: list[dict]) -> str | None:
+    """The high-level-alone setting that replans the same high level as often as hierarchy row ``r`` does."""
+    every = r["execution"].get("replan_high_every")
+    high = r["high"]
+    for a in alone_rows:
+        if (every and a["execution"]["replan_every"] == every and a["nfe"] == high["nfe"]
+                and (a["horizon"], a["stride"]) == (high["horizon"], high["stride"])
+                and a["config"]["seed"] == high["config"]["seed"] and a["process"] == high["process"]):
+            return high_alone_setting(a)
+    return None
+
+
 def setting_of(r: dict) -> str:
     high, low, ex = r["high"], r["low"], r["execution"]
     control = ex["controller"] + (f" {ex['lookahead']:g}" if ex.get("lookahead") else "")
@@ -125,6 +153,14 @@ def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> 
         coarse = by_seed(rows, setting, "test", multi_task, alone)
         parts = [f"{fmt_mean_se(test)} (success {success.mean:.2f})",
                  f"minus the coarse plans alone {verdict(paired(test, coarse))}"]
+        alone_rows = read_high_alone(root, maze)
+        first = next(r for r in rows if setting_of(r) == setting)
+        replanned = matching_high_alone(first, alone_rows)
+        if replanned is not None:
+            same = high_alone_values(alone_rows, replanned, "test", multi_task, minari)
+            if same:
+                parts.append(f"minus its high level alone, replanned as often, "
+                             f"{verdict(paired(test, same, seeds='common'))}")
         if flat is not None:
             parts.append(f"minus the best flat planner ({flat[0]}) {verdict(paired(test, flat[1], seeds='common'))}")
         if goal_score is not None:
@@ -177,10 +213,24 @@ def maze_lines(root: Path, maze: str) -> list[str]:
                          f"{average(ms):.1f}" if ms else "-"])
         scores = expert.get((maze, multi_task))
         flat = flat_best(root, maze, multi_task)
+        alone_rows = [r for r in read_high_alone(root, maze) if bool(r["multi_task"]) == multi_task]
+        alone_body = []
+        for setting in sorted({high_alone_setting(r) for r in alone_rows}):
+            def values(value, s=setting):
+                return high_alone_values(alone_rows, s, "test", multi_task, value)
+            ms = values(lambda r: r["decision_ms_batch1"]["p50"])
+            alone_body.append([setting, cell(high_alone_values(alone_rows, setting, "validation", multi_task, minari)),
+                               cell(values(minari)), f"{average(values(lambda r: r['success_rate']['mean'])):.2f}",
+                               f"{average(values(lambda r: r['calls_per_episode'])):.0f}",
+                               f"{average(ms):.1f}" if ms else "-"])
         out += [f"### {'Multi2D' if multi_task else 'single-task'}", "",
                 *table(["setting", "validation", "test", "success", "coarse alone", "success", "hierarchy - coarse",
                         "line alone", "coarse in walls", "coarse arrival (step)", "calls / episode",
                         "ms / decision"], body), "",
+                *(["The high level alone, replanned from the current state (`bridgeplan eval --replan-every K`, "
+                   "pursued; no low level):", "",
+                   *table(["setting", "validation", "test", "success", "calls / episode", "ms / decision"],
+                          alone_body), ""] if alone_body else []),
                 f"The expert on the same test episodes: {fmt_mean_se(scores) if scores else '-'}; the best flat "
                 f"pursued planner: " + (f"{flat[0]}, {fmt_mean_se(flat[1])} (success "
                                         f"{average(flat[2]):.2f})" if flat else "-") + ".", "",
