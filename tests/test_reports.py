@@ -115,7 +115,7 @@ def _hierarchy_row(seed, eval_seed, low, nfe_low, score, coarse, multi=False):
             "high": level, "low": low_level, **scored(score, 0.9), "high_alone": scored(coarse, 0.7),
             "floor_line": scored(40.0, 0.3), "calls_per_episode": 4 + 34 * nfe_low,
             "execution": {"replan_every": 24, "controller": "pursuit", "lookahead": 1.5},
-            "decision_ms_batch1": {"p50": 1.5}, "environment": {"code_version": "0.1.0+test"}}
+            "decision_ms_batch1": {"p50": 1.5, "p95": 4.0}, "environment": {"code_version": "0.1.0+test"}}
 
 
 def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(tmp_path):
@@ -158,7 +158,7 @@ def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_pat
                      "seed": eval_seed, "multi_task": False, "config": {"seed": seed},
                      "execution": {"replan_every": 96, "controller": "pursuit", "lookahead": 1.5},
                      "score": {"minari": {"mean": 80.0}}, "success_rate": {"mean": 0.8}, "calls_per_episode": 36,
-                     "decision_ms_batch1": {"p50": 2.0}}
+                     "decision_ms_batch1": {"p50": 2.0, "p95": 3.0}}
             out = tmp_path / "large-hierarchy-flat" / "replan96" / f"single-seed{eval_seed}.json"
             out.parent.mkdir(parents=True, exist_ok=True)
             out.write_text(json.dumps(alone))
