@@ -9,11 +9,12 @@ current state through the next ``m = (H - 1) / j`` states of the coarse plan; it
 subgoal step is one high-level step: ``low.subgoal_every * low.stride == high.stride``.
 
 Executed closed loop (:class:`HierarchySource` is the ``plan_fn`` of ``maze.rollout.ClosedLoopController``):
-the high level plans once per episode, at its first step, and its plan holds the goal from its first arrival
-on (a plan conditioned to end at the goal fills its whole span, however short the way: a high level trained
-with holds, ``hold_share``, may arrive early instead); every decision, the low level plans
-from the current state through the coarse states that follow the one nearest the agent (searched forward
-from the last, so progress never runs back), the goal at rest repeating once the coarse plan runs out.
+the high level plans at an episode's first step (and again from the current state every ``replan_high_every``
+steps, if given: on large that is what pays, docs/results/hierarchy.md), and its plan holds the goal from its
+first arrival on (a plan conditioned to end at the goal fills its whole span, however short the way: a high
+level trained with holds, ``hold_share``, may arrive early instead); every decision, the low level plans from
+the current state through the coarse states that follow the one nearest the agent (searched forward from the
+last, so progress never runs back), the goal at rest repeating once the coarse plan runs out.
 """
 
 from __future__ import annotations
