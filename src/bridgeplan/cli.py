@@ -379,14 +379,18 @@ def _execution_flags(p) -> None:
                    help="pursuit: distance to the planned position driven toward (maze units; default 1.0)")
 
 
+def _check_lookahead(args) -> None:
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+
+
 def _execution(args):
     from bridgeplan.replan import Execution
 
     if args.prior is not None and args.prior != "warm":
         raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
                               f"the run's own prior), got {args.prior!r}")
-    if args.lookahead is not None and args.controller != "pursuit":
-        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    _check_lookahead(args)
     lookahead = {} if args.lookahead is None else {"lookahead": args.lookahead}
     return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
                      select=args.select, warm=args.prior == "warm", arrival=args.arrival,
@@ -468,8 +472,7 @@ def _cmd_hierarchy_eval(args) -> int:
     from bridgeplan.runs import run_dir_of
 
     _positive("--episodes", args.episodes)
-    if args.lookahead is not None and args.controller != "pursuit":
-        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    _check_lookahead(args)
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
     if args.multi_task:

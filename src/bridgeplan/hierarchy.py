@@ -100,8 +100,10 @@ class HierarchySource:
     """
 
     hierarchy: Hierarchy
-    nfe_high: int
-    nfe_low: int
+    nfe_high: int | None
+    """Network calls per coarse plan (None: the high level's process's most)."""
+    nfe_low: int | None
+    """Network calls per low-level plan (None: the low level's process's most)."""
     generator: torch.Generator
     n: int
     replan_high_every: int | None = None
@@ -121,6 +123,9 @@ class HierarchySource:
     low_plans: int = 0
 
     def __post_init__(self):
+        high, low = self.hierarchy.high.process, self.hierarchy.low.process
+        self.nfe_high = high.max_nfe if self.nfe_high is None else self.nfe_high
+        self.nfe_low = low.max_nfe if self.nfe_low is None else self.nfe_low
         self.hierarchy.high.process.validate_nfe(self.nfe_high)
         self.hierarchy.low.process.validate_nfe(self.nfe_low)
         self.calls = np.zeros(self.n, dtype=np.int64)
@@ -235,14 +240,13 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
     untimed decision.
     """
     high, low = hierarchy.high, hierarchy.low
-    nfe_high = high.process.max_nfe if nfe_high is None else nfe_high
-    nfe_low = low.process.max_nfe if nfe_low is None else nfe_low
     maze, n = tasks.maze, tasks.episodes
     execution = execution or Execution(replan_every=high.stride, controller="pursuit")
     check_execution(execution, maze.episode_steps)
     starts, goals = tasks.starts_xy, tasks.goals_xy
     check_high_replanning(replan_high_every, maze.episode_steps)
     source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n, replan_high_every)
+    nfe_high, nfe_low = source.nfe_high, source.nfe_low
     result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
                                  follower=execution.follower(n))
     dense = densify(source.first_coarse, high.stride)

@@ -85,8 +85,6 @@ class PlannerPolicy:
                               controller=controller, lookahead=lookahead)
         check_execution(execution, maze.episode_steps)
         check_high_replanning(replan_high_every, maze.episode_steps)
-        nfe_high = hierarchy.high.process.max_nfe if nfe_high is None else nfe_high
-        nfe_low = hierarchy.low.process.max_nfe if nfe_low is None else nfe_low
         source = HierarchySource(hierarchy, nfe_high, nfe_low,
                                  torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1, replan_high_every)
         return cls(source, maze, execution)
