@@ -171,16 +171,16 @@ def test_first_row_of_an_evaluation_wins():
 
 # --- method keys from every committed schema -------------------------------------------------------------------
 
-def test_every_committed_csv_schema_is_read():
+def test_every_committed_csv_is_read_in_todays_schema():
+    """One schema: a row per evaluation, its split and the experiments that show it."""
+    from bridgeplan.experiments.store import COLUMNS
+
     headers = {tuple(next(csv.reader(path.open()))) for path in CSVS}
-    # version 1, version 2, version 2 with a sampler column, version 4 with the plans' cost and residuals
-    assert len(headers) == 4
-    schemas = set()
+    assert headers == {("id", "experiments", *COLUMNS)}
     for path in CSVS:
         raw = list(csv.DictReader(path.open()))
         rows = read_csv(path)
         assert len(rows) == len(raw)
-        schemas.add(tuple(raw[0]))
         for r, x in zip(rows, raw):
             # the label is a function of the key, and equals what the run's config names the method
             assert label(r.key) == method_label(x) + (f" by {x['sampler']}" if x.get("sampler") else "")
@@ -188,11 +188,71 @@ def test_every_committed_csv_schema_is_read():
             assert parse_execution(r.key.tag) == r.key.execution
             assert r.key.multi_task == bool(int(x.get("multi_task") or 0))
             assert r.key.steps == int(x["diffusion_steps"]) and r.key.process == x["process"]
-            assert r.split == ("validation" if x["experiment"].endswith("-validation") else "test")
-            if "network_calls_per_plan" in x:
+            assert r.split == x["split"] == ("validation" if int(x["eval_seed"]) >= 1000 else "test")
+            if x["network_calls_per_plan"]:
                 assert r.network_calls == float(x["network_calls_per_plan"]) >= r.nfe
                 assert r.plan_dynamics == float(x["plan_dynamics_rms"]) > 0
-    assert schemas == headers
+
+
+OLD_SCHEMAS = {  # the committed CSVs' headers before the store was keyed by evaluation (one row per experiment)
+    1: "id,experiment,run_name,maze,process,prior,diffusion_steps,seed,step,train_seconds,nfe,episodes,eval_seed,"
+       "score_minari,score_minari_se,score_d4rl,score_d4rl_se,success_rate,plan_ms,prior_ms,floor_minari,config,"
+       "code_version,created",
+    2: "id,experiment,run_name,maze,process,prior,diffusion_steps,seed,step,train_seconds,nfe,episodes,eval_seed,"
+       "score_minari,score_minari_se,score_d4rl,score_d4rl_se,success_rate,plan_ms,prior_ms,floor_minari,execution,"
+       "multi_task,calls_per_episode,decision_ms_p50,decision_ms_p95,config,code_version,created",
+    3: "id,experiment,run_name,maze,process,prior,diffusion_steps,seed,step,train_seconds,nfe,episodes,eval_seed,"
+       "score_minari,score_minari_se,score_d4rl,score_d4rl_se,success_rate,plan_ms,prior_ms,floor_minari,execution,"
+       "multi_task,sampler,calls_per_episode,decision_ms_p50,decision_ms_p95,config,code_version,created",
+    4: "id,experiment,run_name,maze,process,prior,diffusion_steps,seed,step,train_seconds,nfe,episodes,eval_seed,"
+       "score_minari,score_minari_se,score_d4rl,score_d4rl_se,success_rate,plan_ms,prior_ms,floor_minari,execution,"
+       "multi_task,sampler,calls_per_episode,decision_ms_p50,decision_ms_p95,network_calls_per_plan,"
+       "plan_kinematics_rms,plan_dynamics_rms,config,code_version,created",
+}
+
+
+def as_old_schema(path: Path, out: Path, version: int) -> int:
+    """``path`` (today's schema) written in an older one: a row per experiment and evaluation (the evaluations an
+    older schema could not hold left out); returns the evaluations written."""
+    fields = OLD_SCHEMAS[version].split(",")
+    rows, evaluations = [], 0
+    for x in csv.DictReader(path.open()):
+        if (version == 1 and (x["execution"] or x["multi_task"] != "0")) or (version <= 2 and x["sampler"]):
+            continue
+        evaluations += 1
+        rows += [{k: (name if k == "experiment" else x[k]) for k in fields} for name in x["experiments"].split()]
+    with out.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    return evaluations
+
+
+@pytest.mark.parametrize("version", sorted(OLD_SCHEMAS))
+def test_an_older_csv_schema_reads_and_imports_as_todays(tmp_path, version):
+    """The older schemas (one row per experiment and evaluation, the split in the experiment's name) give the same
+    analysis rows, and import into a store as the same evaluations with the same memberships."""
+    from bridgeplan.experiments.store import ResultsStore, read_csv_rows
+
+    path = RESULTS / "medium-v2-hold" / "results.csv"  # closed-loop and validation rows, shared evaluations
+    old = tmp_path / "old.csv"
+    evaluations = as_old_schema(path, old, version)
+    assert evaluations >= 20
+    today = {(r.key, r.split, r.step, r.nfe, r.seed): r for r in read_csv(path)}
+    rows = read_csv(old)
+    assert len(rows) > evaluations  # some evaluations are shown by several experiments
+    for r in rows:
+        mine = today[r.key, r.split, r.step, r.nfe, r.seed]
+        assert (r.score, r.floor, r.success, r.run_name) == (mine.score, mine.floor, mine.success, mine.run_name)
+        assert r.experiment in mine.experiment.split()
+    store = ResultsStore(tmp_path / "results.sqlite")
+    assert store.import_rows(read_csv_rows(old)) == (evaluations, evaluations)
+    assert store.import_rows(read_csv_rows(path))[1] == sum(1 for _ in csv.DictReader(path.open())) - evaluations
+    expected = {(x["run_name"], x["step"], x["nfe"], x["sampler"], x["execution"], x["eval_seed"]):
+                (x["experiments"], x["split"], float(x["score_minari"])) for x in csv.DictReader(path.open())}
+    stored = {(x["run_name"], str(x["step"]), str(x["nfe"]), x["sampler"], x["execution"], str(x["eval_seed"])):
+              (x["experiments"], x["split"], x["score_minari"]) for x in store.rows()}
+    assert stored == expected
 
 
 def first(path: str, **match) -> dict:
@@ -202,7 +262,7 @@ def first(path: str, **match) -> dict:
 def test_keys_from_configs_that_spell_defaults_or_not():
     # medium-v2-curves' consistent runs predate predict/weighting in the config; the consistent-priors store's
     # configs spell them out at their defaults: one key
-    old = row_from_csv(first("medium-v2-curves/results.csv", experiment="nfe-curves", prior="line",
+    old = row_from_csv(first("medium-v2-curves/results.csv", split="test", prior="line",
                              run_name="medium-bridge-line-N16-consistent-H32k8-cpu-small-s0"))
     new = row_from_csv(first("medium-v2-consistent-priors/results.csv", prior="line"))
     assert old.key == new.key == method("bridge", "line", steps=16, consistent=True)
@@ -220,7 +280,7 @@ def test_keys_of_samplers_holds_executions_and_version_1_rows():
     assert describe(hold.key).startswith("DDPM, hold 0.5, N=16, replan32-arrival-keep, ")
     v1 = row_from_csv(first("umaze-cpu-small/results.csv", process="bridge", prior="line", nfe="4"))
     assert v1.key.execution == OPEN_LOOP and not v1.key.multi_task and v1.decision_ms is None
-    assert v1.calls == v1.nfe == 4  # version 1 has no calls column: one call per NFE
+    assert v1.calls == v1.nfe == 4  # rows made by version 1 have no calls: one call per NFE
     assert label(v1.key) == "bridge (line; beta_max=0.3)"
     with pytest.raises(BridgeplanError):
         method("bridge", "line", steps=16, beta=0.3)

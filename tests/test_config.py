@@ -103,7 +103,7 @@ def test_eval_result_is_a_store_row_with_its_method(tiny_runs):
     from bridgeplan.evaluate import evaluate
 
     result = evaluate(tiny_runs["bridge"], episodes=2, nfe=1, device="cpu")
-    row = result.to_row("nfe1")
+    row = result.to_row()
     assert set(row) <= set(COLUMNS) and set(KEY) <= set(row)
     assert (row["process"], row["prior"], row["nfe"], row["episodes"]) == ("bridge", "learned", 1, 2)
     assert method_label(dict(row, config=json.dumps(row["config"]))) == "bridge (learned)"

@@ -335,7 +335,7 @@ def test_a_store_row_records_the_plans_cost_and_residuals(tiny_runs):
     from bridgeplan.evaluate import evaluate
 
     deep = Correction((("dynamics", 1e-3),), form="deep")
-    rows = {c: evaluate(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu", correction=c).to_row("e")
+    rows = {c: evaluate(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu", correction=c).to_row()
             for c in (None, deep)}
     assert rows[None]["network_calls_per_plan"] == 2 and rows[deep]["network_calls_per_plan"] == 6
     for row in rows.values():

@@ -17,7 +17,7 @@ TINY_SWEEP = ["--maze", "umaze", "--train-steps", "2", "--prior-steps", "2", "--
               "--device", "cpu"]
 
 
-def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys):
+def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys, monkeypatch):
     results = tmp_path / "results"
     args = ["experiment", "nfe1", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
     assert main(args) == 0
@@ -32,10 +32,22 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys):
     assert main(args) == 0
     assert "0 new results" in capsys.readouterr().out
     assert len(ResultsStore(results / "results.sqlite").rows()) == 8
-    # a second experiment reuses the trained runs (no new training directory)
+    # a second experiment reuses the trained runs (no new training directory) and the evaluations it shares with
+    # the first (DDPM and the bridge from the line at NFE 1): it computes only its own
+    import bridgeplan.evaluate
+
     runs_before = sorted(p.name for p in (results / "runs").iterdir())
-    assert main(["experiment", "priors", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]) == 0
+    calls = []
+    real = bridgeplan.evaluate.evaluate_planner
+    monkeypatch.setattr(bridgeplan.evaluate, "evaluate_planner", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert main(["experiment", "nfe-curves", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]) == 0
     assert sorted(p.name for p in (results / "runs").iterdir()) == runs_before
+    assert "12 new results" in capsys.readouterr().out  # (4 + 4 NFE) x 2 snapshots, 4 of them stored already
+    assert len(calls) == 12  # and not evaluated again
+    store = ResultsStore(results / "results.sqlite")
+    assert len(store.rows("nfe-curves")) == 16 and len(store.rows()) == 8 + 12
+    shared = [r for r in store.rows() if r["experiments"] == "nfe-curves nfe1"]
+    assert {(r["process"], r["prior"], r["nfe"]) for r in shared} == {("ddpm", "gaussian", 1), ("bridge", "line", 1)}
 
     assert main(["report", "--results", str(results)]) == 0
     report = (results / "report" / "report.md").read_text()
@@ -216,9 +228,37 @@ def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
     (row,) = store.rows()
     assert (row["score_minari"], row["execution"], row["multi_task"], row["step"]) == (42.5, "", 0, 1000)
     assert row["sampler"] == ""  # as its process samples by default
-    assert store.has(experiment="nfe1", run_name="r", step=1000, nfe=1, sampler="", execution="", multi_task=0,
-                     episodes=200, eval_seed=0)
+    assert store.has(("r", 1000, 1, "", "", 0, 200, 0), "nfe1")
     with sqlite3.connect(db) as con:
-        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
+        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 5
     ResultsStore(db)  # opening it again changes nothing
     assert len(store.rows()) == 1
+
+
+def test_a_version_4_store_keeps_one_evaluation_per_key_and_its_experiments(tmp_path):
+    """Version 4 keyed rows by experiment too: the same evaluation stored for two experiments becomes one
+    evaluation (the first by id) with two memberships; a validation experiment's rows get the validation split."""
+    from bridgeplan.experiments.store import stored_keys
+
+    db = tmp_path / "results.sqlite"
+    cols = ["experiment", "run_name", "maze", "process", "prior", "diffusion_steps", "seed", "step", "nfe",
+            "episodes", "eval_seed", "score_minari", "plan_ms", "execution", "multi_task", "sampler"]
+    rows = [("nfe1", "r", 1, 0, 42.5, 3.0), ("nfe-curves", "r", 1, 0, 42.5, 9.0), ("nfe-curves", "r", 2, 0, 50.0, 4.0),
+            ("nfe-curves-validation", "r", 1, 1000, 44.0, 3.0)]
+    with sqlite3.connect(db) as con:
+        con.execute(f"CREATE TABLE results (id INTEGER PRIMARY KEY, {', '.join(cols)}, "
+                    "UNIQUE (experiment, run_name, step, nfe, sampler, execution, multi_task, episodes, eval_seed))")
+        for experiment, run, nfe, eval_seed, score, ms in rows:
+            con.execute(f"INSERT INTO results ({', '.join(cols)}) VALUES (?, ?, 'umaze', 'ddpm', 'gaussian', 16, 0, "
+                        "1000, ?, 200, ?, ?, ?, '', 0, '')", (experiment, run, nfe, eval_seed, score, ms))
+        con.execute("PRAGMA user_version=4")
+    keys, members = stored_keys(db)  # read as the upgrade will make it, without writing
+    assert len(keys) == 3 and len(members) == 4
+    store = ResultsStore(db)
+    assert stored_keys(db) == (keys, members)
+    by_nfe = {(r["nfe"], r["eval_seed"]): r for r in store.rows()}
+    assert len(by_nfe) == 3
+    assert by_nfe[1, 0]["experiments"] == "nfe-curves nfe1" and by_nfe[1, 0]["plan_ms"] == 3.0  # the first row
+    assert [r["split"] for r in store.rows("nfe-curves-validation")] == ["validation"]
+    assert {r["split"] for r in store.rows("nfe-curves")} == {"test"} and len(store.rows("nfe-curves")) == 2
+    assert store.experiments() == ["nfe-curves", "nfe-curves-validation", "nfe1"]

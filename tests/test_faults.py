@@ -203,7 +203,7 @@ def store_rows(results: Path) -> dict[tuple, dict]:
         return {}
     with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=60.0) as con:
         con.row_factory = sqlite3.Row
-        rows = [dict(r) for r in con.execute("SELECT * FROM results")]
+        rows = [dict(r) for r in con.execute("SELECT * FROM evaluations")]
     con.close()
     return {tuple(r[k] for k in KEY): r for r in rows}
 
@@ -215,7 +215,8 @@ def check_store(results: Path, train_steps: int) -> dict[tuple, dict]:
     with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as con:
         assert con.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
         keys = ", ".join(KEY)
-        assert con.execute(f"SELECT {keys}, COUNT(*) FROM results GROUP BY {keys} HAVING COUNT(*) > 1").fetchall() == []
+        duplicates = f"SELECT {keys}, COUNT(*) FROM evaluations GROUP BY {keys} HAVING COUNT(*) > 1"
+        assert con.execute(duplicates).fetchall() == []
     con.close()
     rows = store_rows(results)
     for r in rows.values():

@@ -34,11 +34,35 @@ def test_committed_studies_parse_into_dataclasses():
 
 @pytest.mark.parametrize("name", ["medium-v2-curves", "large-v2-curves", "umaze-v2-hold"])
 def test_a_campaign_study_lists_every_committed_evaluation(name):
-    """With no store, the dry run's evaluations are the committed CSV's rows, experiment by experiment: the study
-    file encodes the campaign that made them."""
+    """With no store, the dry run lists the committed CSV's evaluations, each computed once, and every experiment
+    shows exactly the evaluations the CSV says it shows: the study file encodes the campaign that made them."""
     m = missing(load_studies(REPO)[name], REPO / "no-such-dir")  # root without results: everything is missing
     with open(REPO / "docs" / "results" / name / "results.csv") as f:
-        assert m.evaluations == Counter(r["experiment"] for r in csv.DictReader(f))
+        rows = list(csv.DictReader(f))
+    shows: dict[str, set] = {}
+    for r in rows:
+        key = (r["run_name"], int(r["step"]), int(r["nfe"]), r["sampler"], r["execution"], int(r["multi_task"]),
+               int(r["episodes"]), int(r["eval_seed"]))
+        for experiment in r["experiments"].split():
+            shows.setdefault(experiment, set()).add(key)
+    assert m.wanted == shows
+    assert sum(m.evaluations.values()) == len(rows)
+
+
+def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_again(tmp_path, capsys):
+    """`study import`: the committed CSV into the study's store; the dry run then lists training (the runs are not
+    here) but no evaluation; importing again adds nothing."""
+    root = _docs_copy(tmp_path)
+    study = load_studies(root)["umaze-v2-hold"]
+    assert sum(missing(study, root).evaluations.values()) == 84
+    assert main(["study", "import", "umaze-v2-hold", "--root", str(root)]) == 0
+    assert "umaze-v2-hold: 84 evaluations in docs/results/umaze-v2-hold/results.csv, 84 new" in capsys.readouterr().out
+    m = missing(study, root)
+    assert sum(m.evaluations.values()) == 0 and m.wanted == {} and len(m.trains) == 6  # 2 methods x 3 seeds
+    assert main(["study", "import", "umaze-v2-hold", "--root", str(root)]) == 0
+    assert ", 0 new" in capsys.readouterr().out
+    assert main(["study", "import", "headline", "--root", str(root)]) == 2  # reads others' rows, has none of its own
+    assert "headline has no committed rows to import" in capsys.readouterr().err
 
 
 def test_study_report_check_passes_on_the_committed_tree(capsys):

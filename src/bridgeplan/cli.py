@@ -695,11 +695,15 @@ def _add_study_commands(sub) -> None:
     run.add_argument("--workers", type=int, default=None, help="local backend: parallel jobs (default: the study's)")
     run.add_argument("--ray-address", default=None)
     run.add_argument("--no-progress", action="store_true")
-    for q in (ls, r, run):
+    imp = study.add_parser("import", help="load a study's committed rows (docs/results/DATA/results.csv, any schema) "
+                                          "into its store, so that `study run` computes only what they lack")
+    imp.add_argument("file", help="the study file (or a study's name)")
+    for q in (ls, r, run, imp):
         q.add_argument("--root", default=None, help="the repository root (holds studies/ and docs/results/)")
     ls.set_defaults(func=_cmd_study_list)
     r.set_defaults(func=_cmd_study_report)
     run.set_defaults(func=_cmd_study_run)
+    imp.set_defaults(func=_cmd_study_import)
 
 
 def _cmd_study_list(args) -> int:
@@ -780,6 +784,24 @@ def _cmd_study_run(args) -> int:
     out = results_dir(study, root, scale)
     print(f"{study.name}: {added} new results in {out / 'results.sqlite'}"
           + ("" if scale.committed else f" [{QUICK_NOTE}]"))
+    return 0
+
+
+def _cmd_study_import(args) -> int:
+    from bridgeplan.experiments.store import ResultsStore, read_csv_rows
+    from bridgeplan.layout import store_path
+    from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies.plan import Scale, results_dir
+
+    root = find_root(args.root)
+    study = select(load_studies(root), [args.file], root)[0]
+    committed = root / "docs" / "results" / study.data_dir / "results.csv"
+    if not study.experiments or not committed.exists():
+        raise BridgeplanError(f"study {study.name} has no committed rows to import (no {committed.relative_to(root)})")
+    rows = read_csv_rows(committed)  # the whole file checked before the store is touched
+    store = store_path(results_dir(study, root, Scale()))
+    read, new = ResultsStore(store).import_rows(rows)
+    print(f"{study.name}: {read} evaluations in {committed.relative_to(root)}, {new} new in {store}")
     return 0
 
 

@@ -194,15 +194,16 @@ class EvalResult:
                 "candidate_plans_per_episode": float(made.mean() * self.execution.candidates),
                 **self.decisions}
 
-    def to_row(self, experiment: str) -> dict:
-        """A results-store row (``experiments.store.COLUMNS``); needs the run the planner came from."""
+    def to_row(self, split: str = "test") -> dict:
+        """A results-store row (``experiments.store.COLUMNS``) made on ``split``'s episodes; needs the run the
+        planner came from."""
         if self.run is None:
             raise BridgeplanError("a store row needs the run the planner was loaded from")
         run = self.run
         latency = self.decisions.get("decision_ms_batch1", {})
         residual = self.plan_residuals or {}
         return {
-            "experiment": experiment, "run_name": run.config.run_name(), "maze": self.tasks.maze.name,
+            "run_name": run.config.run_name(), "split": split, "maze": self.tasks.maze.name,
             "process": self.planner.process.name, "prior": self.prior, "diffusion_steps": self.planner.process.steps,
             "seed": run.config.seed, "step": run.step, "train_seconds": run.elapsed_seconds, "nfe": self.nfe,
             "episodes": self.tasks.episodes, "eval_seed": self.tasks.seed,

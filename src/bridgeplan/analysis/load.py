@@ -3,16 +3,18 @@
 
 Sources:
 
-- the stores' CSVs (``bridgeplan report --csv``) in their three schemas: version 1 (no ``execution``,
-  ``multi_task``, ``calls_per_episode`` or decision-latency columns: open loop, single-task, one call per NFE),
-  version 2 (those columns) and version 2 with a ``sampler`` column (the sampling tag; without it the config's
-  process says how it was sampled). The method comes from the row's ``config`` JSON (the run's ``TrainConfig``),
-  checked against the ``process``, ``prior`` and ``diffusion_steps`` columns; the execution from its tag;
+- the stores' CSVs (``bridgeplan report --csv``): today's (one row per evaluation, with its ``split`` and its
+  ``experiments``) and the older ones, one row per experiment and evaluation (``experiment``): version 1 (no
+  ``execution``, ``multi_task``, ``calls_per_episode`` or decision-latency columns: open loop, single-task, one call
+  per NFE), version 2 (those columns) and version 2 with a ``sampler`` column (the sampling tag; without it the
+  config's process says how it was sampled). The method comes from the row's ``config`` JSON (the run's
+  ``TrainConfig``), checked against the ``process``, ``prior`` and ``diffusion_steps`` columns; the execution
+  from its tag;
 - evaluation JSONs (``bridgeplan eval --json``): the same fields, the method from ``process_params`` and
   ``config``, the execution from its settings.
 
-A row whose experiment ends in ``-validation`` was made on the validation episodes (split ``validation``), any
-other on the test episodes (``test``).
+In the older CSVs, a row whose experiment ends in ``-validation`` was made on the validation episodes (split
+``validation``), any other on the test episodes (``test``).
 """
 
 from __future__ import annotations
@@ -25,11 +27,8 @@ from pathlib import Path
 
 from bridgeplan.analysis.keys import MethodKey, execution_from_dict, key_of, parse_execution
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.experiments.store import SPLITS, split_of
 from bridgeplan.processes import process_from_dict
-
-VALIDATION_SUFFIX = "-validation"
-"""The experiment-name suffix of rows made on the validation episodes (``experiments.runner``)."""
-SPLITS = ("test", "validation")
 
 
 @dataclass(frozen=True)
@@ -59,6 +58,7 @@ class Row:
     """Closed loop: a decision's p50 and p95 milliseconds at batch 1 (None open loop)."""
     maze: str = ""
     experiment: str = ""
+    """The experiments that show the evaluation (space-separated)."""
     run_name: str = ""
     episodes: int = 0
     eval_seed: int = 0
@@ -75,10 +75,6 @@ class Row:
     """The learned prior tracked alone on the same episodes, where the evaluation measured it."""
     source: str = ""
     """The file the row was read from."""
-
-
-def split_of(experiment: str) -> str:
-    return "validation" if experiment.endswith(VALIDATION_SUFFIX) else "test"
 
 
 class _Keys:
@@ -113,11 +109,13 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
         key = key_of(process, prior, hold_share=hold, sampler=sampler, execution=execution,
                      multi_task=bool(int(r.get("multi_task") or 0)))
         p50, p95 = _float(r.get("decision_ms_p50")), _float(r.get("decision_ms_p95"))
-        return Row(key=key, split=split_of(r["experiment"]), seed=int(r["seed"]), step=int(r["step"]),
+        experiment = r["experiments"] if "experiments" in r else r["experiment"]
+        split = r["split"] if "split" in r else split_of(experiment)
+        return Row(key=key, split=split, seed=int(r["seed"]), step=int(r["step"]),
                    nfe=int(r["nfe"]), score=float(r["score_minari"]), score_se=float(r["score_minari_se"]),
                    floor=float(r["floor_minari"]), success=float(r["success_rate"]),
                    calls=float(r.get("calls_per_episode") or r["nfe"]), plan_ms=float(r["plan_ms"]),
-                   decision_ms=(p50, p95) if p50 is not None else None, maze=r["maze"], experiment=r["experiment"],
+                   decision_ms=(p50, p95) if p50 is not None else None, maze=r["maze"], experiment=experiment,
                    run_name=r["run_name"], episodes=int(r["episodes"]), eval_seed=int(r["eval_seed"]),
                    code_version=r.get("code_version", ""), score_d4rl=_float(r.get("score_d4rl")),
                    network_calls=_float(r.get("network_calls_per_plan")),

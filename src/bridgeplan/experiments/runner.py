@@ -17,7 +17,7 @@ from bridgeplan import layout
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
-from bridgeplan.experiments.store import ResultsStore
+from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore
 from bridgeplan.locks import run_lock
 
 
@@ -51,7 +51,6 @@ class SweepSettings:
     were trained in passes (``studies``)."""
 
 
-VALIDATION_SUFFIX = "-validation"
 
 
 def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
@@ -79,8 +78,9 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
 
     Each snapshot is loaded once and evaluated for every series (NFE, sampler, correction, execution, task set)
-    missing from the store (keyed by ``Series.sampling_tag``, as the row writes it); the floors are computed once per
-    task set and controller for the job.
+    whose evaluation is missing from the store (its ``store.KEY``, with ``Series.sampling_tag`` as the row writes
+    it); an evaluation stored already, for another experiment, is only linked to this one. The floors are computed
+    once per task set and controller for the job.
     """
     from bridgeplan.device import configure_threads
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
@@ -98,6 +98,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         return []
     store = ResultsStore(layout.store_path(settings.results_dir))
     suffix = VALIDATION_SUFFIX if settings.validation else ""
+    split = "validation" if settings.validation else "test"
     wanted = [(exp.name + suffix, series) for exp in experiments for series in exp.series if series.run == spec]
     last_only = {exp.name + suffix for exp in experiments if exp.last_snapshot_only or settings.validation}
     task_seed = seed + VALIDATION_SEED_OFFSET if settings.validation else seed
@@ -106,16 +107,23 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     rows = []
     steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
     for step in steps:
-        missing = [(name, series) for name, series in wanted
-                   if (step == steps[-1] or name not in last_only)
-                   and not store.has(experiment=name, run_name=config.run_name(), step=step, nfe=series.nfe,
-                                     sampler=series.sampling_tag(), execution=series.execution.tag(),
-                                     multi_task=int(series.multi_task),
-                                     episodes=settings.episodes, eval_seed=task_seed)]
-        if not missing:
+        todo = []
+        for name, series in wanted:
+            if step != steps[-1] and name in last_only:
+                continue
+            key = (config.run_name(), step, series.nfe, series.sampling_tag(), series.execution.tag(),
+                   int(series.multi_task), settings.episodes, task_seed)
+            if store.has(key):  # evaluated for another experiment (or by another sweep): shown, not recomputed
+                store.link(key, name)
+            else:
+                todo.append((name, series, key))
+        if not todo:
             continue
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
-        for name, series in missing:
+        for name, series, key in todo:
+            if store.has(key):  # another experiment of this job named the same evaluation
+                store.link(key, name)
+                continue
             task_set = tasks[series.multi_task]
             ex = series.execution
             floors_key = (series.multi_task, ex.controller, ex.lookahead)
@@ -124,8 +132,8 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
             sampled = planner if series.sampler is None else planner.with_sampler(series.sampler)
             sampled = sampled.with_correction(series.correction)
             row = evaluate_planner(sampled, task_set, series.nfe, run=info, execution=series.execution,
-                                   precomputed_floors=job_floors[floors_key]).to_row(name)
-            if store.add(row):  # a concurrent sweep may have added it meanwhile
+                                   precomputed_floors=job_floors[floors_key]).to_row(split)
+            if store.add(row, [name]):  # a concurrent sweep may have added it meanwhile
                 rows.append(row)
     return rows
 

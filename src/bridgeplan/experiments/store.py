@@ -1,11 +1,21 @@
-"""The results store: one SQLite row per evaluation, safe for concurrent sweeps.
+"""The results store: one SQLite row per evaluation, keyed by what the evaluation is; safe for concurrent sweeps.
 
-WAL journaling and a busy timeout let two sweeps write at once; every insert is one transaction,
-so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the schema
-version: a database from a newer bridgeplan is refused, untouched; one from an older one is upgraded in
-place, in one transaction (version 1 had no execution or multi-task columns: its rows were open loop,
-single-task; version 2 had no sampler column: its rows were sampled as their processes are by default; version 3
-had no plan-cost columns: ``network_calls_per_plan`` and the plans' residuals are empty there).
+An evaluation is a trained run's snapshot sampled and executed one way on one set of episodes (:data:`KEY`); the
+experiments that show it are memberships beside it (table ``memberships``), so an evaluation that two experiments
+name is computed once and shown by both. WAL journaling and a busy timeout let two sweeps write at once; every
+insert is one transaction, so an interrupted sweep keeps everything it finished. ``PRAGMA user_version`` holds the
+schema version: a database from a newer bridgeplan is refused, untouched; one from an older one is upgraded in
+place, in one transaction. Versions 1-4 keyed a row by its experiment too (one table ``results``), so the same
+evaluation could be stored once per experiment: the upgrade keeps the first of them (by id) and makes the others
+memberships. Version 1 had no execution or multi-task columns (its rows were open loop, single-task); version 2
+no sampler column (rows sampled as their processes are by default); version 3 no plan-cost columns
+(``network_calls_per_plan`` and the plans' residuals are empty there); none had ``split`` (it was the experiment's
+``-validation`` suffix).
+
+The CSV form (:meth:`ResultsStore.export_csv`, the committed ``results.csv`` files) is one row per evaluation with
+every key, its ``split`` and its ``experiments`` (space-separated); it and
+the older CSVs (one row per experiment and evaluation, with an ``experiment`` column) are read by
+:func:`read_csv_rows` and imported by :meth:`ResultsStore.import_rows`, nothing recomputed.
 """
 
 from __future__ import annotations
@@ -15,6 +25,7 @@ import io
 import json
 import sqlite3
 import time
+from collections.abc import Iterable
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -22,10 +33,9 @@ from typing import Iterator
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 COLUMNS = {
-    "experiment": "TEXT NOT NULL",
     "run_name": "TEXT NOT NULL",
     "maze": "TEXT NOT NULL",
     "process": "TEXT NOT NULL",
@@ -37,6 +47,7 @@ COLUMNS = {
     "nfe": "INTEGER NOT NULL",
     "episodes": "INTEGER NOT NULL",
     "eval_seed": "INTEGER NOT NULL",
+    "split": "TEXT NOT NULL DEFAULT 'test'",
     "score_minari": "REAL",
     "score_minari_se": "REAL",
     "score_d4rl": "REAL",
@@ -58,15 +69,69 @@ COLUMNS = {
     "code_version": "TEXT",
     "created": "REAL",
 }
-KEY = ("experiment", "run_name", "step", "nfe", "sampler", "execution", "multi_task", "episodes", "eval_seed")
-"""What makes an evaluation: ``sampler`` is ``consistency.sampling_tag``: ``Process.sampling_tag()`` ('' as the
-process samples by default) and the consistency correction's tag, if any;
-``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1."""
+KEY = ("run_name", "step", "nfe", "sampler", "execution", "multi_task", "episodes", "eval_seed")
+"""What an evaluation is: the run (its name within the results directory, which holds one run per name), the
+snapshot, the NFE, the sampling tag, the execution and the task set on given episodes. ``sampler`` is
+``consistency.sampling_tag``: ``Process.sampling_tag()`` ('' as the process samples by default) and the consistency
+correction's tag, if any; ``execution`` is ``replan.Execution.tag()`` ('' for open loop), ``multi_task`` 0/1,
+``eval_seed`` the task seed (the training seed, plus ``evaluate.VALIDATION_SEED_OFFSET`` on validation episodes)."""
+SPLITS = ("test", "validation")
+VALIDATION_SUFFIX = "-validation"
+"""Experiments on the validation episodes are named ``<name>-validation`` (``experiments.runner``)."""
 
 
-def _table_columns() -> str:
+def key_of(row: dict) -> tuple:
+    """A row's :data:`KEY` values, in order."""
+    return tuple(row[k] for k in KEY)
+
+
+def split_of(experiment: str) -> str:
+    """The split of an experiment's evaluations, from its name (``-validation``: the validation episodes)."""
+    return "validation" if experiment.endswith(VALIDATION_SUFFIX) else "test"
+
+
+def _tables() -> list[str]:
     cols = ", ".join(f"{k} {v}" for k, v in COLUMNS.items())
-    return f"id INTEGER PRIMARY KEY, {cols}, UNIQUE ({', '.join(KEY)})"
+    return [f"CREATE TABLE IF NOT EXISTS evaluations (id INTEGER PRIMARY KEY, {cols}, UNIQUE ({', '.join(KEY)}))",
+            "CREATE TABLE IF NOT EXISTS memberships (experiment TEXT NOT NULL, "
+            "evaluation INTEGER NOT NULL REFERENCES evaluations(id), PRIMARY KEY (experiment, evaluation))"]
+
+
+def stored_keys(path: Path) -> tuple[set[tuple], set[tuple[str, tuple]]]:
+    """The :data:`KEY` of every evaluation in the store at ``path``, and every (experiment, KEY) membership; read
+    only, nothing when there is no store (a store of an older schema is read as its upgrade would make it)."""
+    path = Path(path)
+    if not path.exists():
+        return set(), set()
+    try:
+        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
+        try:
+            db.row_factory = sqlite3.Row
+            if db.execute("PRAGMA user_version").fetchone()[0] < SCHEMA_VERSION:
+                if not db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone():
+                    return set(), set()
+                rows = [_upgraded(dict(r)) for r in db.execute("SELECT * FROM results")]
+                return {key_of(r) for r in rows}, {(r["experiment"], key_of(r)) for r in rows}
+            keys = {tuple(r) for r in db.execute(f"SELECT {', '.join(KEY)} FROM evaluations")}
+            members = {(r[0], tuple(r)[1:]) for r in db.execute(
+                f"SELECT m.experiment, {', '.join('e.' + k for k in KEY)} FROM memberships m "
+                "JOIN evaluations e ON e.id = m.evaluation")}
+            return keys, members
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as e:
+        raise BridgeplanError(f"cannot use results store {path}: {e}") from None
+
+
+def _upgraded(old: dict) -> dict:
+    """A row of a version 1-4 table as today's columns, with its ``experiment``: the defaults of the columns it
+    lacked, and its split from the experiment's name."""
+    row = {k: v for k, v in old.items() if k in COLUMNS or k == "experiment"}
+    row.setdefault("execution", "")
+    row.setdefault("multi_task", 0)
+    row.setdefault("sampler", "")
+    row["split"] = split_of(old["experiment"])
+    return row
 
 
 class ResultsStore:
@@ -82,14 +147,16 @@ class ResultsStore:
         with self._connect() as db:
             db.execute("BEGIN IMMEDIATE")  # one writer creates or upgrades; a second sweep waits, then sees it done
             version = db.execute("PRAGMA user_version").fetchone()[0]
-            exists = db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone()
-            if exists and version < SCHEMA_VERSION:  # the old table's rows into today's, keyed by today's KEY
-                db.execute("ALTER TABLE results RENAME TO results_old")
-                db.execute(f"CREATE TABLE results ({_table_columns()})")
-                old = [r[1] for r in db.execute("PRAGMA table_info(results_old)") if r[1] in COLUMNS]
-                db.execute(f"INSERT INTO results ({', '.join(old)}) SELECT {', '.join(old)} FROM results_old")
-                db.execute("DROP TABLE results_old")
-            db.execute(f"CREATE TABLE IF NOT EXISTS results ({_table_columns()})")
+            old = db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone()
+            for statement in _tables():
+                db.execute(statement)
+            if old and version < SCHEMA_VERSION:  # one row per experiment and evaluation -> evaluations + memberships
+                db.row_factory = sqlite3.Row
+                rows = [_upgraded(dict(r)) for r in db.execute("SELECT * FROM results ORDER BY id")]
+                db.row_factory = None
+                for row in rows:
+                    self._insert(db, row, [row.pop("experiment")])
+                db.execute("DROP TABLE results")
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
 
     @contextmanager
@@ -118,39 +185,129 @@ class ResultsStore:
             raise BridgeplanError(f"{self.path} has schema version {version}, newer than this bridgeplan "
                                   f"understands ({SCHEMA_VERSION}); upgrade bridgeplan")
 
-    def has(self, **key) -> bool:
+    @staticmethod
+    def _insert(db: sqlite3.Connection, row: dict, experiments: Iterable[str]) -> bool:
+        """Insert the evaluation ``row`` unless one with its KEY is there, and make it a member of ``experiments``;
+        True when the evaluation is new."""
+        names = [k for k in COLUMNS if k in row]
+        cursor = db.execute(f"INSERT OR IGNORE INTO evaluations ({', '.join(names)}) "
+                            f"VALUES ({', '.join('?' * len(names))})", [row[k] for k in names])
         where = " AND ".join(f"{k} = ?" for k in KEY)
-        with self._connect() as db:
-            return db.execute(f"SELECT 1 FROM results WHERE {where}", [key[k] for k in KEY]).fetchone() is not None
+        (evaluation,) = db.execute(f"SELECT id FROM evaluations WHERE {where}", key_of(row)).fetchone()
+        db.executemany("INSERT OR IGNORE INTO memberships (experiment, evaluation) VALUES (?, ?)",
+                       [(name, evaluation) for name in experiments])
+        return cursor.rowcount == 1
 
-    def add(self, row: dict) -> bool:
-        """Insert ``row``; False (and the store unchanged) when a row with its KEY is there already (another
-        sweep evaluated the same thing first: the evaluations are seeded, so it holds the same numbers)."""
+    def has(self, key: tuple, experiment: str | None = None) -> bool:
+        """Whether the evaluation with :data:`KEY` values ``key`` is stored (and, with ``experiment``, a member
+        of it)."""
+        where = " AND ".join(f"e.{k} = ?" for k in KEY)
+        query = f"SELECT 1 FROM evaluations e WHERE {where}"
+        if experiment is not None:
+            query = (f"SELECT 1 FROM evaluations e JOIN memberships m ON m.evaluation = e.id "
+                     f"WHERE {where} AND m.experiment = ?")
+        with self._connect() as db:
+            return db.execute(query, [*key, *([experiment] if experiment is not None else [])]).fetchone() is not None
+
+    def add(self, row: dict, experiments: Iterable[str] = ()) -> bool:
+        """Insert the evaluation ``row`` as a member of ``experiments``; False (the evaluation unchanged, the
+        memberships added) when one with its KEY is there already (another experiment or sweep evaluated the same
+        thing first: the evaluations are seeded, so it holds the same numbers)."""
         row = dict(row, created=row.get("created", time.time()))
         if isinstance(row.get("config"), dict):
             row["config"] = json.dumps(row["config"], sort_keys=True)
-        names = [k for k in COLUMNS if k in row]
         with self._connect() as db:
-            cursor = db.execute(f"INSERT OR IGNORE INTO results ({', '.join(names)}) "
-                                f"VALUES ({', '.join('?' * len(names))})", [row[k] for k in names])
-            return cursor.rowcount == 1
+            return self._insert(db, row, experiments)
+
+    def link(self, key: tuple, experiment: str) -> None:
+        """Make the stored evaluation ``key`` a member of ``experiment`` (no evaluation is computed again)."""
+        where = " AND ".join(f"{k} = ?" for k in KEY)
+        with self._connect() as db:
+            db.execute(f"INSERT OR IGNORE INTO memberships (experiment, evaluation) "
+                       f"SELECT ?, id FROM evaluations WHERE {where}", [experiment, *key])
 
     def rows(self, experiment: str | None = None) -> list[dict]:
+        """The evaluations, each with ``experiments`` (its memberships, space-separated, sorted); with
+        ``experiment``, those of that experiment, each with ``experiment`` set to it."""
+        order = " ORDER BY e.run_name, e.nfe, e.sampler, e.execution, e.multi_task, e.step"
         with self._connect() as db:
             db.row_factory = sqlite3.Row
-            query = "SELECT * FROM results" + (" WHERE experiment = ?" if experiment else "")
-            query += " ORDER BY experiment, run_name, nfe, sampler, execution, multi_task, step"
-            return [dict(r) for r in db.execute(query, [experiment] if experiment else [])]
+            if experiment is not None:
+                return [dict(r) for r in db.execute(
+                    "SELECT m.experiment AS experiment, e.* FROM evaluations e JOIN memberships m "
+                    f"ON m.evaluation = e.id WHERE m.experiment = ?{order}", [experiment])]
+            return [dict(r) for r in db.execute(
+                "SELECT e.*, (SELECT group_concat(experiment, ' ') FROM (SELECT experiment FROM memberships "
+                "WHERE evaluation = e.id ORDER BY experiment)) AS experiments FROM evaluations e ORDER BY e.id")]
 
     def experiments(self) -> list[str]:
         with self._connect() as db:
-            return [r[0] for r in db.execute("SELECT DISTINCT experiment FROM results ORDER BY experiment")]
+            return [r[0] for r in db.execute("SELECT DISTINCT experiment FROM memberships ORDER BY experiment")]
 
     def export_csv(self, path: Path) -> int:
+        """Every evaluation, in the order it was stored: ``id``, ``experiments``, then :data:`COLUMNS`."""
         rows = self.rows()
         buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=["id", *COLUMNS])
+        writer = csv.DictWriter(buf, fieldnames=["id", "experiments", *COLUMNS], lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
         atomic_write_text(Path(path), buf.getvalue())
         return len(rows)
+
+    def import_rows(self, rows: list[tuple[dict, list[str]]]) -> tuple[int, int]:
+        """Rows of a results CSV (:func:`read_csv_rows`) into the store, in one transaction, nothing recomputed; an
+        evaluation already stored keeps its numbers and gains the row's experiments. Returns (evaluations given,
+        evaluations new)."""
+        with self._connect() as db:
+            new = sum(self._insert(db, row, experiments) for row, experiments in rows)
+        return len({key_of(r) for r, _ in rows}), new
+
+
+_INTEGER = {k for k, v in COLUMNS.items() if v.startswith("INTEGER")}
+_REAL = {k for k, v in COLUMNS.items() if v.startswith("REAL")}
+
+
+def read_csv_rows(path: Path) -> list[tuple[dict, list[str]]]:
+    """Each row of a results CSV (any schema) as (store row, its experiments), in the file's order. An older CSV
+    without a ``sampler`` column gets the sampling tag of the process in its config, as the analysis reads it."""
+    from bridgeplan.processes import process_from_dict
+
+    path = Path(path)
+    out = []
+    try:
+        with path.open(newline="") as f:
+            for i, r in enumerate(csv.DictReader(f)):
+                where = f"{path} row {r.get('id') or i + 1}"
+                if "experiments" in r:
+                    experiments = (r["experiments"] or "").split()
+                elif "experiment" in r:
+                    experiments = [r["experiment"]]
+                else:
+                    raise BridgeplanError(f"{where}: not a results CSV (no experiment or experiments column)")
+                row = {}
+                for k in COLUMNS:
+                    value = r.get(k)
+                    if value is None:
+                        continue
+                    if k in _INTEGER:
+                        value = int(value)
+                    elif k in _REAL:
+                        value = float(value) if value != "" else None
+                    row[k] = value
+                if "split" not in r:
+                    row["split"] = split_of(experiments[0])
+                if "sampler" not in r:
+                    row["sampler"] = process_from_dict(json.loads(r["config"])["process"]).sampling_tag()
+                if row["split"] not in SPLITS:
+                    raise BridgeplanError(f"{where}: split {row['split']!r}: choose from {', '.join(SPLITS)}")
+                missing = [k for k in KEY if k not in row and k not in ("sampler", "execution", "multi_task")]
+                if missing:
+                    raise BridgeplanError(f"{where}: no {missing[0]} column")
+                row.setdefault("execution", "")
+                row.setdefault("multi_task", 0)
+                out.append((row, experiments))
+    except OSError as e:
+        raise BridgeplanError(f"cannot read results CSV {path}: {e.strerror}") from None
+    except (KeyError, ValueError, json.JSONDecodeError) as e:
+        raise BridgeplanError(f"{path}: not a results CSV ({type(e).__name__}: {e})") from None
+    return out

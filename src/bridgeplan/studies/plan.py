@@ -9,7 +9,6 @@ evaluations are skipped; runs are locked while trained) and runs with ``--worker
 from __future__ import annotations
 
 import dataclasses
-import sqlite3
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -195,22 +194,6 @@ def check_reports(study: Study, studies: dict[str, Study]) -> None:
 
 # --- what is missing ---------------------------------------------------------------------------------------------
 
-def _store_keys(path: Path) -> set[tuple]:
-    """The KEY of every row of the store at ``path`` (read-only; none when there is no store)."""
-    from bridgeplan.experiments.store import KEY
-
-    if not path.exists():
-        return set()
-    try:
-        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
-        try:
-            return {tuple(r) for r in db.execute(f"SELECT {', '.join(KEY)} FROM results")}
-        finally:
-            db.close()
-    except sqlite3.DatabaseError as e:
-        raise BridgeplanError(f"cannot use results store {path}: {e}") from None
-
-
 def _planned_snapshots(run_dir: Path, stages) -> list[int]:
     from bridgeplan import layout
 
@@ -227,11 +210,15 @@ class Missing:
     trains: tuple[tuple[str, int, int], ...]
     """(run name, steps to train, steps done) per run that is not finished, learned priors included."""
     evaluations: Counter
-    """Missing evaluations by experiment name (``-validation`` for the validation split)."""
+    """Evaluations to compute (absent from the store), each counted once, under the first experiment that names
+    it (``-validation`` for the validation split)."""
     episodes: int
     """Episodes per evaluation."""
     corrections: Counter = dataclasses.field(default_factory=Counter)
-    """Missing evaluations by experiment name and consistency correction (its tag; '' uncorrected)."""
+    """Evaluations to compute by experiment name and consistency correction (its tag; '' uncorrected)."""
+    wanted: dict[str, set[tuple]] = dataclasses.field(default_factory=dict)
+    """Per experiment, the evaluations (``store.KEY``) it shows and is not yet linked to in the store: computed, or
+    only linked where another experiment's evaluation is stored already."""
 
     def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
         train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
@@ -261,13 +248,15 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     from bridgeplan import config as cfg
     from bridgeplan import layout
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
-    from bridgeplan.experiments.runner import VALIDATION_SUFFIX, _prior_config, _train_config, _trained_step
+    from bridgeplan.experiments.runner import _prior_config, _train_config, _trained_step
+    from bridgeplan.experiments.store import VALIDATION_SUFFIX, stored_keys
 
     plan = sweeps(study, root, scale)
     trains: dict[str, tuple[int, int]] = {}
     evaluations: Counter = Counter()
     corrections: Counter = Counter()
-    keys = _store_keys(layout.store_path(results_dir(study, root, scale)))
+    wanted: dict[str, set[tuple]] = {}
+    keys, members = stored_keys(layout.store_path(results_dir(study, root, scale)))
     seen = set()
     for sweep in plan:
         s, experiment = sweep.settings, sweep.experiment
@@ -291,14 +280,16 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                     if series.run != spec:
                         continue
                     for step in (snapshots[-1:] if last_only else snapshots):
-                        key = (name, config.run_name(), step, series.nfe, series.sampling_tag(),
+                        key = (config.run_name(), step, series.nfe, series.sampling_tag(),
                                series.execution.tag(), int(series.multi_task), s.episodes, task_seed)
+                        if (name, key) not in members:
+                            wanted.setdefault(name, set()).add(key)
                         if key not in keys and key not in seen:
                             seen.add(key)
                             evaluations[name] += 1
                             corrections[name, series.correction.tag() if series.correction else ""] += 1
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections)
+    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections, wanted)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
@@ -317,6 +308,10 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         by_correction = sorted((tag, n) for (exp, tag), n in m.corrections.items() if exp == name)
         if any(tag for tag, _ in by_correction):  # corrected series: each correction's evaluations apart
             lines.extend(f"    {tag or 'uncorrected'}: {n} evaluations" for tag, n in by_correction)
+    shared = sum(len(keys) for keys in m.wanted.values()) - sum(m.evaluations.values())
+    if shared:
+        lines.append(f"  link {shared} evaluations to more experiments: stored already, or named by an earlier "
+                     f"experiment above (computed once)")
     from bridgeplan import config as cfg
 
     rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
