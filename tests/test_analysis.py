@@ -313,10 +313,9 @@ def test_unknown_execution_tags(tag):
 
 
 def test_eval_json_rows():
-    r = read_eval_json(RESULTS / "medium-v2-consistent-samplers" / "s0-mean-nfe2-track.json")
-    assert r.key == method("bridge", "line", steps=16, consistent=True, sampler="mean")
-    assert label(r.key) == "bridge (line; consistent=True) by mean"
-    assert (r.seed, r.nfe, r.split) == (0, 2, "test") and r.floor > 0
+    r = read_eval_json(RESULTS / "medium-v2-curves" / "learned-floor" / "s1.json")
+    assert r.key == method("bridge", "learned", steps=16) and label(r.key) == "bridge (learned)"
+    assert (r.seed, r.nfe, r.split) == (1, 1, "test") and r.floor > 0 and r.floor_learned > 0
 
 
 # --- Markdown ---------------------------------------------------------------------------------------------------

@@ -1,8 +1,9 @@
-"""Sweeps, the results store and the report, with a tiny grid."""
+"""Sweeps (the thesis's grids in tiny study files), the results store and the report."""
 
 from __future__ import annotations
 
 import sqlite3
+from pathlib import Path
 
 import pytest
 
@@ -11,15 +12,43 @@ from bridgeplan.experiments.grids import get_experiment
 from bridgeplan.experiments.store import SCHEMA_VERSION, ResultsStore
 from bridgeplan.processes import Flow
 
-TINY_SWEEP = ["--maze", "umaze", "--train-steps", "2", "--prior-steps", "2", "--checkpoint-every", "1",
-              "--episodes", "4", "--no-progress",
-              "--horizon", "32", "--dim", "8", "--dim-mults", "1,2", "--diffusion-steps", "6", "--batch-size", "4",
-              "--device", "cpu"]
+TINY_STUDY = """
+[dataset]
+maze = "umaze"
+path = "{dataset}"
+
+[training]
+steps = {steps}
+checkpoint_every = 1
+prior_steps = 2
+seeds = {seeds}
+diffusion_steps = 6
+horizon = 32
+batch_size = 4
+device = "cpu"
+model = {{ dim = 8, dim_mults = [1, 2] }}
+
+[evaluation]
+episodes = 4
+workers = 1
+"""
+
+
+def tiny_study(root: Path, dataset: str, *grids: str, steps: int = 2, seeds: tuple = (0,),
+               validation: bool = False) -> tuple[list[str], Path]:
+    """The study ``root/studies/tiny.toml`` of the thesis's ``grids`` at a tiny scale (6 diffusion steps, a
+    horizon of 32, a U-Net of dim 8, ``steps`` optimizer steps snapshotted at each); returns its `study run`
+    arguments and its results directory."""
+    (root / "studies").mkdir(parents=True, exist_ok=True)
+    splits = '\nsplits = ["test", "validation"]' if validation else ""
+    experiments = "".join(f'\n[[experiments]]\ngrid = "{g}"{splits}\n' for g in grids)
+    (root / "studies" / "tiny.toml").write_text(TINY_STUDY.format(dataset=dataset, steps=steps, seeds=list(seeds))
+                                               + experiments)
+    return ["study", "run", "tiny", "--no-progress", "--root", str(root)], root / "results" / "tiny"
 
 
 def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys, monkeypatch):
-    results = tmp_path / "results"
-    args = ["experiment", "nfe1", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    args, results = tiny_study(tmp_path, tiny_dataset, "nfe1")
     assert main(args) == 0
     rows = ResultsStore(results / "results.sqlite").rows("nfe1")
     # 4 series (DDPM + 3 priors) x 2 snapshots
@@ -40,7 +69,8 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys, monkeypatch):
     calls = []
     real = bridgeplan.evaluate.evaluate_planner
     monkeypatch.setattr(bridgeplan.evaluate, "evaluate_planner", lambda *a, **k: calls.append(1) or real(*a, **k))
-    assert main(["experiment", "nfe-curves", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]) == 0
+    args, _ = tiny_study(tmp_path, tiny_dataset, "nfe1", "nfe-curves")
+    assert main(args) == 0
     assert sorted(p.name for p in (results / "runs").iterdir()) == runs_before
     assert "12 new results" in capsys.readouterr().out  # (4 + 4 NFE) x 2 snapshots, 4 of them stored already
     assert len(calls) == 12  # and not evaluated again
@@ -61,14 +91,13 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys, monkeypatch):
 def test_validation_sweep_scores_other_episodes_of_the_same_runs(tiny_dataset, tmp_path, capsys):
     """`--validation`: the final snapshot of each run, on tasks of another seed, under `<name>-validation`;
     the test rows and the trained runs are left as they were."""
-    results = tmp_path / "results"
-    args = ["experiment", "nfe-curves", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP,
-            "--seeds", "0,1"]
+    args, results = tiny_study(tmp_path, tiny_dataset, "nfe-curves", seeds=(0, 1))
     assert main(args) == 0
     store = ResultsStore(results / "results.sqlite")
     test_rows = store.rows("nfe-curves")
     runs_before = sorted(p.name for p in (results / "runs").iterdir())
-    assert main([*args, "--validation"]) == 0
+    args, _ = tiny_study(tmp_path, tiny_dataset, "nfe-curves", seeds=(0, 1), validation=True)
+    assert main(args) == 0
     rows = store.rows("nfe-curves-validation")
     assert store.rows("nfe-curves") == test_rows
     assert sorted(p.name for p in (results / "runs").iterdir()) == runs_before
@@ -77,7 +106,7 @@ def test_validation_sweep_scores_other_episodes_of_the_same_runs(tiny_dataset, t
     assert {(r["seed"], r["eval_seed"]) for r in rows} == {(0, 1000), (1, 1001)}
     assert {(r["seed"], r["eval_seed"]) for r in test_rows} == {(0, 0), (1, 1)}
     capsys.readouterr()
-    assert main([*args, "--validation"]) == 0 and "0 new results" in capsys.readouterr().out
+    assert main(args) == 0 and "0 new results" in capsys.readouterr().out
 
 
 def test_prior_curves_has_each_prior_at_nfe_1_2_4_and_full():
@@ -91,8 +120,7 @@ def test_samplers_sweep_keys_each_sampler_apart(tiny_dataset, tmp_path, capsys):
     """The samplers experiment evaluates each run at NFE 2, 4 and full by every sampler of its process: the store
     keys them apart by the sampler the evaluated planner used ('' as trained), a second sweep adds nothing, and
     the report names the sampler of each series."""
-    results = tmp_path / "results"
-    args = ["experiment", "samplers", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    args, results = tiny_study(tmp_path, tiny_dataset, "samplers")
     assert main(args) == 0
     rows = ResultsStore(results / "results.sqlite").rows("samplers")
     # per snapshot: DDPM at NFE 1, and 2, 4, 6 by ancestral and ddim; the bridge at 1, and 2, 4, 5 by posterior
@@ -136,23 +164,6 @@ def test_controllers_experiment_pairs_tracking_with_pursuit():
     assert len(experiment.series) == 2 * 2 * 9
 
 
-@pytest.mark.parametrize("args, message", [
-    (["nfe1", "--maze", "maze9"], "unknown maze"),
-    (["priors", "--diffusion-steps", "4", "--fixed-nfe", "8"], "allows 1..3"),
-    (["nfe1", "--train-steps", "0"], "must be positive"),
-])
-def test_bad_sweeps_leave_no_store(tmp_path, capsys, args, message):
-    assert main(["experiment", *args, "--results", str(tmp_path / "r")]) == 2
-    assert message in capsys.readouterr().err
-    assert not (tmp_path / "r").exists()
-
-
-def test_unknown_experiment(tmp_path, capsys):
-    assert main(["experiment", "nope", "--results", str(tmp_path / "r")]) == 2
-    assert "unknown experiment" in capsys.readouterr().err
-    assert not (tmp_path / "r").exists()
-
-
 def test_newer_schema_is_refused_untouched(tmp_path, capsys):
     db = tmp_path / "results.sqlite"
     with sqlite3.connect(db) as con:
@@ -168,8 +179,7 @@ def test_newer_schema_is_refused_untouched(tmp_path, capsys):
 def test_parallel_backends_fill_the_same_store(tiny_dataset, tmp_path, backend):
     if "ray" in backend:
         pytest.importorskip("ray")
-    results = tmp_path / "results"
-    args = ["experiment", "bridge-vs-ddpm", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    args, results = tiny_study(tmp_path, tiny_dataset, "bridge-vs-ddpm")
     assert main(args + backend) == 0
     rows = ResultsStore(results / "results.sqlite").rows()
     assert len(rows) == 4 and {r["process"] for r in rows} == {"ddpm", "bridge"}
@@ -178,9 +188,8 @@ def test_parallel_backends_fill_the_same_store(tiny_dataset, tmp_path, backend):
 
 def test_ray_address_that_does_not_answer(tiny_dataset, tmp_path, capsys):
     pytest.importorskip("ray")
-    results = tmp_path / "r"
-    assert main(["experiment", "nfe1", "--dataset", tiny_dataset, "--results", str(results),
-                 *TINY_SWEEP, "--backend", "ray", "--ray-address", "127.0.0.1:1"]) == 2
+    args, results = tiny_study(tmp_path, tiny_dataset, "nfe1")
+    assert main([*args, "--backend", "ray", "--ray-address", "127.0.0.1:1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ray" in err[0].lower()
     assert not (results / "runs").exists()
@@ -189,8 +198,7 @@ def test_ray_address_that_does_not_answer(tiny_dataset, tmp_path, capsys):
 def test_closed_loop_sweep(tiny_dataset, tmp_path, capsys):
     """The closed-loop experiment: at the final snapshot only, each run open loop (NFE 1 and full) and replanned
     every 32 steps (truncated, keep; the bridge warm), single-task and Multi2D; keyed apart in the store."""
-    results = tmp_path / "results"
-    args = ["experiment", "closed-loop", "--dataset", tiny_dataset, "--results", str(results), *TINY_SWEEP]
+    args, results = tiny_study(tmp_path, tiny_dataset, "closed-loop")
     assert main(args) == 0
     rows = ResultsStore(results / "results.sqlite").rows("closed-loop")
     assert len(rows) == 2 * 2 * 4 and {r["step"] for r in rows} == {2}

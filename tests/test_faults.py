@@ -27,7 +27,7 @@ from bridgeplan.data.datasets import CACHE_NAME, read_cache
 from bridgeplan.data.info import summarize
 from bridgeplan.experiments.store import KEY
 from bridgeplan.locks import run_lock
-from tests.test_experiments import TINY_SWEEP
+from tests.test_experiments import tiny_study
 from tests.test_train import train_args
 
 ENV = {**os.environ, "PYTHONPATH": str(Path(bridgeplan.__file__).resolve().parents[1]),
@@ -35,7 +35,7 @@ ENV = {**os.environ, "PYTHONPATH": str(Path(bridgeplan.__file__).resolve().paren
 TIMEOUT = 120.0
 
 TRAIN_STEPS = 40  # checkpoint (and snapshot) every step, so writes take much of the time
-SWEEP = ["--train-steps", "4"]  # after TINY_SWEEP (argparse: the later flag wins); snapshots 1..4
+SWEEP_STEPS = 4  # snapshots 1..4
 SWEEP_ROWS = 8  # bridge-vs-ddpm: 2 runs x 4 snapshots, one NFE each
 
 
@@ -236,21 +236,21 @@ def count_redone(before: dict, after: dict) -> int:
                for k, r in before.items())
 
 
-def sweep_args(name: str, dataset: str, results: Path) -> list:
-    return ["experiment", name, "--dataset", dataset, "--results", results, *TINY_SWEEP, *SWEEP]
+def sweep(grid: str, dataset: str, root: Path) -> tuple[list, Path]:
+    """`study run` of a tiny study of ``grid`` under ``root``, and its results directory."""
+    return tiny_study(root, dataset, grid, steps=SWEEP_STEPS)
 
 
 @pytest.fixture(scope="module")
 def finished_sweep(tiny_dataset, tmp_path_factory) -> Path:
     """The results directory of an uninterrupted bridge-vs-ddpm sweep."""
-    results = tmp_path_factory.mktemp("sweep") / "results"
-    assert f"{SWEEP_ROWS} new results" in ok(*sweep_args("bridge-vs-ddpm", tiny_dataset, results))
+    args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path_factory.mktemp("sweep"))
+    assert f"{SWEEP_ROWS} new results" in ok(*args)
     return results
 
 
 def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, finished_sweep):
-    results = tmp_path / "results"
-    args = sweep_args("bridge-vs-ddpm", tiny_dataset, results)
+    args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     moments = [  # (while, condition)
         ("training the first run", lambda: any((results / "runs").glob("*/checkpoint.pt"))),
         ("evaluating the first run", lambda: len(store_rows(results)) >= 1),
@@ -280,8 +280,8 @@ def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, f
 
 
 def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_dataset, tmp_path, finished_sweep):
-    results = tmp_path / "results"
-    r = cli(*sweep_args("bridge-vs-ddpm", tiny_dataset, results), "--workers", "2")
+    args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
+    r = cli(*args, "--workers", "2")
     assert r.returncode == 0, r.stderr
     # workers killed by the pool instead of exiting leave semaphores the resource tracker warns about
     assert "leaked" not in r.stderr and "Warning" not in r.stderr, r.stderr
@@ -293,10 +293,9 @@ def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_datase
 
 
 def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
-    results = tmp_path / "results"
     # the same grid twice: both want to train the learned prior and the same four runs, and to
     # evaluate the same snapshots
-    args = ["experiment", "nfe1", "--dataset", tiny_dataset, "--results", results, *TINY_SWEEP]
+    args, results = tiny_study(tmp_path, tiny_dataset, "nfe1")
     prior = results / "runs" / PriorTrainConfig(maze="umaze", horizon=32, seed=0).run_name()
     logs = [tmp_path / f"sweep{i}.err" for i in range(2)]
     procs = []
@@ -319,7 +318,7 @@ def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
     rows = check_store(results, train_steps=2)
     assert len(rows) == 4 * 2  # 4 series x 2 snapshots, each once
     # each row is reported as new by the one sweep that stored it, even when both evaluated it
-    added = [int(re.search(r"nfe1: (\d+) new results", out).group(1)) for out in outs]
+    added = [int(re.search(r"tiny: (\d+) new results", out).group(1)) for out in outs]
     assert sum(added) == len(rows), outs
     runs = sorted((results / "runs").iterdir())
     assert len(runs) == 5  # the prior and four planners
@@ -406,23 +405,23 @@ def flip_page_type(path: Path) -> None:
 
 @pytest.mark.parametrize("damage", [truncate, flip_page_type])
 def test_damaged_store(tiny_dataset, tmp_path, finished_sweep, damage):
-    results = tmp_path / "results"
+    args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     shutil.copytree(finished_sweep, results)
     db = results / "results.sqlite"
     damage(db)
     before = files(results)
     assert str(db) in error_line("report", "--results", results)
-    assert str(db) in error_line(*sweep_args("bridge-vs-ddpm", tiny_dataset, results))
+    assert str(db) in error_line(*args)
     assert files(results) == before  # no training, no evaluation, the store as it was
 
 
 def test_sweep_over_damaged_run(tiny_dataset, tmp_path, finished_sweep):
-    results = tmp_path / "results"
+    args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     shutil.copytree(finished_sweep, results)
     ckpt = next((results / "runs").glob("*/checkpoint.pt"))
     truncate(ckpt)
     before, rows = files(results, skip=("results.sqlite",)), store_rows(results)
-    assert str(ckpt) in error_line(*sweep_args("bridge-vs-ddpm", tiny_dataset, results))
+    assert str(ckpt) in error_line(*args)
     # opening the store may rewrite its header: its rows must be the same
     assert files(results, skip=("results.sqlite",)) == before and store_rows(results) == rows
 

@@ -67,8 +67,8 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
 
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert ("9 reports and the generated blocks in README.md, docs/ogbench_pointmaze.md match their studies"
-            in capsys.readouterr().out)
+    assert ("9 reports, 9 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
+            "their studies" in capsys.readouterr().out)
     # a generator's name (as the markers and the errors say it) selects the studies whose reports it makes
     assert main(["study", "report", "cddb", "--check", "--root", str(REPO)]) == 0
     assert "1 reports" in capsys.readouterr().out
@@ -133,7 +133,7 @@ def test_study_list(capsys):
     assert {"findings", "prior-curves", "controllers", "medium-v2-curves", "umaze-v2-curves"} <= set(lines)
     assert lines["findings"][0] == "studies/findings.toml"
     assert "docs/results/findings.md (feeds README.md, docs/history.md)" in lines["findings"][1]
-    assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop)"
+    assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop, candidates)"
 
 
 GOOD = """
@@ -240,6 +240,50 @@ def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_pat
     assert sum(missing(study, root, Scale("quick")).evaluations.values()) == 0
     assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 0 new results" in capsys.readouterr().out  # resumable: nothing left to do
+
+
+def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_path, capsys):
+    """`study export`: the store's evaluations, a report and a figure into docs/results/NAME; `study report` then
+    writes its provenance (the study file's hash, the code versions), which `--check` holds to the study file."""
+    import json
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    file = root / "studies" / "tiny.toml"
+    file.write_text(GOOD.format(dataset=tiny_dataset))
+    assert main(["study", "export", "tiny", "--root", str(root)]) == 2  # nothing run yet
+    assert "no results store at" in capsys.readouterr().err and not (root / "docs").exists()
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert main(["study", "export", "tiny", "--root", str(root)]) == 0
+    folder = root / "docs" / "results" / "tiny"
+    assert "wrote docs/results/tiny/results.csv" in capsys.readouterr().out
+    rows = list(csv.DictReader((folder / "results.csv").open()))
+    assert len(rows) == 4 and {r["experiments"] for r in rows} == {"tiny"}
+    assert "## tiny" in (folder / "report.md").read_text() and (folder / "tiny.png").read_bytes()[:4] == b"\x89PNG"
+    # an evaluation JSON imported as a row of an experiment that declares it; one it does not declare is refused
+    run = root / "results" / "tiny" / "runs" / "umaze-ddpm-N6-H32-cpu-small-s0"
+    for nfe in (1, 2):
+        assert main(["eval", str(run), "--nfe", str(nfe), "--episodes", "4", "--seed", "0", "--snapshot", "2",
+                     "--device", "cpu", "--out", str(tmp_path / f"nfe{nfe}.json")]) == 0
+    capsys.readouterr()
+    assert main(["study", "import", "tiny", "--experiment", "tiny", "--eval-json", str(tmp_path / "nfe1.json"),
+                 "--root", str(root)]) == 0
+    assert "tiny: 1 evaluations in 1 evaluation JSONs, 0 new" in capsys.readouterr().out  # the same as stored
+    assert main(["study", "import", "tiny", "--experiment", "tiny", "--eval-json", str(tmp_path / "nfe2.json"),
+                 "--root", str(root)]) == 2
+    assert "nfe2.json: not an evaluation that tiny of studies/tiny.toml declares" in capsys.readouterr().err
+    assert main(["study", "import", "tiny", "--experiment", "nope", "--eval-json", str(tmp_path / "nfe1.json"),
+                 "--root", str(root)]) == 2
+    assert "has no experiment 'nope'" in capsys.readouterr().err
+    assert main(["study", "report", "--check", "--root", str(root)]) == 2  # no provenance yet
+    assert main(["study", "report", "--root", str(root)]) == 0
+    record = json.loads((folder / "study.json").read_text())
+    assert record["study"] == "studies/tiny.toml" and record["evaluations"] == 4 and record["training_seeds"] == [0]
+    assert record["code_versions"] == [rows[0]["code_version"]] and record["code_versions"][0].startswith("0.1.0")
+    assert main(["study", "report", "--check", "--root", str(root)]) == 0
+    file.write_text(file.read_text().replace("episodes = 4", "episodes = 5"))  # the study changed, its rows not
+    assert main(["study", "report", "--check", "--root", str(root)]) == 2
+    assert "docs/results/tiny/study.json differs" in capsys.readouterr().err
 
 
 CORRECTED = GOOD.replace("steps = 2\ncheckpoint_every = 1", "steps = 1\ncheckpoint_every = 1").replace(

@@ -282,16 +282,6 @@ def _int_tuple(text: str, flag: str) -> tuple[int, ...]:
     return values
 
 
-def _seeds(text: str) -> tuple[int, ...]:
-    try:
-        seeds = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise BridgeplanError(f"--seeds takes comma-separated integers, got {text!r}") from None
-    if min(seeds) < 0:
-        raise BridgeplanError(f"--seeds must be >= 0, got {text!r}")
-    return seeds
-
-
 def _add_eval_commands(sub) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run over many episodes")
     p.add_argument("run", help="run directory (or a checkpoint/snapshot file)")
@@ -498,85 +488,12 @@ def _cmd_hierarchy_eval(args) -> int:
     return 0
 
 
-def _add_experiment_commands(sub) -> None:
-    from bridgeplan.experiments.grids import EXPERIMENTS
-
-    p = sub.add_parser("experiment", help="run one of the thesis's experiments (a declared grid of runs)",
-                       description="Experiments: " + "; ".join(f"{k}: {e.title}" for k, e in EXPERIMENTS.items()))
-    p.add_argument("name", help=", ".join(EXPERIMENTS))
-    p.add_argument("--maze", default="umaze")
-    p.add_argument("--dataset", default="", help="dataset directory (default: generated under RESULTS/data)")
-    p.add_argument("--dataset-steps", type=int, default=200_000, help="size of the generated dataset")
-    p.add_argument("--preset", default="cpu-small")
-    p.add_argument("--results", default="results", help="results directory (store, runs, report)")
-    p.add_argument("--train-steps", type=int, default=3000, help="optimizer steps per run")
-    p.add_argument("--prior-steps", type=int, default=2000, help="optimizer steps of the learned prior")
-    p.add_argument("--checkpoint-every", type=int, default=500, help="snapshot (evaluation) interval")
-    p.add_argument("--diffusion-steps", type=int, default=16)
-    p.add_argument("--process", default="bridge",
-                   help="the process compared with DDPM from each prior (default bridge)")
-    _process_param_flag(p)
-    p.add_argument("--beta-max", type=float, default=None, help="bridge runs: largest beta of the schedule")
-    p.add_argument("--ot-ode", action="store_true", help="bridge runs: noise-free marginal and sampler")
-    p.add_argument("--consistent", action="store_true",
-                   help="bridge runs: train on the marginals the sampling chain implies")
-    p.add_argument("--fixed-nfe", type=int, default=4, help="NFE of the `priors` experiment")
-    p.add_argument("--episodes", type=int, default=200)
-    p.add_argument("--seeds", default="0", help="comma-separated training/evaluation seeds")
-    p.add_argument("--validation", action="store_true",
-                   help="evaluate each run's final snapshot on validation episodes (other task seeds) into "
-                        "EXPERIMENT-validation, to choose settings there and report them on the test episodes")
-    p.add_argument("--backend", default="local", help="local or ray")
-    p.add_argument("--workers", type=int, default=1, help="local backend: parallel jobs (cores divided)")
-    p.add_argument("--ray-address", default=None, help="existing Ray cluster (default: start a local one)")
-    p.add_argument("--horizon", type=int, default=None)
-    p.add_argument("--stride", type=int, default=None, help="environment steps between planned states")
-    p.add_argument("--dim", type=int, default=None)
-    p.add_argument("--dim-mults", default=None)
-    p.add_argument("--batch-size", type=int, default=None)
-    _hold_share_flag(p)
-    p.add_argument("--device", default=None)
-    _threads_flag(p)
-    p.add_argument("--no-progress", action="store_true")
-    p.set_defaults(func=_cmd_experiment)
-
+def _add_report_command(sub) -> None:
     p = sub.add_parser("report", help="figures and a Markdown page from the results store")
     p.add_argument("--results", default="results")
     p.add_argument("--out", default=None, help="output directory (default RESULTS/report)")
     p.add_argument("--csv", default=None, help="also export every result row to this CSV file")
     p.set_defaults(func=_cmd_report)
-
-
-def _cmd_experiment(args) -> int:
-    from bridgeplan.experiments.grids import get_experiment
-    from bridgeplan.experiments.runner import SweepSettings, run_sweep
-    from bridgeplan.layout import store_path
-    from bridgeplan.processes import make_process
-
-    for name in ("train_steps", "prior_steps", "checkpoint_every", "episodes", "dataset_steps"):
-        if getattr(args, name) <= 0:
-            raise BridgeplanError(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    from bridgeplan.config import preset_config
-
-    informed = make_process(args.process, **_process_params(args, args.process))
-    experiment = get_experiment(args.name, args.diffusion_steps, args.fixed_nfe, informed)
-    overrides = _overrides(args, ("horizon", "stride", "batch_size", "device", "threads", "hold_share"))
-    preset_config(args.maze, args.preset, **overrides)  # bad maze, preset or horizon: before the store is touched
-    model = {"dim": args.dim} if args.dim is not None else {}
-    if args.dim_mults is not None:
-        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
-    if model:
-        overrides["model"] = model
-    settings = SweepSettings(maze=args.maze, dataset=_dataset_ref(args.dataset) if args.dataset else "",
-                             dataset_steps=args.dataset_steps,
-                             preset=args.preset, train_steps=args.train_steps, prior_steps=args.prior_steps,
-                             checkpoint_every=args.checkpoint_every, episodes=args.episodes,
-                             seeds=_seeds(args.seeds),
-                             results_dir=args.results, overrides=overrides, validation=args.validation)
-    added = run_sweep([experiment], settings, backend=args.backend, workers=args.workers,
-                      ray_address=args.ray_address, progress=not args.no_progress)
-    print(f"{args.name}: {added} new results in {store_path(args.results)}")
-    return 0
 
 
 def _cmd_report(args) -> int:
@@ -586,7 +503,7 @@ def _cmd_report(args) -> int:
 
     store = store_path(args.results)
     if not store.exists():
-        raise BridgeplanError(f"no results store at {store}; run `bridgeplan experiment` first")
+        raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
     path = write_report(Path(args.results), Path(args.out) if args.out else None)
     print(f"wrote {path}")
     if args.csv:
@@ -645,7 +562,7 @@ def _add_demo_command(sub) -> None:
     p.add_argument("--maze", default="umaze")
     p.add_argument("--out", default="demo", help="output directory")
     p.add_argument("--dataset-steps", type=int, default=200_000)
-    p.add_argument("--train-steps", type=int, default=1500, help="optimizer steps per run")
+    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run")
     p.add_argument("--episodes", type=int, default=100)
     _threads_flag(p)
     p.set_defaults(func=_cmd_demo)
@@ -665,7 +582,7 @@ def _cmd_demo(args) -> int:
                       tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
                             for nfe in (spec.process.max_nfe, 1)))
     settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
-                             train_steps=args.train_steps, checkpoint_every=max(1, args.train_steps // 3),
+                             train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
                              episodes=args.episodes, results_dir=args.out,
                              overrides=_overrides(args, ("threads",)))
     added = run_sweep([demo], settings)
@@ -696,14 +613,24 @@ def _add_study_commands(sub) -> None:
     run.add_argument("--ray-address", default=None)
     run.add_argument("--no-progress", action="store_true")
     imp = study.add_parser("import", help="load a study's committed rows (docs/results/DATA/results.csv, any schema) "
-                                          "into its store, so that `study run` computes only what they lack")
+                                          "into its store, so that `study run` computes only what they lack; or "
+                                          "evaluation JSONs (`eval --json`) as rows of one of its experiments")
     imp.add_argument("file", help="the study file (or a study's name)")
-    for q in (ls, r, run, imp):
+    imp.add_argument("--eval-json", nargs="+", default=None, metavar="FILE",
+                     help="evaluation JSONs to import instead, each an evaluation that --experiment declares")
+    imp.add_argument("--experiment", default=None,
+                     help="with --eval-json: the study's experiment they belong to (NAME-validation: its validation "
+                          "split)")
+    exp = study.add_parser("export", help="a study's store (results/NAME) into its committed folder "
+                                          "docs/results/DATA: results.csv, report.md and a figure per experiment")
+    exp.add_argument("file", help="the study file (or a study's name)")
+    for q in (ls, r, run, imp, exp):
         q.add_argument("--root", default=None, help="the repository root (holds studies/ and docs/results/)")
     ls.set_defaults(func=_cmd_study_list)
     r.set_defaults(func=_cmd_study_report)
     run.set_defaults(func=_cmd_study_run)
     imp.set_defaults(func=_cmd_study_import)
+    exp.set_defaults(func=_cmd_study_export)
 
 
 def _cmd_study_list(args) -> int:
@@ -721,6 +648,7 @@ def _cmd_study_list(args) -> int:
 def _cmd_study_report(args) -> int:
     from bridgeplan.files import atomic_write_text
     from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies.export import provenance, provenance_path
     from bridgeplan.studies.reports import GENERATORS
 
     root = find_root(args.root)
@@ -729,6 +657,9 @@ def _cmd_study_report(args) -> int:
     results = root / "docs" / "results"
     texts = {}  # file (relative to root) -> (the studies that change it, text): nothing written unless all render
     for s in chosen:
+        record = provenance(s, root)
+        if record is not None:
+            texts[provenance_path(s)] = ([s.name], record)
         for r in s.reports:
             generator = GENERATORS[r.generator]
             texts[f"docs/results/{r.output}"] = ([s.name], generator.render(results))
@@ -749,11 +680,12 @@ def _cmd_study_report(args) -> int:
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
             print(f"wrote {output}")
-    reports = sum(output.startswith("docs/results/") for output in texts)
+    provenances = sum(output.endswith("/study.json") for output in texts)
+    reports = sum(output.startswith("docs/results/") for output in texts) - provenances
     if args.check and not differ:
         fed = [output for output in texts if not output.startswith("docs/results/")]
         blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
-        print(f"{reports} reports{blocks} match their studies")
+        print(f"{reports} reports, {provenances} provenance files{blocks} match their studies")
     return 2 if differ else 0
 
 
@@ -788,20 +720,50 @@ def _cmd_study_run(args) -> int:
 
 
 def _cmd_study_import(args) -> int:
-    from bridgeplan.experiments.store import ResultsStore, read_csv_rows
+    from bridgeplan.experiments.store import KEY as KEY_NAMES
+    from bridgeplan.experiments.store import ResultsStore, key_of, read_csv_rows, read_eval_json_rows
     from bridgeplan.layout import store_path
     from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies.plan import Scale, missing, results_dir
+
+    root = find_root(args.root)
+    study = select(load_studies(root), [args.file], root)[0]
+    if (args.eval_json is None) != (args.experiment is None):
+        raise BridgeplanError("--eval-json and --experiment go together")
+    if args.eval_json is None:
+        source = root / "docs" / "results" / study.data_dir / "results.csv"
+        if not study.experiments or not source.exists():
+            raise BridgeplanError(f"study {study.name} has no committed rows to import "
+                                  f"(no {source.relative_to(root)})")
+        rows = read_csv_rows(source)  # the whole file checked before the store is touched
+        source = source.relative_to(root)
+    else:
+        declared = missing(study, root).declared
+        if args.experiment not in declared:
+            raise BridgeplanError(f"study {study.name} has no experiment {args.experiment!r} (it has: "
+                                  f"{', '.join(sorted(declared)) or 'none'})")
+        rows = read_eval_json_rows(args.eval_json, args.experiment)
+        for path, (row, _) in zip(args.eval_json, rows):
+            if key_of(row) not in declared[args.experiment]:
+                raise BridgeplanError(f"{path}: not an evaluation that {args.experiment} of {study.file} declares "
+                                      f"({', '.join(f'{k}={v}' for k, v in zip(KEY_NAMES, key_of(row)))})")
+        source = f"{len(rows)} evaluation JSONs"
+    store = store_path(results_dir(study, root, Scale()))
+    read, new = ResultsStore(store).import_rows(rows)
+    print(f"{study.name}: {read} evaluations in {source}, {new} new in {store}")
+    return 0
+
+
+def _cmd_study_export(args) -> int:
+    from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies.export import export
     from bridgeplan.studies.plan import Scale, results_dir
 
     root = find_root(args.root)
     study = select(load_studies(root), [args.file], root)[0]
-    committed = root / "docs" / "results" / study.data_dir / "results.csv"
-    if not study.experiments or not committed.exists():
-        raise BridgeplanError(f"study {study.name} has no committed rows to import (no {committed.relative_to(root)})")
-    rows = read_csv_rows(committed)  # the whole file checked before the store is touched
-    store = store_path(results_dir(study, root, Scale()))
-    read, new = ResultsStore(store).import_rows(rows)
-    print(f"{study.name}: {read} evaluations in {committed.relative_to(root)}, {new} new in {store}")
+    for path in export(study, root, results_dir(study, root, Scale())):
+        print(f"wrote {path.relative_to(root)}")
+    print(f"then `bridgeplan study report` regenerates the reports and {study.data_dir}'s provenance from them")
     return 0
 
 
@@ -813,7 +775,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_commands(sub)
     _add_eval_commands(sub)
     _add_hierarchy_commands(sub)
-    _add_experiment_commands(sub)
+    _add_report_command(sub)
     _add_bench_command(sub)
     _add_demo_command(sub)
     _add_study_commands(sub)

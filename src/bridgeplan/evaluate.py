@@ -195,31 +195,13 @@ class EvalResult:
                 **self.decisions}
 
     def to_row(self, split: str = "test") -> dict:
-        """A results-store row (``experiments.store.COLUMNS``) made on ``split``'s episodes; needs the run the
-        planner came from."""
+        """A results-store row (``experiments.store.COLUMNS``) made on ``split``'s episodes, as the store reads
+        :meth:`to_dict`'s JSON (``store.row_from_eval_json``); needs the run the planner came from."""
+        from bridgeplan.experiments.store import row_from_eval_json
+
         if self.run is None:
             raise BridgeplanError("a store row needs the run the planner was loaded from")
-        run = self.run
-        latency = self.decisions.get("decision_ms_batch1", {})
-        residual = self.plan_residuals or {}
-        return {
-            "run_name": run.config.run_name(), "split": split, "maze": self.tasks.maze.name,
-            "process": self.planner.process.name, "prior": self.prior, "diffusion_steps": self.planner.process.steps,
-            "seed": run.config.seed, "step": run.step, "train_seconds": run.elapsed_seconds, "nfe": self.nfe,
-            "episodes": self.tasks.episodes, "eval_seed": self.tasks.seed,
-            "score_minari": self.score("minari")["mean"], "score_minari_se": self.score("minari")["se"],
-            "score_d4rl": self.score("d4rl")["mean"], "score_d4rl_se": self.score("d4rl")["se"],
-            "success_rate": self.scores["success_rate"]["mean"], "plan_ms": self.plan_ms_per_plan,
-            "prior_ms": self.prior_ms_per_plan, "floor_minari": self.floors["floor_line"]["score"]["minari"]["mean"],
-            "sampler": self.sampling_tag(), "execution": self.execution.tag(),
-            "multi_task": int(self.tasks.multi_task),
-            "calls_per_episode": self.execution_fields()["calls_per_episode"],
-            "decision_ms_p50": latency.get("p50"), "decision_ms_p95": latency.get("p95"),
-            "network_calls_per_plan": self.cost_fields()["network_call_equivalents_per_plan"],
-            "plan_kinematics_rms": residual.get("kinematics_rms", {}).get("mean"),
-            "plan_dynamics_rms": residual.get("dynamics_rms", {}).get("mean"),
-            "config": run.portable_config, "code_version": self.environment["code_version"],
-        }
+        return row_from_eval_json(self.to_dict(), split)
 
 
 def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run: RunInfo | None = None,

@@ -127,8 +127,9 @@ def plot_calls(rows: list[dict], name: str, path: Path) -> bool:
     return True
 
 
-def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
-    """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path."""
+def write_report(results_dir: Path, out_dir: Path | None = None, titles: dict[str, str] | None = None) -> Path:
+    """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path. ``titles``: experiments'
+    titles (a study's), beside the thesis grids' own."""
     results_dir = Path(results_dir)
     out_dir = Path(out_dir) if out_dir else layout.report_dir(results_dir)
     store = ResultsStore(layout.store_path(results_dir))
@@ -140,7 +141,7 @@ def write_report(results_dir: Path, out_dir: Path | None = None) -> Path:
         if not plot_experiment(store, name, png):
             continue
         rows = store.rows(name)
-        title = EXPERIMENTS[name].title if name in EXPERIMENTS else name
+        title = (titles or {}).get(name) or (EXPERIMENTS[name].title if name in EXPERIMENTS else name)
         lines += [f"## {name}: {title}", "", f"![{name}]({png.name})", "",
                   "| series | step | train s | NFE | episodes | seeds | score (minari) | score (d4rl) | success "
                   "| plan ms | calls/episode | decision ms p50/p95 (batch 1) |",

@@ -228,12 +228,12 @@ class Results:
         return sum(1 for _ in self)
 
 
-def load_csvs(paths: Iterable[str | Path], missing_ok: bool = True) -> Results:
+def load_csvs(paths: Iterable[str | Path], missing_ok: bool = True, experiments: set[str] | None = None) -> Results:
     """The rows of several CSVs in one :class:`Results`, earlier files first (precedence); a file that does not
-    exist is skipped when ``missing_ok``."""
+    exist is skipped when ``missing_ok``; with ``experiments``, only the rows these experiments show."""
     rows: list[Row] = []
     for path in map(Path, paths):
         if missing_ok and not path.exists():
             continue
-        rows += read_csv(path)
+        rows += [r for r in read_csv(path) if experiments is None or experiments & set(r.experiment.split())]
     return Results(rows)

@@ -263,6 +263,57 @@ class ResultsStore:
         return len({key_of(r) for r, _ in rows}), new
 
 
+def row_from_eval_json(d: dict, split: str = "test") -> dict:
+    """The store row of an evaluation JSON (``EvalResult.to_dict``, what ``bridgeplan eval --json`` writes) made on
+    ``split``'s episodes: the run named as its config names it, the sampling tag from the process as sampled and the
+    correction, the execution's tag from its settings."""
+    from bridgeplan import config as cfg
+    from bridgeplan.analysis.keys import execution_from_dict
+    from bridgeplan.consistency import Correction, sampling_tag
+    from bridgeplan.processes import process_from_dict
+
+    if split not in SPLITS:
+        raise BridgeplanError(f"unknown split {split!r}: choose from {', '.join(SPLITS)}")
+    config = cfg.from_dict(cfg.TrainConfig, d["config"])
+    c = d.get("correction")
+    correction = None if not c else Correction(tuple(sorted(c["steps"].items())), form=c["form"])
+    latency = d.get("decision_ms_batch1") or {}
+    residuals = d.get("plan_residuals") or {}
+    score = d["score"]
+    return {
+        "run_name": config.run_name(), "maze": d["maze"], "process": d["process"], "prior": d["prior"],
+        "diffusion_steps": d["diffusion_steps"], "seed": config.seed, "step": d["step"],
+        "train_seconds": d.get("train_seconds"), "nfe": d["nfe"], "episodes": d["episodes"], "eval_seed": d["seed"],
+        "split": split, "score_minari": score["minari"]["mean"], "score_minari_se": score["minari"]["se"],
+        "score_d4rl": score["d4rl"]["mean"], "score_d4rl_se": score["d4rl"]["se"],
+        "success_rate": d["success_rate"]["mean"], "plan_ms": d["plan_ms_per_plan"], "prior_ms": d["prior_ms_per_plan"],
+        "floor_minari": d["floor_line"]["score"]["minari"]["mean"],
+        "sampler": sampling_tag(process_from_dict(d["process_params"]).sampling_tag(), correction),
+        "execution": execution_from_dict(d.get("execution")).tag(), "multi_task": int(d["multi_task"]),
+        "calls_per_episode": d.get("calls_per_episode"), "decision_ms_p50": latency.get("p50"),
+        "decision_ms_p95": latency.get("p95"),
+        "network_calls_per_plan": d.get("network_call_equivalents_per_plan"),
+        "plan_kinematics_rms": residuals.get("kinematics_rms", {}).get("mean"),
+        "plan_dynamics_rms": residuals.get("dynamics_rms", {}).get("mean"),
+        "config": d["config"], "code_version": d["environment"]["code_version"],
+    }
+
+
+def read_eval_json_rows(paths: Iterable[Path], experiment: str) -> list[tuple[dict, list[str]]]:
+    """Evaluation JSONs as rows of ``experiment`` (its split from its name), as :func:`read_csv_rows` gives them."""
+    out = []
+    for path in paths:
+        try:
+            row = row_from_eval_json(json.loads(Path(path).read_text()), split_of(experiment))
+        except OSError as e:
+            raise BridgeplanError(f"cannot read evaluation JSON {path}: {e.strerror}") from None
+        except (KeyError, TypeError, ValueError) as e:
+            raise BridgeplanError(f"{path}: not an evaluation JSON ({type(e).__name__}: {e})") from None
+        row["config"] = json.dumps(row["config"], sort_keys=True)
+        out.append((row, [experiment]))
+    return out
+
+
 _INTEGER = {k for k, v in COLUMNS.items() if v.startswith("INTEGER")}
 _REAL = {k for k, v in COLUMNS.items() if v.startswith("REAL")}
 

@@ -219,6 +219,8 @@ class Missing:
     wanted: dict[str, set[tuple]] = dataclasses.field(default_factory=dict)
     """Per experiment, the evaluations (``store.KEY``) it shows and is not yet linked to in the store: computed, or
     only linked where another experiment's evaluation is stored already."""
+    declared: dict[str, set[tuple]] = dataclasses.field(default_factory=dict)
+    """Per experiment, every evaluation (``store.KEY``) it shows, stored or not."""
 
     def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
         train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
@@ -256,6 +258,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     evaluations: Counter = Counter()
     corrections: Counter = Counter()
     wanted: dict[str, set[tuple]] = {}
+    declared: dict[str, set[tuple]] = {}
     keys, members = stored_keys(layout.store_path(results_dir(study, root, scale)))
     seen = set()
     for sweep in plan:
@@ -282,6 +285,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                     for step in (snapshots[-1:] if last_only else snapshots):
                         key = (config.run_name(), step, series.nfe, series.sampling_tag(),
                                series.execution.tag(), int(series.multi_task), s.episodes, task_seed)
+                        declared.setdefault(name, set()).add(key)
                         if (name, key) not in members:
                             wanted.setdefault(name, set()).add(key)
                         if key not in keys and key not in seen:
@@ -289,7 +293,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                             evaluations[name] += 1
                             corrections[name, series.correction.tag() if series.correction else ""] += 1
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections, wanted)
+    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections, wanted, declared)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:

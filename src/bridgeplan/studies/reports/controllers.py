@@ -74,7 +74,8 @@ def render(root: Path) -> str:
              "Diffuser's controller; `pursuit R`: the plan's path at the expert's pace, toward the first planned "
              "position R away; bold: the lookahead the validation episodes pick; `replan32 pursuit 1`: a new plan "
              "every 32 steps (bridge and flow from the warm prior).", ""]
-    results = {maze: load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in STORES) for maze in MAZES}
+    results = {maze: load_csvs((root / f"{maze}-v2-{store}" / "results.csv" for store in STORES),
+                               experiments={"controllers", "controllers-validation"}) for maze in MAZES}
     for multi in (0, 1):
         lines += [f"## {'Multi2D' if multi else 'single-task'}", "",
                   "| maze | method | NFE | track | pursuit 0.5 | pursuit 1 | pursuit 1.5 | replan32 pursuit 1 |",

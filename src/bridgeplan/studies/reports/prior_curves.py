@@ -4,7 +4,7 @@ against DDPM, and the issue's goal checked at every snapshot (umaze and medium; 
 docs/results/<maze>-v2-consistent-priors/results.csv, made by studies/<maze>-v2-consistent-priors.toml in a store
 of its own). The line prior's consistent runs are in both: the table takes the first, and says how closely the
 retrained runs reproduce it. On medium, a table checks the goal for the consistent bridge from the line sampled by
-its posterior means (evaluation JSONs in docs/results/medium-v2-consistent-samplers), and a
+its posterior means (the consistent-means rows of docs/results/medium-v2-consistent-priors), and a
 last one checks it with 5 seeds and the bridge's setting declared in advance (:func:`declared_table`).
 
 Goal, per maze, prior and training step: flow at NFE 2 (fixed in advance, no selection) reaches the best score
@@ -118,18 +118,16 @@ def reproduction(root: Path, maze: str) -> str:
 
 
 def mean_sampler_table(root: Path, results: Results, maze: str) -> list[str]:
-    """The consistent bridge from the line sampled by its posterior means at NFE 2 (evaluation
-    JSONs in docs/results/<maze>-v2-consistent-samplers: the final snapshot there, earlier ones in step*/) against
-    DDPM's best NFE at each step, per seed, and against the line alone."""
-    here = root / f"{maze}-v2-consistent-samplers"
+    """The consistent bridge from the line sampled by its posterior means at NFE 2 (the consistent-means experiment
+    of docs/results/<maze>-v2-consistent-priors) against DDPM's best NFE at each step, per seed, and against the
+    line alone."""
+    means = CONSISTENT.replace(sampler="mean")
     lines = []
-    by_step: dict[int, list] = {}
-    for path in [*here.glob("step*/s[0-9]-mean-nfe2-track.json"), *here.glob("s[0-9]-mean-nfe2-track.json")]:
-        row = read_eval_json(path)
-        by_step.setdefault(row.step, []).append(row)
-    for step, evals in sorted(by_step.items()):
-        ours = {r.seed: r.score for r in evals}
-        alone = {r.seed: r.floor for r in evals}
+    for step in results.steps(means):
+        point = Point(means, step, 2)
+        ours, alone = results.values(point), results.values(point, field="floor")
+        if not ours:
+            continue
         ddpm = best_nfe(results, DDPM, step)
         reaches, clears = verdict(diff(ours, scores(results, ddpm)), "reaches"), verdict(diff(ours, alone), "clears")
         lines.append(f"| {step} | {mean_se(ours)} | {best_cell(results, ddpm)} | {reaches} | {clears} |")

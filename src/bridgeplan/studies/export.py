@@ -1,0 +1,68 @@
+"""A study's committed folder, ``docs/results/DATA/``: what ``study export`` writes there from the study's store
+(``results.csv``, ``report.md`` and a figure per experiment), and the provenance ``study.json`` that
+``study report`` generates from the committed rows (``--check`` verifies it): the study file and its sha256, the
+code versions that made the rows, the seeds and the number of evaluations.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.studies.spec import Study
+
+PROVENANCE = "study.json"
+
+
+def committed_csv(study: Study, root: Path) -> Path:
+    return Path(root) / "docs" / "results" / study.data_dir / "results.csv"
+
+
+def provenance_path(study: Study) -> str:
+    """The provenance file, relative to the repository root."""
+    return f"docs/results/{study.data_dir}/{PROVENANCE}"
+
+
+def provenance(study: Study, root: Path) -> str | None:
+    """The text of the study's provenance file, from its study file and committed rows; None for a study that
+    commits no rows of its own (it reads others')."""
+    path = committed_csv(study, root)
+    if not study.experiments or not path.exists():
+        return None
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    record = {
+        "study": str(study.file),
+        "study_sha256": hashlib.sha256((Path(root) / study.file).read_bytes()).hexdigest(),
+        "rows": f"docs/results/{study.data_dir}/results.csv",
+        "evaluations": len(rows),
+        "experiments": sorted({e for r in rows for e in (r.get("experiments") or r.get("experiment", "")).split()}),
+        "training_seeds": sorted({int(r["seed"]) for r in rows}),
+        "code_versions": sorted({r["code_version"] for r in rows if r.get("code_version")}),
+    }
+    return json.dumps(record, indent=2) + "\n"
+
+
+def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
+    """The study's store (``store_dir``, its committed-scale results directory) into its committed folder:
+    ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment; the files written."""
+    from bridgeplan import layout
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.report import write_report
+
+    store = layout.store_path(store_dir)
+    if not study.experiments:
+        raise BridgeplanError(f"study {study.name} trains and evaluates nothing of its own: nothing to export")
+    if not store.exists():
+        raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
+                              f"`study import`) first")
+    out = committed_csv(study, root).parent
+    n = ResultsStore(store).export_csv(out / "results.csv")
+    if n == 0:
+        raise BridgeplanError(f"{store} holds no evaluation yet")
+    titles = {e.name + suffix: e.title for e in study.experiments if e.title for suffix in ("", "-validation")}
+    report = write_report(Path(store_dir), out, titles)
+    return [out / "results.csv", report, *sorted(out.glob("*.png"))]
