@@ -357,3 +357,115 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     assert rate == 1120.0 / 32 and "a core busy" in source  # 35 steps/s: two jobs of a sweep, one thread each
     rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256))
     assert rate == TRAIN_STEPS_PER_SECOND  # no figure at that batch
+
+
+@pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy", "large-hierarchy-flat"]),
+                                           ("ogbench-planners", ["ogbench-medium-navigate"])])
+def test_a_command_study_declares_exactly_its_committed_jsons(name, folders):
+    """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
+    them all present, the dry run trains and evaluates nothing."""
+    from bridgeplan.studies.commands import jobs
+
+    study = load_studies(REPO)[name]
+    declared = {j.path for j in jobs(study, REPO / "no-such-dir", REPO / "docs" / "results", quick=False)}
+    committed = {p for folder in folders for p in (REPO / "docs" / "results" / folder).glob("*/*.json")}
+    assert declared == committed and len(declared) >= 24
+    m = missing(study, REPO)
+    assert m.jsons == () and m.trains == ()
+
+
+TINY_HIERARCHY = """
+[dataset]
+maze = "umaze"
+path = "{dataset}"
+
+[training]
+steps = 2
+checkpoint_every = 2
+seeds = [0]
+diffusion_steps = 4
+batch_size = 4
+device = "cpu"
+model = {{ dim = 8, dim_mults = [1, 2] }}
+
+[evaluation]
+episodes = 3
+
+[runs.high]
+process = "ddpm"
+horizon = 8
+stride = 12
+
+[runs.low]
+process = "flow"
+prior = "coarse"
+horizon = 16
+stride = 4
+subgoal_every = 3
+
+[[evaluations]]
+command = "hierarchy eval"
+runs = ["high", "low"]
+args = {{ nfe_high = 2, nfe_low = 1, lookahead = 1.5 }}
+out = "tiny-hierarchy/nfe2/{{tasks}}-seed{{eval_seed}}.json"
+splits = ["test", "validation"]
+
+[[evaluations]]
+command = "eval"
+runs = ["high"]
+args = {{ nfe = 2, replan_every = 24, controller = "pursuit" }}
+out = "tiny-hierarchy-flat/{{tasks}}-seed{{eval_seed}}.json"
+task_sets = ["single", "multi"]
+"""
+
+
+def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_dataset, tmp_path, capsys,
+                                                                        monkeypatch):
+    import json
+
+    import bridgeplan.cli
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(TINY_HIERARCHY.format(dataset=tiny_dataset))
+    assert main(["study", "run", "tiny", "--dry-run", "--root", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
+    assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 4 new results" in capsys.readouterr().out
+    results = root / "docs" / "results"
+    test, validation = (json.loads((results / "tiny-hierarchy" / "nfe2" / f"single-seed{s}.json").read_text())
+                        for s in (0, 1000))
+    assert (test["seed"], validation["seed"], test["episodes"]) == (0, 1000, 3)
+    assert (test["high"]["run"], test["low"]["run"], test["high"]["nfe"], test["low"]["nfe"]) == ("high-s0", "low-s0",
+                                                                                                   2, 1)
+    multi = json.loads((results / "tiny-hierarchy-flat" / "multi-seed0.json").read_text())
+    assert multi["multi_task"] and multi["execution"]["replan_every"] == 24 and multi["nfe"] == 2
+    assert (root / "results" / "tiny" / "runs" / "low-s0" / "checkpoint.pt").exists()
+    calls = []
+    real = bridgeplan.cli.main
+    monkeypatch.setattr(bridgeplan.cli, "main", lambda argv: calls.append(argv) or real(argv))
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 0 new results" in capsys.readouterr().out and calls == []  # nothing run again
+    (results / "tiny-hierarchy-flat" / "single-seed0.json").unlink()
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 1 new results" in capsys.readouterr().out and len(calls) == 1  # only what is missing
+
+
+@pytest.mark.parametrize("evaluation, message", [
+    ('command = "render"\nruns = ["high"]\nout = "x.json"', "evaluations[0].command: unknown command 'render'"),
+    ('command = "eval"\nruns = ["nope"]\nout = "x.json"', "evaluations[0].runs: unknown run 'nope'"),
+    ('command = "hierarchy eval"\nruns = ["high"]\nout = "x.json"', "evaluations[0].runs: hierarchy eval takes 2"),
+    ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }', "evaluations[0].args: unrecognized"),
+    ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { seed = 2 }', "evaluations[0].args.seed: set by"),
+    ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
+])
+def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation, message):
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    text = TINY_HIERARCHY.format(dataset="d").split("[[evaluations]]")[0] + "[[evaluations]]\n" + evaluation + "\n"
+    (root / "studies" / "bad.toml").write_text(text)
+    assert main(["study", "run", "bad", "--dry-run", "--root", str(root)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err

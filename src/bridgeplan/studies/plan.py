@@ -39,7 +39,8 @@ class Scale:
 
     def apply(self, study: Study) -> Study:
         """The study at this scale. Quick: the first two seeds, a tenth of the training steps (two snapshots),
-        a tenth of the learned prior's, at most 20 episodes per evaluation, at most 100 000 transitions of data."""
+        a tenth of the learned prior's, at most 20 episodes per evaluation (4 per task on OGBench), at most
+        100 000 transitions of Maze2D data."""
         if self.committed:
             return study
         t = study.training
@@ -48,13 +49,14 @@ class Scale:
                                        prior_steps=max(1, t.prior_steps // 10), seeds=t.seeds[:2])
         evaluation = dataclasses.replace(study.evaluation, episodes=min(study.evaluation.episodes, 20))
         experiments = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.experiments)
+        evaluations = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.evaluations)
         dataset = study.dataset
-        if dataset is not None and not dataset.path:
+        if dataset is not None and not dataset.path and dataset.generator == "expert":  # OGBench's: the recipe's
             n = min(dataset.steps, 100_000)
             dataset = dataclasses.replace(dataset, steps=n, path=f"results/quick/datasets/{dataset.maze}-{n}-v"
                                                                  f"{dataset.version}")
         return dataclasses.replace(study, training=training, evaluation=evaluation, experiments=experiments,
-                                   dataset=dataset)
+                                   evaluations=evaluations, dataset=dataset)
 
 
 SCALES = ("committed", "quick")
@@ -148,6 +150,7 @@ def check_study(study: Study) -> None:
     """Everything that can be checked without the other studies: the grids and series, the preset and the
     training fields against the maze."""
     from bridgeplan import config as cfg
+    from bridgeplan.studies.commands import train_config
 
     if study.dataset is not None:
         try:
@@ -156,6 +159,11 @@ def check_study(study: Study) -> None:
             raise StudyError(study.file, "training", str(e)) from None
     for i in range(len(study.experiments)):
         build_experiment(study, i)
+    for run in study.runs:
+        try:
+            train_config(study, run, 0, Path("dataset"))
+        except (BridgeplanError, TypeError, ValueError) as e:
+            raise StudyError(study.file, f"runs.{run.name}", str(e)) from None
 
 
 def trained_methods(study: Study) -> set:
@@ -221,10 +229,12 @@ class Missing:
     only linked where another experiment's evaluation is stored already."""
     declared: dict[str, set[tuple]] = dataclasses.field(default_factory=dict)
     """Per experiment, every evaluation (``store.KEY``) it shows, stored or not."""
+    jsons: tuple = ()
+    """The evaluation JSONs of the study's ``[[evaluations]]`` not written yet (``commands.Job``)."""
 
     def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
         train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
-        return train, sum(self.evaluations.values()) * self.episodes * EVAL_SECONDS_PER_EPISODE
+        return train, (sum(self.evaluations.values()) + len(self.jsons)) * self.episodes * EVAL_SECONDS_PER_EPISODE
 
 
 def training_rate(root: Path, maze: str, config) -> tuple[float, str]:
@@ -292,17 +302,35 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                             seen.add(key)
                             evaluations[name] += 1
                             corrections[name, series.correction.tag() if series.correction else ""] += 1
+    scaled, jsons = scale.apply(study), ()
+    if study.evaluations:
+        from bridgeplan.studies.commands import jobs, missing_trains
+
+        results = results_dir(study, root, scale)
+        jsons = tuple(j for j in jobs(scaled, results, json_root(study, root, scale), not scale.committed)
+                      if not j.path.exists())
+        needed = {(r, j.seed) for j in jsons for r in j.runs}
+        for run, n, done in missing_trains(scaled, results):
+            if any(run == f"{r}-s{seed}" for r, seed in needed):
+                trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scale.apply(study).evaluation.episodes, corrections, wanted, declared)
+    return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
+
+
+def json_root(study: Study, root: Path, scale: Scale) -> Path:
+    """Where a study's evaluation JSONs go: docs/results (the committed scale, where its reports read them), or its
+    quick results directory."""
+    return Path(root) / "docs" / "results" if scale.committed else results_dir(study, root, scale)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
     """``study run --dry-run``'s lines."""
     m = missing(study, root, scale)
     store = results_dir(study, root, scale) / "results.sqlite"
-    lines = [f"study {study.name} ({'committed scale' if scale.committed else QUICK_NOTE}): store {store}"
-             f"{'' if store.exists() else ' (absent)'}"]
-    if not study.experiments:
+    where = (f"store {store}{'' if store.exists() else ' (absent)'}" if study.experiments else
+             f"runs under {results_dir(study, root, scale)}, evaluation JSONs under {json_root(study, root, scale)}")
+    lines = [f"study {study.name} ({'committed scale' if scale.committed else QUICK_NOTE}): {where}"]
+    if not study.experiments and not study.evaluations:
         lines.append(f"  trains and evaluates nothing of its own (reports from: {', '.join(study.uses) or 'none'})")
         return lines
     for run, n, done in m.trains:
@@ -312,6 +340,11 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         by_correction = sorted((tag, n) for (exp, tag), n in m.corrections.items() if exp == name)
         if any(tag for tag, _ in by_correction):  # corrected series: each correction's evaluations apart
             lines.extend(f"    {tag or 'uncorrected'}: {n} evaluations" for tag, n in by_correction)
+    by_command: dict[str, list] = {}
+    for job in m.jsons:
+        by_command.setdefault(" ".join(job.argv[:1 if job.argv[0] == "eval" else 2]), []).append(job)
+    for command, todo in by_command.items():
+        lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}")
     shared = sum(len(keys) for keys in m.wanted.values()) - sum(m.evaluations.values())
     if shared:
         lines.append(f"  link {shared} evaluations to more experiments: stored already, or named by an earlier "
@@ -321,7 +354,8 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
         study.dataset.maze, study.training.preset, **dict(study.training.overrides)))
     train_s, eval_s = m.cost_seconds(rate)
-    lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values())} evaluations; estimated "
+    lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values()) + len(m.jsons)} evaluations; "
+                 f"estimated "
                  f"{_hours(train_s)} of training at {rate:.1f} steps/s per run ({source}) and {_hours(eval_s)} "
                  f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumed; one CPU core per job: "
                  f"divide by --workers)")
@@ -341,6 +375,12 @@ def ensure_dataset(study: Study, root: Path) -> Path:
 
     d = study.dataset
     path = (Path(root) / d.directory()).resolve()
+    if d.generator == "ogbench":
+        if not path.exists():
+            from bridgeplan.ogbench_pointmaze.generate import generate_dataset as generate_ogbench
+
+            generate_ogbench(d.maze, path.parent, seed=d.seed)
+        return path
     if d.version != DATA_VERSION:
         raise StudyError(study.file, "dataset.version", f"data version {d.version}, but this bridgeplan generates "
                                                         f"version {DATA_VERSION}")
@@ -356,10 +396,10 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows."""
     from bridgeplan.experiments.runner import run_sweep
 
-    if not study.experiments:
+    if not study.experiments and not study.evaluations:
         return 0
     scaled = scale.apply(study)
-    ensure_dataset(scaled, root)
+    dataset = ensure_dataset(scaled, root)
     workers = workers or study.evaluation.workers
     added = 0
     for sweep in sweeps(study, root, scale):
@@ -371,4 +411,9 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
                           progress=progress)
         added += run_sweep([sweep.experiment], sweep.settings, backend=backend, workers=workers,
                            ray_address=ray_address, progress=progress)
+    if study.evaluations:
+        from bridgeplan.studies.commands import run_commands
+
+        added += run_commands(scaled, results_dir(study, root, scale), json_root(study, root, scale), dataset,
+                              not scale.committed, workers, progress)
     return added

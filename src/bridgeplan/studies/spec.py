@@ -16,6 +16,7 @@ Example (the keys and their defaults: the dataclasses below)::
     steps = 1_000_000                    # transitions `bridgeplan data generate` makes
     seed = 123
     version = 2                          # the generator's data version (bridgeplan.data.generate.DATA_VERSION)
+    # generator = "ogbench"              # OGBench's recipe instead; maze = "pointmaze-medium-navigate-v0"
 
     [training]
     preset = "cpu-small"
@@ -51,6 +52,19 @@ Example (the keys and their defaults: the dataclasses below)::
     series = [{ method = "bridge-line", nfe = [1, 2], correction = ["none", "dynamics=1e-4"],
                 correction_form = "x0" }]  # consistency corrections (CDDB) of x0 (default) or deep form
 
+    [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
+    process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, ogbench eval,
+    horizon = 32                         #  each writing one JSON under docs/results)
+    stride = 12
+
+    [[evaluations]]
+    command = "eval"
+    runs = ["high-ddpm-k12"]
+    args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
+    out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
+    splits = ["test", "validation"]
+    task_sets = ["single", "multi"]
+
     [[reports]]
     generator = "findings"               # bridgeplan.studies.reports.GENERATORS
     output = "findings.md"               # relative to docs/results
@@ -65,9 +79,12 @@ import dataclasses
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bridgeplan.errors import BridgeplanError
+
+if TYPE_CHECKING:
+    from bridgeplan.studies.commands import CommandEvaluation, NamedRun
 
 SPLITS = ("test", "validation")
 EXECUTION_FIELDS = ("controller", "lookahead", "replan_every", "warm", "arrival", "tolerance", "candidates", "select")
@@ -87,15 +104,21 @@ class Dataset:
     """Transitions of the generated dataset (`bridgeplan data generate --steps`)."""
     seed: int = 123
     generator: str = "expert"
-    """The noisy expert stream of `bridgeplan data generate` (Minari's D4RL recipe): the one generator."""
+    """``expert``: the noisy expert stream of `bridgeplan data generate` (Minari's D4RL recipe); ``ogbench``: OGBench's
+    recipe (`bridgeplan ogbench generate`; ``maze`` is then the dataset's name, e.g.
+    ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
     version: int = 2
-    """The data version the generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
+    """The data version the expert generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
     path: str = ""
-    """Dataset directory, relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``
-    (generated there when absent, as the campaigns did)."""
+    """Dataset directory (or file), relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``,
+    or ``datasets/ogbench/<name>.npz`` (generated there when absent, as the campaigns did)."""
 
     def directory(self) -> str:
-        return self.path or f"datasets/{self.maze}-{self.steps}-v{self.version}"
+        if self.path:
+            return self.path
+        if self.generator == "ogbench":
+            return f"datasets/ogbench/{self.maze}.npz"
+        return f"datasets/{self.maze}-{self.steps}-v{self.version}"
 
 
 @dataclass(frozen=True)
@@ -186,6 +209,10 @@ class Study:
     evaluation: Evaluation = Evaluation()
     methods: tuple[Method, ...] = ()
     experiments: tuple[ExperimentSpec, ...] = ()
+    runs: tuple[NamedRun, ...] = ()
+    """Named runs for :attr:`evaluations` (``studies.commands``)."""
+    evaluations: tuple[CommandEvaluation, ...] = ()
+    """Evaluation JSONs, one command each (``studies.commands``)."""
     reports: tuple[ReportSpec, ...] = ()
 
     @property
@@ -389,7 +416,8 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise StudyError(path, "(syntax)", str(e)) from None
-    top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "reports"}
+    top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "runs",
+           "evaluations", "reports"}
     _table(path, "", raw, top)
     name = _typed(path, "name", raw.get("name", stem), str)
     uses = raw.get("uses", [])
@@ -400,13 +428,15 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
         d = _table(path, "dataset", raw["dataset"], {f.name for f in dataclasses.fields(Dataset)}, ("maze",))
         dataset = Dataset(**_dataclass_fields(Dataset, d, path, "dataset"))
         from bridgeplan.maze.layouts import get_maze
+        from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
 
+        if dataset.generator not in ("expert", "ogbench"):
+            raise StudyError(path, "dataset.generator", f"unknown generator {dataset.generator!r} (choose from expert, "
+                                                        f"ogbench)")
         try:
-            get_maze(dataset.maze)
+            (get_maze if dataset.generator == "expert" else parse_dataset_name)(dataset.maze)
         except BridgeplanError as e:
             raise StudyError(path, "dataset.maze", str(e)) from None
-        if dataset.generator != "expert":
-            raise StudyError(path, "dataset.generator", f"unknown generator {dataset.generator!r} (choose from expert)")
     training = _training(path, raw.get("training", {}))
     evaluation = Evaluation(**_dataclass_fields(
         Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), {"episodes", "workers"}), path,
@@ -422,6 +452,10 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
     if not isinstance(experiments, list):
         raise StudyError(path, "experiments", "expected an array of tables ([[experiments]])")
     experiments = tuple(_experiment(path, f"experiments[{i}]", e, methods) for i, e in enumerate(experiments))
+    from bridgeplan.studies.commands import parse_evaluations, parse_runs
+
+    runs = parse_runs(path, raw.get("runs", {}))
+    evaluations = parse_evaluations(path, raw.get("evaluations", []), runs)
     reports = []
     for i, r in enumerate(raw.get("reports", [])):
         key = f"reports[{i}]"
@@ -434,9 +468,12 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
     study = Study(name=name, file=path, title=_typed(path, "title", raw.get("title", ""), str),
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
                   training=training, evaluation=evaluation, methods=tuple(methods.values()),
-                  experiments=experiments, reports=tuple(reports))
-    if experiments and dataset is None:
-        raise StudyError(path, "dataset", "required: the study trains runs (it has experiments)")
+                  experiments=experiments, runs=runs, evaluations=evaluations, reports=tuple(reports))
+    if (experiments or evaluations) and dataset is None:
+        raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
+    if experiments and dataset.generator != "expert":
+        raise StudyError(path, "experiments", "the thesis's grids and declared series run on Maze2D (an expert "
+                                              "dataset); an OGBench study declares [runs.NAME] and [[evaluations]]")
     from bridgeplan.studies.plan import check_study
 
     check_study(study)
