@@ -96,7 +96,7 @@ def test_an_unknown_name_is_one_error_line_listing_the_shipped(tmp_path, monkeyp
     for command in (["eval", "tiny-maze"], ["render", "tiny-maze"]):
         assert main(command) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert err == ["error: no run directory or checkpoint 'tiny-maze', and no shipped planner of that name "
+        assert err == ["error: no checkpoint or run directory 'tiny-maze', and no shipped planner of that name "
                        "(shipped: umaze, medium, large; see `bridgeplan planners list`)"]
     assert not (tmp_path / "runs").exists()
 

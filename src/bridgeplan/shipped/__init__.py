@@ -104,7 +104,7 @@ def output_dir(name: str) -> Path:
 
 def unknown_message(run: str | Path) -> str:
     shipped = names()
-    return (f"no run directory or checkpoint {str(run)!r}, and no shipped planner of that name (shipped: "
+    return (f"no checkpoint or run directory {str(run)!r}, and no shipped planner of that name (shipped: "
             f"{', '.join(shipped) or 'none'}; see `bridgeplan planners list`)")
 
 
