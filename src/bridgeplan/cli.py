@@ -284,7 +284,8 @@ def _int_tuple(text: str, flag: str) -> tuple[int, ...]:
 
 def _add_eval_commands(sub) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run over many episodes")
-    p.add_argument("run", help="run directory (or a checkpoint/snapshot file)")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
+                               "(`bridgeplan planners list`)")
     p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
     p.add_argument("--seed", type=int, default=0)
@@ -306,7 +307,7 @@ def _add_eval_commands(sub) -> None:
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
-    p.add_argument("run")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
     p.add_argument("--episodes", type=int, default=8)
     p.add_argument("--nfe", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
@@ -767,6 +768,55 @@ def _cmd_study_export(args) -> int:
     return 0
 
 
+def _add_planners_commands(sub) -> None:
+    p = sub.add_parser("planners", help="the shipped planners: trained weights that come with bridgeplan",
+                       description="Shipped planners plan without training: give a name wherever a run directory "
+                                   "goes (`bridgeplan eval medium`, `PlannerPolicy.from_run(\"medium\")`). Their "
+                                   "scores: docs/results/shipped.md.")
+    planners = p.add_subparsers(dest="planners_command")
+    ls = planners.add_parser("list", help="each shipped planner with its manifest's facts (the default)")
+    ls.add_argument("--json", action="store_true", help="the manifest's entries as JSON")
+    ex = planners.add_parser("export", help="(re)make the shipped files and the manifest from a study's runs")
+    ex.add_argument("--study", default="shipped",
+                    help="the study whose used studies train the shipped planners (default: shipped)")
+    ex.add_argument("--root", default=None, help="the repository root (holds studies/, docs/results/ and results/)")
+    ex.add_argument("--out", default=None, help="output folder (default: ROOT/src/bridgeplan/shipped)")
+    p.set_defaults(func=_cmd_planners_list, json=False)
+    ls.set_defaults(func=_cmd_planners_list)
+    ex.set_defaults(func=_cmd_planners_export)
+
+
+def _cmd_planners_list(args) -> int:
+    from dataclasses import asdict
+
+    from bridgeplan import shipped
+
+    entries = list(shipped.manifest().values())
+    if args.json:
+        print(json.dumps([asdict(e) for e in entries], indent=2))
+        return 0
+    if not entries:
+        print("no shipped planners in this install")
+        return 0
+    for e in entries:
+        print(f"{e.name}\t{e.maze}\t{e.method}\tstep {e.step}\tseed {e.seed}\t{e.parameters} parameters\t"
+              f"{e.bytes / 1e6:.2f} MB\tcode {e.code_version}\t{e.study}\tsha256 {e.sha256}")
+    print("scores: docs/results/shipped.md (bridgeplan study report shipped)")
+    return 0
+
+
+def _cmd_planners_export(args) -> int:
+    from bridgeplan import shipped
+    from bridgeplan.studies import find_root
+
+    root = find_root(args.root)
+    for e in shipped.export(root, args.study, Path(args.out) if args.out else None):
+        print(f"wrote {e.file} ({e.name}: {e.method} on {e.maze}, {e.run} step {e.step}, code {e.code_version}, "
+              f"{e.bytes} bytes, sha256 {e.sha256[:12]}...)")
+    print(f"wrote {shipped.MANIFEST}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bridgeplan", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -779,6 +829,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench_command(sub)
     _add_demo_command(sub)
     _add_study_commands(sub)
+    _add_planners_commands(sub)
     from bridgeplan.ogbench_pointmaze.commands import add_ogbench_commands
 
     add_ogbench_commands(sub)

@@ -322,10 +322,17 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     require_family(info, "maze2d")
     planner = planner.with_correction(correction)
     if multi_task:
-        check_multi_task_data(info.config.maze, info.config.dataset)
+        check_multi_task_run(info)
     tasks = make_tasks(info.config.maze, episodes, seed, multi_task)
     return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,
                             execution=execution)
+
+
+def check_multi_task_run(info: RunInfo) -> None:
+    """:func:`check_multi_task_data` for a loaded run, unless its dataset is known to cover every cell (a shipped
+    planner's, checked when exported)."""
+    if not info.dataset_covers_every_cell:
+        check_multi_task_data(info.config.maze, info.config.dataset)
 
 
 def check_multi_task_data(maze_name: str, dataset: str) -> None:

@@ -87,7 +87,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     then shows each episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
-    from bridgeplan.evaluate import check_multi_task_data, make_tasks
+    from bridgeplan.evaluate import check_multi_task_run, make_tasks
     from bridgeplan.layout import render_dir
     from bridgeplan.maze.rollout import execute_plans
     from bridgeplan.runs import load_planner, load_windows, require_family
@@ -100,7 +100,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
     if multi_task:
-        check_multi_task_data(config.maze, config.dataset)
+        check_multi_task_run(info)
     tasks = make_tasks(config.maze, episodes, seed, multi_task)
     gen = tasks.generator(planner.device)
     maze = tasks.maze

@@ -99,6 +99,9 @@ class RunInfo:
     """The config as saved (what the run was trained with)."""
     step: int
     elapsed_seconds: float
+    dataset_covers_every_cell: bool = False
+    """Known without the dataset at hand (a shipped planner's, checked when it was exported): its dataset visits
+    every free cell, as Multi2D's goals need."""
 
     @property
     def name(self) -> str:
@@ -126,11 +129,15 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     ``planner.with_sampler`` does. ``compile`` wraps the network in ``torch.compile`` (off by default:
     see the benchmark in docs/results).
     """
-    run = Path(run)
+    run_dir = run_dir_of(run)
+    run = resolve_run(run)
     path = run if run.is_file() else (snapshot_path(run, snapshot) if snapshot is not None else checkpoint_path(run))
     if snapshot is not None and not path.exists():
         raise BridgeplanError(f"no snapshot at step {snapshot} in {run} (have: {snapshot_steps(run) or 'none'})")
     state = load_checkpoint(path)
+    if state.get("shipped") and snapshot is not None and snapshot != state["step"]:
+        raise BridgeplanError(f"shipped planner {state['shipped']!r} has the weights of step {state['step']} only, "
+                              f"not {snapshot}")
     if state["kind"] != "planner":
         raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a planner")
     config = cfg.from_dict(cfg.TrainConfig, state["config"])
@@ -144,7 +151,8 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     planner = build_planner(config, model, normalizer, dev)
     if sampler is not None:
         planner = planner.with_sampler(sampler, eta)
-    return planner, RunInfo(run_dir_of(run), config, state["config"], state["step"], state["elapsed_seconds"])
+    return planner, RunInfo(run_dir, config, state["config"], state["step"], state["elapsed_seconds"],
+                            bool(state.get("dataset_covers_every_cell", False)))
 
 
 FAMILIES = {"maze2d": ("Maze2D", "bridgeplan eval"), "ogbench": ("OGBench pointmaze", "bridgeplan ogbench eval")}
@@ -166,9 +174,30 @@ def require_family(info: RunInfo, family: str) -> None:
                               f"{FAMILIES[family][0]} one: evaluate it with `{command}`")
 
 
-def run_dir_of(path: Path) -> Path:
-    """The run directory of a run, its checkpoint or one of its snapshots."""
+def resolve_run(run: str | Path) -> Path:
+    """A run argument as a file or directory: the path itself when it exists (a run directory, its checkpoint or a
+    snapshot), else a shipped planner's name (:mod:`bridgeplan.shipped`: its file in the package, checked against
+    the manifest's sha256). The one place ``eval``, ``render``, ``PlannerPolicy.from_run`` and the others resolve
+    a run; anything else is a :class:`BridgeplanError` that lists the shipped names."""
+    from bridgeplan import shipped
+
+    path = Path(run)
+    if path.exists():
+        return path
+    entry = shipped.get(str(run))
+    if entry is None:
+        raise BridgeplanError(shipped.unknown_message(run))
+    return shipped.verified_path(entry)
+
+
+def run_dir_of(path: str | Path) -> Path:
+    """The run directory of a run, its checkpoint or one of its snapshots; for a shipped planner's name, where
+    commands write beside it (``runs/shipped/NAME``, :func:`bridgeplan.shipped.output_dir`)."""
+    from bridgeplan import shipped
+
     path = Path(path)
     if path.is_dir():
         return path
+    if not path.exists() and shipped.get(str(path)) is not None:
+        return shipped.output_dir(str(path))
     return path.parent.parent if path.parent.name == "snapshots" else path.parent
