@@ -640,7 +640,11 @@ def _cmd_study_list(args) -> int:
 
     for s in load_studies(find_root(args.root)).values():
         makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
-                 ] if s.experiments else [f"uses {', '.join(s.uses)}"]
+                 ] if s.experiments else []
+        folders = dict.fromkeys(e.out.split("/")[0] for e in s.evaluations)
+        commands = dict.fromkeys(e.command for e in s.evaluations)
+        makes += [f"docs/results/{f}/ ({', '.join(commands)} JSONs)" for f in folders]
+        makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
         makes += [f"docs/results/{r.output} (feeds {', '.join(GENERATORS[r.generator].feeds)})" for r in s.reports]
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
     return 0

@@ -24,7 +24,8 @@ from bridgeplan.analysis.tables import bold, fmt_mean_se, table
 
 READS = ()
 """Its rows are the protocol's JSONs, not a Maze2D store."""
-MAZES = ("medium",)
+MAZES = ("medium", "large", "giant")
+"""The mazes whose folders the report reads (a maze without rows is left out)."""
 TEST_SEED, VALIDATION_SEED = 0, 1000
 ORACLE = "ogbench-oracle"
 PUBLISHED = {"medium": {"GCBC": 9, "QRL": 82, "SAW": 97}, "large": {"GCBC": 29, "QRL": 86, "SAW": 85},
