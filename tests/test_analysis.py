@@ -278,7 +278,7 @@ def test_keys_of_samplers_holds_executions_and_version_1_rows():
                               multi_task=hold.key.multi_task)
     assert label(hold.key) == "DDPM, hold 0.5"
     assert describe(hold.key).startswith("DDPM, hold 0.5, N=16, replan32-arrival-keep, ")
-    v1 = row_from_csv(first("umaze-cpu-small/results.csv", process="bridge", prior="line", nfe="4"))
+    v1 = row_from_csv(first("../history/umaze-cpu-small/results.csv", process="bridge", prior="line", nfe="4"))
     assert v1.key.execution == OPEN_LOOP and not v1.key.multi_task and v1.decision_ms is None
     assert v1.calls == v1.nfe == 4  # rows made by version 1 have no calls: one call per NFE
     assert label(v1.key) == "bridge (line; beta_max=0.3)"

@@ -41,7 +41,7 @@ class Bridge(Process):
     ``sampler`` chooses how a trained bridge is sampled (no retraining): ``posterior`` is I2SB's chain, each step
     a draw from the Gaussian posterior; ``mean`` takes each posterior's mean, no noise (I2SB's OT-ODE sampler on
     a bridge trained with noise). Why ``mean``: at N = 16 the network does not remove the noise the posterior
-    steps put in, and the plans come out ragged from NFE 2 on (docs/results/plan-roughness.md).
+    steps put in, and the plans come out ragged from NFE 2 on (docs/history/plan-roughness.md).
     """
 
     steps: int = 16

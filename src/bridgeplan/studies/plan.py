@@ -368,7 +368,7 @@ def _hours(seconds: float) -> str:
 
 # --- running -----------------------------------------------------------------------------------------------------
 
-def ensure_dataset(study: Study, root: Path) -> Path:
+def ensure_dataset(study: Study, root: Path, progress: bool = True) -> Path:
     """The study's dataset directory, generated (seed and steps as declared) when absent; its data version is
     checked against the generator's."""
     from bridgeplan.data.generate import DATA_VERSION
@@ -379,7 +379,7 @@ def ensure_dataset(study: Study, root: Path) -> Path:
         if not path.exists():
             from bridgeplan.ogbench_pointmaze.generate import generate_dataset as generate_ogbench
 
-            generate_ogbench(d.maze, path.parent, seed=d.seed)
+            generate_ogbench(d.maze, path.parent, seed=d.seed, progress=progress)
         return path
     if d.version != DATA_VERSION:
         raise StudyError(study.file, "dataset.version", f"data version {d.version}, but this bridgeplan generates "
@@ -387,7 +387,7 @@ def ensure_dataset(study: Study, root: Path) -> Path:
     if not path.exists():
         from bridgeplan.data import generate_dataset
 
-        generate_dataset(d.maze, d.steps, seed=d.seed, out=path)
+        generate_dataset(d.maze, d.steps, seed=d.seed, out=path, progress=progress)
     return path
 
 
@@ -399,7 +399,7 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     if not study.experiments and not study.evaluations:
         return 0
     scaled = scale.apply(study)
-    dataset = ensure_dataset(scaled, root)
+    dataset = ensure_dataset(scaled, root, progress)
     workers = workers or study.evaluation.workers
     added = 0
     for sweep in sweeps(study, root, scale):
