@@ -700,7 +700,15 @@ def _read_or_empty(path: Path) -> str:
 
 def _cmd_study_run(args) -> int:
     from bridgeplan.studies import find_root, load_studies, parse_study, select
-    from bridgeplan.studies.plan import QUICK_NOTE, Scale, check_reports, describe_missing, results_dir, run_study
+    from bridgeplan.studies.plan import (
+        QUICK_NOTE,
+        Scale,
+        check_reports,
+        describe_missing,
+        results_dir,
+        run_study,
+        with_used,
+    )
 
     root = find_root(args.root)
     studies = load_studies(root)
@@ -713,14 +721,16 @@ def _cmd_study_run(args) -> int:
     scale = Scale("quick" if args.quick else "committed")
     if args.workers is not None:
         _positive("--workers", args.workers)
+    chain = with_used(study, studies)  # the studies whose rows its reports read first: one command makes them all
     if args.dry_run:
-        print("\n".join(describe_missing(study, root, scale)))
+        print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0
-    added = run_study(study, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                      progress=not args.no_progress)
-    out = results_dir(study, root, scale)
-    print(f"{study.name}: {added} new results in {out / 'results.sqlite'}"
-          + ("" if scale.committed else f" [{QUICK_NOTE}]"))
+    for s in chain:
+        added = run_study(s, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+                          progress=not args.no_progress)
+        if s.experiments or s.evaluations:
+            print(f"{s.name}: {added} new results in {results_dir(s, root, scale)}"
+                  + ("" if scale.committed else f" [{QUICK_NOTE}]"))
     return 0
 
 

@@ -49,6 +49,9 @@ class SweepSettings:
     train_only: bool = False
     """Train (or resume) the runs to ``train_steps`` and evaluate nothing: an earlier stage of a study whose runs
     were trained in passes (``studies``)."""
+    only_runs: tuple[str, ...] | None = None
+    """Train and evaluate only these runs (and the learned priors they need): a study's plan names those it has
+    evaluations to compute for, so that rows imported into its store are not made again; None: every run."""
 
 
 
@@ -88,6 +91,8 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     from bridgeplan.train import train
 
     config = _train_config(settings, spec, seed, prior_run)
+    if settings.only_runs is not None and config.run_name() not in settings.only_runs:
+        return []
     configure_threads(threads or config.threads)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
     with run_lock(run_dir):  # another sweep training this run: wait for it, then see what is left
@@ -173,7 +178,8 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
         planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
         prior_runs = {}
         for seed in settings.seeds:
-            if any(r.prior == "learned" for r in specs):
+            if any(r.prior == "learned" and (settings.only_runs is None or _train_config(
+                    settings, r, seed, "").run_name() in settings.only_runs) for r in specs):
                 prior_runs[seed] = _ensure_prior(settings, seed, planner, progress)
         jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
         if ray is not None:

@@ -216,7 +216,8 @@ def _planned_snapshots(run_dir: Path, stages) -> list[int]:
 @dataclass(frozen=True)
 class Missing:
     trains: tuple[tuple[str, int, int], ...]
-    """(run name, steps to train, steps done) per run that is not finished, learned priors included."""
+    """(run name, steps to train, steps done) per run that is not finished and has evaluations to compute, learned
+    priors included."""
     evaluations: Counter
     """Evaluations to compute (absent from the store), each counted once, under the first experiment that names
     it (``-validation`` for the validation split)."""
@@ -256,7 +257,8 @@ def training_rate(root: Path, maze: str, config) -> tuple[float, str]:
 
 
 def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
-    """What ``study run`` would train and evaluate: runs short of their steps, evaluations absent from the store."""
+    """What ``study run`` would train and evaluate: evaluations absent from the store, and the runs they need that are
+    short of their steps (a run whose evaluations are all stored, imported say, is not trained)."""
     from bridgeplan import config as cfg
     from bridgeplan import layout
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
@@ -279,12 +281,8 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
         name = experiment.name + suffix
         for seed in s.seeds:
             for spec in experiment.runs():
-                if spec.prior == "learned":
-                    prior = _prior_config(s, seed, planner)
-                    trains.setdefault(prior.run_name(), (prior.steps, _trained_step(runs / prior.run_name())))
                 config = _train_config(s, spec, seed, "")
                 run_dir = runs / config.run_name()
-                trains.setdefault(config.run_name(), (config.steps, _trained_step(run_dir)))
                 snapshots = _planned_snapshots(run_dir, sweep.stages if scale.committed else ((s.train_steps,
                                                                                                 s.checkpoint_every),))
                 last_only = experiment.last_snapshot_only or s.validation
@@ -298,6 +296,12 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                         declared.setdefault(name, set()).add(key)
                         if (name, key) not in members:
                             wanted.setdefault(name, set()).add(key)
+                        if key not in keys:  # its run is trained (or finished) for it
+                            trains.setdefault(config.run_name(), (config.steps, _trained_step(run_dir)))
+                            if spec.prior == "learned":
+                                prior = _prior_config(s, seed, planner)
+                                trains.setdefault(prior.run_name(), (prior.steps,
+                                                                     _trained_step(runs / prior.run_name())))
                         if key not in keys and key not in seen:
                             seen.add(key)
                             evaluations[name] += 1
@@ -327,12 +331,13 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     """``study run --dry-run``'s lines."""
     m = missing(study, root, scale)
     store = results_dir(study, root, scale) / "results.sqlite"
+    scale_note = "committed scale" if scale.committed else QUICK_NOTE
+    if not study.experiments and not study.evaluations:
+        return [f"study {study.name} ({scale_note}): trains and evaluates nothing of its own (its reports read: "
+                f"{', '.join(study.uses) or 'none'})"]
     where = (f"store {store}{'' if store.exists() else ' (absent)'}" if study.experiments else
              f"runs under {results_dir(study, root, scale)}, evaluation JSONs under {json_root(study, root, scale)}")
-    lines = [f"study {study.name} ({'committed scale' if scale.committed else QUICK_NOTE}): {where}"]
-    if not study.experiments and not study.evaluations:
-        lines.append(f"  trains and evaluates nothing of its own (reports from: {', '.join(study.uses) or 'none'})")
-        return lines
+    lines = [f"study {study.name} ({scale_note}): {where}"]
     for run, n, done in m.trains:
         lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
     for name, count in m.evaluations.items():
@@ -391,6 +396,23 @@ def ensure_dataset(study: Study, root: Path, progress: bool = True) -> Path:
     return path
 
 
+def with_used(study: Study, studies: dict[str, Study]) -> list[Study]:
+    """The studies whose results ``study``'s reports read (``uses``, and theirs, each once, first) and then
+    ``study``: what `study run` runs so that one command makes a report's rows."""
+    out: dict[str, Study] = {}
+
+    def visit(s: Study) -> None:
+        if s.name in out:
+            return
+        out[s.name] = s  # placed before its uses are visited: a cycle ends here
+        for name in s.uses:
+            visit(studies[name])
+        out[s.name] = out.pop(s.name)  # then moved after them
+
+    visit(study)
+    return list(out.values())
+
+
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,
               ray_address: str | None = None, progress: bool = True) -> int:
     """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows."""
@@ -401,8 +423,23 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     scaled = scale.apply(study)
     dataset = ensure_dataset(scaled, root, progress)
     workers = workers or study.evaluation.workers
-    added = 0
+    added, only = 0, None
+    if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
+        from bridgeplan import layout
+        from bridgeplan.experiments.store import ResultsStore, stored_keys
+
+        m = missing(study, root, scale)
+        path = layout.store_path(results_dir(study, root, scale))
+        keys, _ = stored_keys(path)
+        links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
+        if links:
+            store = ResultsStore(path)
+            for key, name in links:
+                store.link(key, name)
+        only = tuple(sorted({run for run, _, _ in m.trains} | {key[0] for wanted in m.wanted.values() for key in wanted
+                                                                 if key not in keys}))
     for sweep in sweeps(study, root, scale):
+        sweep = dataclasses.replace(sweep, settings=dataclasses.replace(sweep.settings, only_runs=only))
         if scale.committed:
             for steps, every in sweep.stages[:-1]:  # earlier passes: train only, as the committed runs were
                 early = dataclasses.replace(sweep.settings, train_steps=steps, checkpoint_every=every,
