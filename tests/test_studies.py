@@ -369,16 +369,20 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy", "large-hierarchy-flat"]),
                                            ("ogbench-planners", ["ogbench-medium-navigate"])])
-def test_a_command_study_declares_exactly_its_committed_jsons(name, folders):
+def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
-    them all present, the dry run trains and evaluates nothing."""
+    them imported, the dry run trains and evaluates nothing."""
     from bridgeplan.studies.commands import jobs
 
     study = load_studies(REPO)[name]
     declared = {j.path for j in jobs(study, REPO / "no-such-dir", REPO / "docs" / "results", quick=False)}
     committed = {p for folder in folders for p in (REPO / "docs" / "results" / folder).glob("*/*.json")}
     assert declared == committed and len(declared) >= 24
-    m = missing(study, REPO)
+    root = _docs_copy(tmp_path)
+    assert len(missing(study, root).jsons) == len(declared)  # a fresh checkout: everything to compute
+    assert main(["study", "import", name, "--root", str(root)]) == 0
+    assert f"{name}: {len(declared)} evaluation JSONs copied into" in capsys.readouterr().out
+    m = missing(study, root)
     assert m.jsons == () and m.trains == ()
 
 
@@ -442,7 +446,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 4 new results" in capsys.readouterr().out
-    results = root / "docs" / "results"
+    results = root / "results" / "tiny"
     test, validation = (json.loads((results / "tiny-hierarchy" / "nfe2" / f"single-seed{s}.json").read_text())
                         for s in (0, 1000))
     assert (test["seed"], validation["seed"], test["episodes"]) == (0, 1000, 3)
@@ -459,6 +463,10 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     (results / "tiny-hierarchy-flat" / "single-seed0.json").unlink()
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 1 new results" in capsys.readouterr().out and len(calls) == 1  # only what is missing
+    assert main(["study", "export", "tiny", "--root", str(root)]) == 0  # the JSONs where the reports read them
+    for path in ("tiny-hierarchy/nfe2/single-seed0.json", "tiny-hierarchy/nfe2/single-seed1000.json",
+                 "tiny-hierarchy-flat/single-seed0.json", "tiny-hierarchy-flat/multi-seed0.json"):
+        assert (root / "docs" / "results" / path).read_text() == (results / path).read_text()
 
 
 @pytest.mark.parametrize("evaluation, message", [

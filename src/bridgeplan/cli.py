@@ -745,6 +745,12 @@ def _cmd_study_import(args) -> int:
     study = select(load_studies(root), [args.file], root)[0]
     if (args.eval_json is None) != (args.experiment is None):
         raise BridgeplanError("--eval-json and --experiment go together")
+    if args.eval_json is None and not study.experiments and study.evaluations:  # the committed JSONs, copied
+        from bridgeplan.studies.export import copy_jsons
+
+        written = copy_jsons(study, root / "docs" / "results", results_dir(study, root, Scale()))
+        print(f"{study.name}: {len(written)} evaluation JSONs copied into {results_dir(study, root, Scale())}")
+        return 0
     if args.eval_json is None:
         source = root / "docs" / "results" / study.data_dir / "results.csv"
         if not study.experiments or not source.exists():

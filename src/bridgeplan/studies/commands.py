@@ -1,7 +1,7 @@
 """Studies whose rows are evaluation JSONs, one command each: named runs trained per training seed as the study
 says, then ``bridgeplan eval``, ``hierarchy eval`` or ``ogbench eval`` per training seed, split and task set, each
-writing one JSON where the study's report reads it (the form of OGBench's ``hyperparameters.sh``: every table cell
-one declared line, run by ``study run``)::
+writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table cell one declared line, run by ``study
+run``)::
 
     [runs.high-ddpm-k12]                 # a named run: TrainConfig fields over [training]'s, one per training seed
     process = "ddpm"
@@ -17,9 +17,11 @@ one declared line, run by ``study run``)::
     task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; Maze2D's commands)
     # task_seed = 0                      # the same test episodes for every training seed (validation: 1000)
 
-``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single`` or ``multi``). A JSON that
-exists is done; ``study run`` trains what the missing ones need and runs their commands (``--workers`` training
-seeds side by side, one torch thread each).
+``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single`` or ``multi``). ``study run``
+writes each under the study's results directory (results/NAME/OUT): a JSON there is done; it trains what the missing
+ones need and runs their commands (``--workers`` training seeds side by side, one torch thread each). ``study
+export`` copies them to docs/results/OUT, where the study's report reads them; ``study import`` copies the committed
+ones back.
 """
 
 from __future__ import annotations

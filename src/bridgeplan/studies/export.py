@@ -47,15 +47,18 @@ def provenance(study: Study, root: Path) -> str | None:
 
 
 def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
-    """The study's store (``store_dir``, its committed-scale results directory) into its committed folder:
-    ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment; the files written."""
+    """The study's results (``store_dir``, its committed-scale results directory) into docs/results: its store as
+    ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment in its committed folder,
+    and its evaluation JSONs to their ``out`` paths; the files written."""
     from bridgeplan import layout
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.report import write_report
 
     store = layout.store_path(store_dir)
-    if not study.experiments:
+    if not study.experiments and not study.evaluations:
         raise BridgeplanError(f"study {study.name} trains and evaluates nothing of its own: nothing to export")
+    if not study.experiments:
+        return copy_jsons(study, Path(store_dir), Path(root) / "docs" / "results")
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
                               f"`study import`) first")
@@ -66,3 +69,21 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
     titles = {e.name + suffix: e.title for e in study.experiments if e.title for suffix in ("", "-validation")}
     report = write_report(Path(store_dir), out, titles)
     return [out / "results.csv", report, *sorted(out.glob("*.png"))]
+
+
+def copy_jsons(study: Study, source: Path, target: Path) -> list[Path]:
+    """The study's evaluation JSONs that exist under ``source`` copied to the same ``out`` paths under ``target``
+    (each atomically); the files written. None there: an error."""
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.studies.commands import jobs
+
+    written = []
+    for job in jobs(study, source, source, quick=False):
+        if job.path.exists():
+            out = target / job.path.relative_to(source)
+            atomic_write_text(out, job.path.read_text())
+            written.append(out)
+    if not written:
+        raise BridgeplanError(f"no evaluation JSON of study {study.name} under {source}; run `bridgeplan study run "
+                              f"{study.file}` (or `study import`) first")
+    return written

@@ -322,9 +322,9 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
 
 
 def json_root(study: Study, root: Path, scale: Scale) -> Path:
-    """Where a study's evaluation JSONs go: docs/results (the committed scale, where its reports read them), or its
-    quick results directory."""
-    return Path(root) / "docs" / "results" if scale.committed else results_dir(study, root, scale)
+    """Where ``study run`` writes a study's evaluation JSONs (their ``out`` paths under it): its results directory,
+    as a store's rows; ``study export`` copies them to docs/results, where its reports read them."""
+    return results_dir(study, root, scale)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:

@@ -54,7 +54,7 @@ Example (the keys and their defaults: the dataclasses below)::
 
     [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
     process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, ogbench eval,
-    horizon = 32                         #  each writing one JSON under docs/results)
+    horizon = 32                         #  each writing one JSON, exported to docs/results)
     stride = 12
 
     [[evaluations]]
