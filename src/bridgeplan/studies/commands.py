@@ -26,145 +26,19 @@ ones back.
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
-import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import StudyError
+from bridgeplan.studies.spec import COMMANDS, NamedRun, command_flags
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval")}
 EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task"}
 """Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
 task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
 QUICK_EPISODES = {"--episodes": 20, "--episodes-per-task": 4}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1}
-"""How many runs each command takes (a hierarchy: the high level, then the low one)."""
-SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress"}
-TASK_SETS = ("single", "multi")
 
-
-@dataclass(frozen=True)
-class NamedRun:
-    name: str
-    fields: tuple[tuple[str, Any], ...]
-    """TrainConfig fields over the study's [training] (process: its name, with ``params``; prior, horizon, stride,
-    subgoal_every, ...)."""
-
-
-@dataclass(frozen=True)
-class CommandEvaluation:
-    command: str
-    runs: tuple[str, ...]
-    out: str
-    """The JSON's path under docs/results, with ``{seed}``, ``{eval_seed}``, ``{tasks}``."""
-    args: tuple[tuple[str, Any], ...] = ()
-    splits: tuple[str, ...] = ("test",)
-    task_sets: tuple[str, ...] = ("single",)
-    seeds: tuple[int, ...] | None = None
-    """Default: the training seeds."""
-    task_seed: int | None = None
-    """The test episodes' seed, the same for every training seed (OGBench's protocol: its fixed tasks); validation
-    adds 1000. None: the training seed's, as Maze2D's evaluations."""
-
-
-def parse_runs(file, raw) -> tuple[NamedRun, ...]:
-    from bridgeplan import config as cfg
-    from bridgeplan.studies.spec import _frozen, _process_params, _table, _typed
-
-    allowed = {f.name for f in dataclasses.fields(cfg.TrainConfig)} - {
-        "maze", "dataset", "preset", "steps", "checkpoint_every", "seed", "prior_run"}
-    runs = []
-    for name, fields in _table(file, "runs", raw, set(raw)).items():
-        key = f"runs.{name}"
-        fields = dict(_table(file, key, fields, allowed | {"params"}, ("process",)))
-        process = _typed(file, f"{key}.process", fields["process"], str)
-        fields["params"] = _process_params(file, key, process, fields.get("params"))
-        if fields.get("prior") == "learned":
-            raise StudyError(file, f"{key}.prior", "a named run cannot use the learned prior (no prior run is "
-                                                   "trained for it); use a grid or a declared method")
-        runs.append(NamedRun(name, tuple(sorted((k, _frozen(v)) for k, v in fields.items()))))
-    return tuple(runs)
-
-
-def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEvaluation, ...]:
-    from bridgeplan.studies.spec import SPLITS, _ints, _table, _typed
-
-    if not isinstance(raw, list):
-        raise StudyError(file, "evaluations", "expected an array of tables ([[evaluations]])")
-    names = {r.name for r in runs}
-    out = []
-    for i, e in enumerate(raw):
-        key = f"evaluations[{i}]"
-        e = _table(file, key, e, {"command", "runs", "out", "args", "splits", "task_sets", "seeds", "task_seed"},
-                   ("command", "runs", "out"))
-        command = _typed(file, f"{key}.command", e["command"], str)
-        if command not in COMMANDS:
-            raise StudyError(file, f"{key}.command", f"unknown command {command!r} (choose from "
-                                                     f"{', '.join(COMMANDS)})")
-        levels = e["runs"]
-        if (not isinstance(levels, list) or len(levels) != LEVELS[command]
-                or any(not isinstance(r, str) for r in levels)):
-            raise StudyError(file, f"{key}.runs", f"{command} takes {LEVELS[command]} run name(s), got {levels!r}")
-        for r in levels:
-            if r not in names:
-                raise StudyError(file, f"{key}.runs", f"unknown run {r!r} (declared: "
-                                                      f"{', '.join(sorted(names)) or 'none'}; see [runs.NAME])")
-        args = _table(file, f"{key}.args", e.get("args", {}), set(e.get("args", {})))
-        for name in sorted(set(args) & SET_BY_THE_RUNNER):
-            raise StudyError(file, f"{key}.args.{name}", "set by the runner (the seed and split, the task set, the "
-                                                          "output path, one thread)")
-        splits = tuple(e.get("splits", ["test"]))
-        if not splits or any(s not in SPLITS for s in splits):
-            raise StudyError(file, f"{key}.splits", f"expected a list of {', '.join(SPLITS)}, got {e.get('splits')!r}")
-        task_sets = tuple(e.get("task_sets", ["single"]))
-        if not task_sets or any(t not in TASK_SETS for t in task_sets):
-            raise StudyError(file, f"{key}.task_sets", f"expected a list of single, multi, got {e.get('task_sets')!r}")
-        if "multi" in task_sets and command == "ogbench eval":
-            raise StudyError(file, f"{key}.task_sets", "OGBench's protocol has its 5 tasks, no Multi2D")
-        evaluation = CommandEvaluation(command, tuple(levels), _typed(file, f"{key}.out", e["out"], str),
-                                       tuple(sorted(args.items())), splits, task_sets,
-                                       _ints(file, f"{key}.seeds", e["seeds"]) if "seeds" in e else None,
-                                       _ints(file, f"{key}.task_seed", e["task_seed"])[0] if "task_seed" in e else None)
-        try:
-            evaluation.out.format(seed=0, eval_seed=0, tasks="single")
-        except (KeyError, IndexError, ValueError) as err:
-            raise StudyError(file, f"{key}.out", f"names only {{seed}}, {{eval_seed}} and {{tasks}} ({err})") from None
-        _check_flags(file, key, evaluation)
-        out.append(evaluation)
-    return tuple(out)
-
-
-def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
-    argv = []
-    for name, value in args:
-        flag = "--" + name.replace("_", "-")
-        if value is True:
-            argv.append(flag)
-        elif value is not False:
-            argv += [flag, str(value)]
-    return argv
-
-
-def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
-    """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
-    from bridgeplan.cli import build_parser
-
-    argv = [*COMMANDS[evaluation.command], *(["RUN"] * LEVELS[evaluation.command]), *_flags(evaluation.args)]
-    err = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(err):
-            build_parser().parse_args(argv)
-    except SystemExit:
-        message = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else "bad flags"
-        raise StudyError(file, f"{key}.args", message.split("error: ", 1)[-1]) from None
-
-
-# --- planning and running ----------------------------------------------------------------------------------------
+# --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
 @dataclass(frozen=True)
 class Job:
@@ -212,15 +86,15 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if quick:
                         episodes = QUICK_EPISODES[flag] if episodes is None else min(episodes, QUICK_EPISODES[flag])
                     argv = [*COMMANDS[e.command], *(str(run_dir(results, r, seed)) for r in e.runs),
-                            *_flags(tuple(sorted(args.items()))),
+                            *command_flags(tuple(sorted(args.items()))),
                             *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
                             *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
                     out.append(Job(path, tuple(argv), seed, e.runs))
     return out
 
 
-def missing_trains(study, results: Path) -> list[tuple[str, int, int]]:
-    """(run directory name, steps to train, steps done) of every named run an evaluation needs, per seed."""
+def needed_runs(study, results: Path) -> list[tuple[str, int, int]]:
+    """(run directory name, steps to train, steps done so far) of every named run an evaluation needs, per seed."""
     from bridgeplan.experiments.runner import _trained_step
 
     needed = {(r, seed) for e in study.evaluations for seed in (e.seeds or study.training.seeds) for r in e.runs}

@@ -308,13 +308,13 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                             corrections[name, series.correction.tag() if series.correction else ""] += 1
     scaled, jsons = scale.apply(study), ()
     if study.evaluations:
-        from bridgeplan.studies.commands import jobs, missing_trains
+        from bridgeplan.studies.commands import jobs, needed_runs
 
         results = results_dir(study, root, scale)
         jsons = tuple(j for j in jobs(scaled, results, json_root(study, root, scale), not scale.committed)
                       if not j.path.exists())
         needed = {(r, j.seed) for j in jsons for r in j.runs}
-        for run, n, done in missing_trains(scaled, results):
+        for run, n, done in needed_runs(scaled, results):
             if any(run == f"{r}-s{seed}" for r, seed in needed):
                 trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
