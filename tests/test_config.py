@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from bridgeplan import config as cfg
+from bridgeplan.data import load_stream
 from bridgeplan.device import configure_threads
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import RunSpec, get_experiment
@@ -99,12 +100,16 @@ def test_defaults_follow_the_maze():
         cfg.preset_config("umaze", "cpu-small", horizon=400)
 
 
-def test_eval_result_is_a_store_row_with_its_method(tiny_runs):
+def test_eval_result_is_a_store_row_with_its_method(tiny_runs, tiny_dataset):
     from bridgeplan.evaluate import evaluate
 
     result = evaluate(tiny_runs["bridge"], episodes=2, nfe=1, device="cpu")
     row = result.to_row()
     assert set(row) <= set(COLUMNS) and set(KEY) <= set(row)
+    # the row names its data by what it is: name, maze, size, version and the arrays' hash (no machine path)
+    assert row["dataset"] == load_stream(tiny_dataset).identity()
+    assert row["dataset"].startswith("umaze-tiny (umaze, ") and "sha256 " in row["dataset"]
+    assert "/" not in row["dataset"]
     assert (row["process"], row["prior"], row["nfe"], row["episodes"]) == ("bridge", "learned", 1, 2)
     assert method_label(dict(row, config=json.dumps(row["config"]))) == "bridge (learned)"
     held = dict(row["config"], hold_share=0.5)  # a run trained on windows that wait is another method

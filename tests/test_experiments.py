@@ -238,9 +238,31 @@ def test_a_version_1_store_is_upgraded_with_its_rows(tmp_path):
     assert row["sampler"] == ""  # as its process samples by default
     assert store.has(("r", 1000, 1, "", "", 0, 200, 0), "nfe1")
     with sqlite3.connect(db) as con:
-        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 5
+        assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 6
     ResultsStore(db)  # opening it again changes nothing
     assert len(store.rows()) == 1
+
+
+def test_a_version_5_store_gains_the_dataset_column(tmp_path):
+    from bridgeplan.experiments.store import COLUMNS, KEY
+
+    db = tmp_path / "results.sqlite"
+    cols = {k: v for k, v in COLUMNS.items() if k != "dataset"}
+    with sqlite3.connect(db) as con:
+        con.execute(f"CREATE TABLE evaluations (id INTEGER PRIMARY KEY, "
+                    f"{', '.join(f'{k} {v}' for k, v in cols.items())}, UNIQUE ({', '.join(KEY)}))")
+        con.execute("CREATE TABLE memberships (experiment TEXT NOT NULL, evaluation INTEGER NOT NULL, "
+                    "PRIMARY KEY (experiment, evaluation))")
+        con.execute("INSERT INTO evaluations (run_name, maze, process, prior, diffusion_steps, seed, step, nfe, "
+                    "episodes, eval_seed, score_minari) VALUES ('r', 'umaze', 'ddpm', 'gaussian', 16, 0, 1000, 1, 200, "
+                    "0, 42.5)")
+        con.execute("INSERT INTO memberships VALUES ('nfe1', 1)")
+        con.execute("PRAGMA user_version=5")
+    store = ResultsStore(db)
+    (row,) = store.rows("nfe1")
+    assert row["dataset"] is None and row["score_minari"] == 42.5
+    store.add(dict(row, step=2000, dataset="d (umaze, 6 transitions, sha256 00)"), ["nfe1"])
+    assert [r["dataset"] for r in store.rows("nfe1")] == [None, "d (umaze, 6 transitions, sha256 00)"]
 
 
 def test_a_version_4_store_keeps_one_evaluation_per_key_and_its_experiments(tmp_path):

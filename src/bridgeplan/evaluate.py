@@ -162,7 +162,8 @@ class EvalResult:
         """The JSON that ``bridgeplan eval`` writes (fields: README, "Evaluation output")."""
         process, run = self.planner.process, self.run
         out = {
-            "run": run.name if run else None, "step": run.step if run else None,
+            "run": run.name if run else None, "dataset": run.dataset if run else None,
+            "step": run.step if run else None,
             "train_seconds": run.elapsed_seconds if run else None, "maze": self.tasks.maze.name,
             "method": cfg.method_label(process, self.prior, run.config.hold_share if run else 0.0),
             "process": process.name, "prior": self.prior,

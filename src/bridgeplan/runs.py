@@ -102,6 +102,9 @@ class RunInfo:
     dataset_covers_every_cell: bool = False
     """Known without the dataset at hand (a shipped planner's, checked when it was exported): its dataset visits
     every free cell, as Multi2D's goals need."""
+    dataset: str = ""
+    """What the run was trained on (``Stream.identity``: name, maze, size, data version, sha256 of the arrays);
+    '' for a run saved before runs recorded it."""
 
     @property
     def name(self) -> str:
@@ -152,7 +155,7 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
     if sampler is not None:
         planner = planner.with_sampler(sampler, eta)
     return planner, RunInfo(run_dir, config, state["config"], state["step"], state["elapsed_seconds"],
-                            bool(state.get("dataset_covers_every_cell", False)))
+                            bool(state.get("dataset_covers_every_cell", False)), state.get("dataset", ""))
 
 
 FAMILIES = {"maze2d": ("Maze2D", "bridgeplan eval"), "ogbench": ("OGBench pointmaze", "bridgeplan ogbench eval")}

@@ -258,10 +258,11 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
         gen.set_state(state["generator"].to(gen.get_state().device))
         torch.set_rng_state(state["torch_rng"])
         step, elapsed = state["step"], state["elapsed_seconds"]
-    write_config(run_dir, {"kind": job.kind, "config": config_dict, "code_version": code_version()})
+    dataset = windows.dataset  # what the data is (Stream.identity), saved beside the config
+    write_config(run_dir, {"kind": job.kind, "config": config_dict, "dataset": dataset, "code_version": code_version()})
 
     def snapshot_state() -> dict:
-        return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict,
+        return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict, "dataset": dataset,
                 "step": step, "elapsed_seconds": elapsed, "code_version": code_version()}
 
     def save_snapshot() -> None:

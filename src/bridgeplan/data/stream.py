@@ -9,7 +9,9 @@ datasets, official Minari ``D4RL/pointmaze`` ones, legacy D4RL ``maze2d-*.hdf5``
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -53,6 +55,17 @@ class Stream:
     @property
     def layout(self) -> Layout:
         return layout_for(self.maze)
+
+    def identity(self) -> str:
+        """What the data is, as results name it (no path of the machine): its source's name, maze, size, generator
+        version and the sha256 of its arrays (states, actions, segment starts), e.g. ``medium-1000000-v2 (medium,
+        1000000 transitions, data version 2, sha256 1f0c...)``."""
+        digest = hashlib.sha256()
+        for array in (self.states, self.actions, self.segment_starts):
+            digest.update(np.ascontiguousarray(array).tobytes())
+        version = "" if self.data_version is None else f", data version {self.data_version}"
+        return (f"{Path(self.source).name or self.maze} ({self.maze}, {len(self)} transitions{version}, "
+                f"sha256 {digest.hexdigest()[:16]})")
 
     def __len__(self) -> int:
         return len(self.states)

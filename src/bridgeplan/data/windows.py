@@ -38,6 +38,8 @@ class WindowDataset(torch.utils.data.Dataset):
     def __init__(self, stream: Stream, horizon: int, normalizer: Normalizer, stride: int = 1):
         self.horizon, self.stride = int(horizon), int(stride)
         self.layout = stream.layout
+        self.dataset = stream.identity()
+        """The data's :meth:`Stream.identity`: every run saves it, every result row carries it."""
         if len(normalizer.low) != self.layout.transition_dim:
             raise BridgeplanError(f"the normalizer has {len(normalizer.low)} columns, the {stream.maze} data's "
                                   f"transitions {self.layout.transition_dim}")

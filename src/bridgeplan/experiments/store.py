@@ -10,7 +10,8 @@ evaluation could be stored once per experiment: the upgrade keeps the first of t
 memberships. Version 1 had no execution or multi-task columns (its rows were open loop, single-task); version 2
 no sampler column (rows sampled as their processes are by default); version 3 no plan-cost columns
 (``network_calls_per_plan`` and the plans' residuals are empty there); none had ``split`` (it was the experiment's
-``-validation`` suffix).
+``-validation`` suffix). Version 5 had no ``dataset`` (what the run was trained on, ``Stream.identity``): empty
+there, and in every row made before runs recorded it.
 
 The CSV form (:meth:`ResultsStore.export_csv`, the committed ``results.csv`` files) is one row per evaluation with
 every key, its ``split`` and its ``experiments`` (space-separated); it and
@@ -33,10 +34,11 @@ from typing import Iterator
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 COLUMNS = {
     "run_name": "TEXT NOT NULL",
+    "dataset": "TEXT",
     "maze": "TEXT NOT NULL",
     "process": "TEXT NOT NULL",
     "prior": "TEXT NOT NULL",
@@ -107,7 +109,7 @@ def stored_keys(path: Path) -> tuple[set[tuple], set[tuple[str, tuple]]]:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
         try:
             db.row_factory = sqlite3.Row
-            if db.execute("PRAGMA user_version").fetchone()[0] < SCHEMA_VERSION:
+            if db.execute("PRAGMA user_version").fetchone()[0] < 5:
                 if not db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone():
                     return set(), set()
                 rows = [_upgraded(dict(r)) for r in db.execute("SELECT * FROM results")]
@@ -150,7 +152,9 @@ class ResultsStore:
             old = db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone()
             for statement in _tables():
                 db.execute(statement)
-            if old and version < SCHEMA_VERSION:  # one row per experiment and evaluation -> evaluations + memberships
+            if version == 5:  # evaluations without the data's identity: the column, empty
+                db.execute("ALTER TABLE evaluations ADD COLUMN dataset TEXT")
+            if old and version < 5:  # one row per experiment and evaluation -> evaluations + memberships
                 db.row_factory = sqlite3.Row
                 rows = [_upgraded(dict(r)) for r in db.execute("SELECT * FROM results ORDER BY id")]
                 db.row_factory = None
@@ -281,8 +285,9 @@ def row_from_eval_json(d: dict, split: str = "test") -> dict:
     residuals = d.get("plan_residuals") or {}
     score = d["score"]
     return {
-        "run_name": config.run_name(), "maze": d["maze"], "process": d["process"], "prior": d["prior"],
-        "diffusion_steps": d["diffusion_steps"], "seed": config.seed, "step": d["step"],
+        "run_name": config.run_name(), "dataset": d.get("dataset") or None, "maze": d["maze"],
+        "process": d["process"], "prior": d["prior"], "diffusion_steps": d["diffusion_steps"], "seed": config.seed,
+        "step": d["step"],
         "train_seconds": d.get("train_seconds"), "nfe": d["nfe"], "episodes": d["episodes"], "eval_seed": d["seed"],
         "split": split, "score_minari": score["minari"]["mean"], "score_minari_se": score["minari"]["se"],
         "score_d4rl": score["d4rl"]["mean"], "score_d4rl_se": score["d4rl"]["se"],
