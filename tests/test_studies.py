@@ -367,8 +367,9 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     assert rate == TRAIN_STEPS_PER_SECOND  # no figure at that batch
 
 
-@pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy", "large-hierarchy-flat"]),
-                                           ("ogbench-planners", ["ogbench-medium-navigate"])])
+@pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),
+                                           ("ogbench-planners", ["ogbench-medium-navigate/*"]),
+                                           ("ogbench-calibration", ["ogbench-gcbc", "ogbench-oracle"])])
 def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
     them imported, the dry run trains and evaluates nothing."""
@@ -376,8 +377,8 @@ def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp
 
     study = load_studies(REPO)[name]
     declared = {j.path for j in jobs(study, REPO / "no-such-dir", REPO / "docs" / "results", quick=False)}
-    committed = {p for folder in folders for p in (REPO / "docs" / "results" / folder).glob("*/*.json")}
-    assert declared == committed and len(declared) >= 24
+    committed = {p for folder in folders for p in (REPO / "docs" / "results").glob(f"{folder}/*.json")}
+    assert declared == committed and len(declared) >= 9
     root = _docs_copy(tmp_path)
     assert len(missing(study, root).jsons) == len(declared)  # a fresh checkout: everything to compute
     assert main(["study", "import", name, "--root", str(root)]) == 0
@@ -485,3 +486,62 @@ def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation
     assert main(["study", "run", "bad", "--dry-run", "--root", str(root)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err
+
+
+TINY_CALIBRATION = """
+[dataset]
+generator = "ogbench"
+maze = "pointmaze-medium-navigate-v0"
+path = "{dataset}"
+
+[training]
+steps = 4
+checkpoint_every = 4
+seeds = [0]
+
+[runs.gcbc]
+trainer = "gcbc"
+maze = "medium"
+batch_size = 8
+hidden_dims = [8, 8]
+log_every = 2
+device = "cpu"
+
+[[evaluations]]
+command = "ogbench gcbc-eval"
+runs = ["gcbc"]
+args = {{ steps = 4, episodes = 1 }}
+out = "cal/gcbc-step4.json"
+task_seed = 0
+
+[[evaluations]]
+command = "ogbench evaluate-oracle"
+runs = []
+args = {{ maze = "medium", episodes = 1, tasks = "1" }}
+out = "cal/oracle-medium.json"
+task_seed = 0
+"""
+
+
+def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_path, capsys):
+    """GCBC runs (trainer = "gcbc") and the oracle (no run, the maze a positional argument) in a command study."""
+    import json
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    assert main(["ogbench", "generate", "pointmaze-medium-navigate-v0", "--episodes", "4", "--steps", "40",
+                 "--out", str(tmp_path), "--no-progress"]) == 0
+    (root / "studies" / "cal.toml").write_text(
+        TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
+    capsys.readouterr()
+    assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
+    assert "cal: 2 new results" in capsys.readouterr().out
+    gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
+    assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
+    oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())
+    assert oracle["policy"] == "oracle" and oracle["maze"] == "medium" and oracle["episodes"] == 1
+    assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
+    assert "cal: 0 new results" in capsys.readouterr().out
+    assert main(["ogbench", "gcbc-eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
+                 "--out", str(tmp_path / "x.json")]) == 2  # --out takes one evaluation
+    assert "--out takes one evaluation" in capsys.readouterr().err

@@ -33,6 +33,8 @@ def add_gcbc_commands(og) -> None:
     e.add_argument("--episodes", type=int, default=0, help="episodes per task (default 50, as OGBench)")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--json", action="store_true")
+    e.add_argument("--out", default=None, help="also write the JSON to this path (one step only)")
+    e.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: 1 on a CPU device)")
     e.add_argument("--no-progress", action="store_true")
     e.set_defaults(func=_cmd_gcbc_eval)
 
@@ -70,8 +72,19 @@ def _cmd_gcbc_eval(args) -> int:
             steps = [int(v) for v in args.steps.split(",")]
         except ValueError:
             raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {args.steps!r}") from None
+    if args.out and (steps is None or len(steps) != 1):
+        raise BridgeplanError("--out takes one evaluation: give one snapshot with --steps N")
+    if args.threads is not None:
+        from bridgeplan.device import configure_threads
+
+        configure_threads(args.threads)
     rows = evaluate_gcbc(args.run, args.maze or "", steps, args.episodes, args.seed, progress=not args.no_progress)
     for row in rows:
         text = row.pop("text")
         print(json.dumps(row, indent=2) if args.json else f"step {row['step']}: {text}")
+    if args.out:
+        from bridgeplan.files import atomic_write_text
+
+        atomic_write_text(Path(args.out), json.dumps(rows[0], indent=2) + "\n")
+        print(f"wrote {args.out}")
     return 0

@@ -39,6 +39,8 @@ def add_ogbench_commands(sub) -> None:
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
     e.add_argument("--json", action="store_true")
+    e.add_argument("--out", default=None, help="also write the JSON to this path")
+    e.add_argument("--threads", type=int, default=None, help="accepted for the study runner; the oracle uses none")
     e.add_argument("--no-progress", action="store_true")
     e.set_defaults(func=_cmd_evaluate_oracle)
     _add_eval_command(og)
@@ -82,8 +84,13 @@ def _cmd_evaluate_oracle(args) -> int:
     r = evaluate_policy(args.maze, oracle_policy(args.maze),
                         episodes_per_task=args.episodes or EVAL_EPISODES_PER_TASK, seed=args.seed,
                         task_ids=tasks, progress=not args.no_progress)
-    print(json.dumps({**r.to_dict(), "policy": "oracle", "code_version": code_version()}, indent=2) if args.json
-          else r.format())
+    text = json.dumps({**r.to_dict(), "policy": "oracle", "code_version": code_version()}, indent=2)
+    print(text if args.json else r.format())
+    if args.out:
+        from bridgeplan.files import atomic_write_text
+
+        atomic_write_text(Path(args.out), text + "\n")
+        print(f"wrote {args.out}")
     return 0
 
 

@@ -9,7 +9,7 @@ run``)::
     stride = 12
 
     [[evaluations]]
-    command = "hierarchy eval"           # eval | hierarchy eval | ogbench eval
+    command = "hierarchy eval"           # eval | hierarchy eval | ogbench eval | ogbench evaluate-oracle | gcbc-eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
     args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
@@ -31,12 +31,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import COMMANDS, NamedRun, command_flags
+from bridgeplan.studies.spec import NamedRun, command_argv
 
-EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task"}
+EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task",
+                 "ogbench evaluate-oracle": "--episodes", "ogbench gcbc-eval": "--episodes"}
 """Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
 task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
-QUICK_EPISODES = {"--episodes": 20, "--episodes-per-task": 4}
+QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "ogbench eval": 4, "ogbench evaluate-oracle": 4,
+                  "ogbench gcbc-eval": 4}
+"""Episodes at the quick scale: Maze2D's per evaluation, OGBench's per task."""
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
@@ -55,10 +58,17 @@ def run_dir(results: Path, run: str, seed: int) -> Path:
 
 
 def train_config(study, run: NamedRun, seed: int, dataset: Path):
+    """The config that trains ``run`` for training seed ``seed`` (a ``TrainConfig``, or a GCBC run's
+    ``GCBCConfig``)."""
     from bridgeplan import config as cfg
     from bridgeplan.processes import make_process
 
     t = study.training
+    if run.trainer == "gcbc":
+        from bridgeplan.gcbc import GCBCConfig
+
+        return GCBCConfig(dataset=str(dataset), steps=t.steps, checkpoint_every=t.checkpoint_every, seed=seed,
+                          **dict(run.fields))
     fields = dict(run.fields)
     process = make_process(fields.pop("process"), steps=t.diffusion_steps, **dict(fields.pop("params")))
     return cfg.preset_config(study.dataset.maze, t.preset, **{**dict(t.overrides), **fields}, process=process,
@@ -81,12 +91,13 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     args = dict(e.args)
                     flag = EPISODES_FLAG[e.command]
                     episodes = args.pop(flag[2:].replace("-", "_"), None)
-                    if e.command != "ogbench eval" and episodes is None:
+                    if not e.command.startswith("ogbench") and episodes is None:
                         episodes = study.evaluation.episodes
                     if quick:
-                        episodes = QUICK_EPISODES[flag] if episodes is None else min(episodes, QUICK_EPISODES[flag])
-                    argv = [*COMMANDS[e.command], *(str(run_dir(results, r, seed)) for r in e.runs),
-                            *command_flags(tuple(sorted(args.items()))),
+                        cap = QUICK_EPISODES[e.command]
+                        episodes = cap if episodes is None else min(episodes, cap)
+                    argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
+                                          tuple(sorted(args.items()))),
                             *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
                             *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
                     out.append(Job(path, tuple(argv), seed, e.runs))
@@ -107,6 +118,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     from bridgeplan.cli import main
     from bridgeplan.device import configure_threads
     from bridgeplan.experiments.runner import _trained_step
+    from bridgeplan.gcbc import train_gcbc
     from bridgeplan.locks import run_lock
     from bridgeplan.train import train
 
@@ -118,7 +130,8 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
         with run_lock(directory):
             done = _trained_step(directory)
             if done < config.steps:
-                train(config, directory, resume=done >= 0, progress=progress)
+                trainer = train_gcbc if runs[name].trainer == "gcbc" else train
+                trainer(config, directory, resume=done >= 0, progress=progress)
     written = 0
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile

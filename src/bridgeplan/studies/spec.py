@@ -57,8 +57,12 @@ Example (the keys and their defaults: the dataclasses below)::
     horizon = 32                         #  each writing one JSON, exported to docs/results)
     stride = 12
 
+    [runs.gcbc]                          # trainer = "gcbc": `ogbench gcbc-train`'s run (GCBCConfig fields)
+    trainer = "gcbc"
+    maze = "medium"
+
     [[evaluations]]
-    command = "eval"
+    command = "eval"                     # or hierarchy eval, ogbench eval, ogbench evaluate-oracle, ogbench gcbc-eval
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -402,9 +406,15 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 
 # --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1}
-"""How many runs each command takes (a hierarchy: the high level, then the low one)."""
+COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval"),
+            "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval")}
+LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench evaluate-oracle": 0, "ogbench gcbc-eval": 1}
+"""How many runs each command takes (a hierarchy: the high level, then the low one; the oracle none)."""
+POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
+"""The ``args`` a command takes as positional arguments, after its runs."""
+TRAINERS = ("planner", "gcbc")
+"""What trains a named run: ``bridgeplan train`` (a planner), or ``ogbench gcbc-train`` (GCBC, the calibration
+baseline)."""
 SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress"}
 TASK_SETS = ("single", "multi")
 
@@ -414,7 +424,9 @@ class NamedRun:
     name: str
     fields: tuple[tuple[str, Any], ...]
     """TrainConfig fields over the study's [training] (process: its name, with ``params``; prior, horizon, stride,
-    subgoal_every, ...)."""
+    subgoal_every, ...); a GCBC run's GCBCConfig fields (maze, log_every, batch_size, ...)."""
+    trainer: str = "planner"
+    """:data:`TRAINERS`: which command trains it."""
 
 
 @dataclass(frozen=True)
@@ -435,13 +447,24 @@ class CommandEvaluation:
 
 def parse_runs(file, raw) -> tuple[NamedRun, ...]:
     from bridgeplan import config as cfg
+    from bridgeplan.gcbc import GCBCConfig
 
-    allowed = {f.name for f in dataclasses.fields(cfg.TrainConfig)} - {
-        "maze", "dataset", "preset", "steps", "checkpoint_every", "seed", "prior_run"}
+    taken = {"dataset", "steps", "checkpoint_every", "seed"}
+    allowed = {f.name for f in dataclasses.fields(cfg.TrainConfig)} - taken - {"maze", "preset", "prior_run"}
+    gcbc_allowed = {f.name for f in dataclasses.fields(GCBCConfig)} - taken
     runs = []
     for name, fields in _table(file, "runs", raw, set(raw)).items():
         key = f"runs.{name}"
-        fields = dict(_table(file, key, fields, allowed | {"params"}, ("process",)))
+        trainer = fields.get("trainer", "planner") if isinstance(fields, dict) else "planner"
+        if trainer not in TRAINERS:
+            raise StudyError(file, f"{key}.trainer", f"unknown trainer {trainer!r} (choose from {', '.join(TRAINERS)})")
+        if trainer == "gcbc":
+            fields = dict(_table(file, key, fields, gcbc_allowed | {"trainer"}))
+            runs.append(NamedRun(name, tuple(sorted((k, _frozen(v)) for k, v in fields.items() if k != "trainer")),
+                                 trainer))
+            continue
+        fields = dict(_table(file, key, fields, allowed | {"params", "trainer"}, ("process",)))
+        fields.pop("trainer", None)
         process = _typed(file, f"{key}.process", fields["process"], str)
         fields["params"] = _process_params(file, key, process, fields.get("params"))
         if fields.get("prior") == "learned":
@@ -482,7 +505,7 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         task_sets = tuple(e.get("task_sets", ["single"]))
         if not task_sets or any(t not in TASK_SETS for t in task_sets):
             raise StudyError(file, f"{key}.task_sets", f"expected a list of single, multi, got {e.get('task_sets')!r}")
-        if "multi" in task_sets and command == "ogbench eval":
+        if "multi" in task_sets and command.startswith("ogbench"):
             raise StudyError(file, f"{key}.task_sets", "OGBench's protocol has its 5 tasks, no Multi2D")
         evaluation = CommandEvaluation(command, tuple(levels), _typed(file, f"{key}.out", e["out"], str),
                                        tuple(sorted(args.items())), splits, task_sets,
@@ -508,11 +531,18 @@ def command_flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
     return argv
 
 
+def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...]) -> list[str]:
+    """``bridgeplan``'s arguments for ``command`` on ``runs`` with ``args``: its positional ones, then flags."""
+    positional = POSITIONAL.get(command, ())
+    return [*COMMANDS[command], *runs, *(str(v) for k, v in args if k in positional),
+            *command_flags(tuple((k, v) for k, v in args if k not in positional))]
+
+
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
     """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
     from bridgeplan.cli import build_parser
 
-    argv = [*COMMANDS[evaluation.command], *(["RUN"] * LEVELS[evaluation.command]), *command_flags(evaluation.args)]
+    argv = command_argv(evaluation.command, ["RUN"] * LEVELS[evaluation.command], evaluation.args)
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err):
