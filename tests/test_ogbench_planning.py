@@ -228,3 +228,37 @@ def test_eval_settings_are_checked(point_runs, capsys):
         assert main(["ogbench", "eval", run, "--no-progress", *flags]) == 2
         assert capsys.readouterr().err.startswith("error: ")
     assert not (point_runs["ddpm"] / "eval").exists()
+
+
+def test_a_hierarchy_on_the_protocol(navigate, tmp_path, capsys):
+    """`ogbench hierarchy-eval`: a high level of 4 states 12 steps apart, a low level of 10 states 4 apart through
+    every 3rd (one high-level step); the low level replanned every 12 steps, the high level once and every 24."""
+    import json
+
+    runs = {"high": ("--process", "ddpm", "--horizon", "4", "--stride", "12"),
+            "low": ("--process", "flow", "--prior", "coarse", "--horizon", "10", "--stride", "4",
+                    "--subgoal-every", "3")}
+    for name, flags in runs.items():
+        assert main(["train", "--maze", NAME, "--dataset", str(navigate), "--preset", "cpu-small", "--steps", "2",
+                     "--checkpoint-every", "2", "--run-dir", str(tmp_path / name), "--device", "cpu", "--no-progress",
+                     "--dim", "8", "--dim-mults", "1,2", *flags]) == 0
+    args = ["ogbench", "hierarchy-eval", str(tmp_path / "high"), str(tmp_path / "low"), "--nfe-high", "2",
+            "--nfe-low", "1", "--replan-every", "12", "--episodes-per-task", "1", "--tasks", "1,3", "--device", "cpu",
+            "--no-progress", "--controller", "pursuit"]
+    assert main([*args, "--out", str(tmp_path / "h.json")]) == 0
+    r = json.loads((tmp_path / "h.json").read_text())
+    assert r["kind"] == "hierarchy" and r["method"].startswith("hierarchy DDPM H4k12 -> flow (coarse) H10k4")
+    assert (r["high"]["nfe"], r["low"]["nfe"], r["nfe"], r["episodes"]) == (2, 1, 1, 2)
+    assert set(r["tasks"]) == {"1", "3"}
+    steps = [sum(t["steps"]) for t in r["tasks"].values()]
+    # every episode: one coarse plan (2 calls) and a low-level plan every 12 steps it ran (1 call each)
+    assert r["calls_per_episode"] == pytest.approx((2 * 2 + sum(-(-s // 12) for s in steps)) / 2)
+    assert r["plans_per_episode"]["mean"] == pytest.approx(sum(-(-s // 12) for s in steps) / 2)
+    assert 0 <= r["success_rate"] <= 1 and "floor_line" in r and r["decision_ms_batch1"]["p50"] > 0
+    assert main([*args, "--replan-high-every", "24", "--out", str(tmp_path / "h24.json")]) == 0
+    r24 = json.loads((tmp_path / "h24.json").read_text())
+    assert r24["replan_high_every"] == 24 and r24["calls_per_episode"] > r["calls_per_episode"]
+    assert main([*args[:-2], "--controller", "track", "--replan-every", "0"]) == 2  # bad K: one error line
+    assert main(["ogbench", "hierarchy-eval", str(tmp_path / "low"), str(tmp_path / "high"), "--replan-every", "12",
+                 "--device", "cpu"]) == 2
+    assert "must plan from a start to a goal" in capsys.readouterr().err

@@ -209,7 +209,8 @@ def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = No
     return Hierarchy(high, low), high_info, low_info
 
 
-def _level(planner: Planner, info: RunInfo, nfe: int) -> dict:
+def level_dict(planner: Planner, info: RunInfo, nfe: int) -> dict:
+    """One level's settings in a hierarchy's JSON."""
     return {"run": info.name, "step": info.step, "method": cfg.method_label(planner.process, planner.prior.name),
             "process": planner.process.name, "prior": planner.prior.name, "process_params": planner.process.to_dict(),
             "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
@@ -258,7 +259,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
     return {
         "kind": "hierarchy", "maze": maze.name, "episodes": n, "seed": tasks.seed, "multi_task": tasks.multi_task,
         "episode_steps": maze.episode_steps,
-        "high": _level(high, high_info, nfe_high), "low": _level(low, low_info, nfe_low),
+        "high": level_dict(high, high_info, nfe_high), "low": level_dict(low, low_info, nfe_low),
         **score_returns(maze.name, result.returns, result.success),
         "high_alone": score_returns(maze.name, alone.returns, alone.success),
         "coarse_plans": coarse_diagnostics(dense, goals, maze, high.layout),

@@ -54,8 +54,6 @@ class SweepSettings:
     evaluations to compute for, so that rows imported into its store are not made again; None: every run."""
 
 
-
-
 def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
     return cfg.preset_config(
         s.maze, s.preset, **s.overrides, dataset=s.dataset, steps=s.train_steps, seed=seed,

@@ -106,18 +106,34 @@ def _task_ids(text: str | None) -> list[int] | None:
 def _add_eval_command(og) -> None:
     p = og.add_parser("eval", help="a trained planner (bridgeplan train on an OGBench dataset) on the 5-task protocol")
     p.add_argument("run", help="run directory (or a checkpoint/snapshot file)")
-    p.add_argument("--episodes-per-task", type=int, default=None, help="default 50, as OGBench")
     p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
+    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
+    _protocol_flags(p, "plan again from the current position every K steps (default: open loop)")
+    p.set_defaults(func=_cmd_eval)
+    h = og.add_parser("hierarchy-eval", help="two runs as a hierarchy (a coarse plan, a low level through it) on the "
+                                             "5-task protocol")
+    h.add_argument("high", help="the high level's run directory (a long --stride)")
+    h.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
+                               "the high level's stride)")
+    h.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
+    h.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
+    h.add_argument("--replan-high-every", type=int, default=None, metavar="K",
+                   help="plan the coarse plan again from the current position every K steps (default: once)")
+    _protocol_flags(h, "plan the low level again every K steps (required: one high-level step is the natural K)")
+    h.set_defaults(func=_cmd_hierarchy_eval)
+
+
+def _protocol_flags(p, replan_help: str) -> None:
+    """The flags ``eval`` and ``hierarchy-eval`` share: the protocol's episodes and tasks, the execution, output."""
+    p.add_argument("--episodes-per-task", type=int, default=None, help="default 50, as OGBench")
     p.add_argument("--controller", default="track",
                    help="track (the plan's next state at each step; default) or pursuit (the plan's path at the "
                         "expert's pace, toward the first planned position --lookahead away)")
     p.add_argument("--lookahead", type=float, default=None, metavar="R",
                    help="pursuit: distance to the planned position stepped toward (default 2.0, half a cell)")
-    p.add_argument("--replan-every", type=int, default=None, metavar="K",
-                   help="plan again from the current position every K steps (default: open loop)")
+    p.add_argument("--replan-every", type=int, default=None, metavar="K", help=replan_help)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
-    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
@@ -125,28 +141,27 @@ def _add_eval_command(og) -> None:
     p.add_argument("--no-floor", action="store_true",
                    help="skip the floor (the same episodes from the straight line, no network)")
     p.add_argument("--no-progress", action="store_true")
-    p.set_defaults(func=_cmd_eval)
 
 
-def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import write_result
-    from bridgeplan.layout import eval_dir
-    from bridgeplan.ogbench_pointmaze.planning import PointExecution, evaluate_run, format_result
+def _execution(args):
+    from bridgeplan.ogbench_pointmaze.planning import PointExecution
     from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK
-    from bridgeplan.runs import run_dir_of
 
     if args.lookahead is not None and args.controller != "pursuit":
         raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
     execution = PointExecution(args.controller, replan_every=args.replan_every,
                                **({} if args.lookahead is None else {"lookahead": args.lookahead}))
-    episodes = EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
-    result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
-                          seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
-                          snapshot=args.snapshot, progress=not args.no_progress,
-                          floor=not args.no_floor)
+    return execution, EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
+
+
+def _write(result: dict, args, run: Path, prefix: str, suffix: str) -> int:
+    from bridgeplan.evaluate import write_result
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.ogbench_pointmaze.planning import format_result
+    from bridgeplan.runs import run_dir_of
+
     tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
-    name = f"ogbench-step{result['step']}-nfe{result['nfe']}-ep{episodes}-seed{args.seed}{tasks}-{execution.tag()}"
-    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(run)) / f"{prefix}-seed{args.seed}{tasks}-{suffix}.json"
     write_result(result, out)
     if args.json:
         print(json.dumps(result, indent=2))
@@ -154,3 +169,27 @@ def _cmd_eval(args) -> int:
         print(format_result(result))
         print(f"wrote {out}")
     return 0
+
+
+def _cmd_eval(args) -> int:
+    from bridgeplan.ogbench_pointmaze.planning import evaluate_run
+
+    execution, episodes = _execution(args)
+    result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
+                          seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
+                          snapshot=args.snapshot, progress=not args.no_progress,
+                          floor=not args.no_floor)
+    return _write(result, args, Path(args.run), f"ogbench-step{result['step']}-nfe{result['nfe']}-ep{episodes}",
+                  execution.tag())
+
+
+def _cmd_hierarchy_eval(args) -> int:
+    from bridgeplan.ogbench_pointmaze.planning import evaluate_hierarchy_run
+
+    execution, episodes = _execution(args)
+    result = evaluate_hierarchy_run(Path(args.high), Path(args.low), args.nfe_high, args.nfe_low, execution,
+                                    args.replan_high_every, episodes, args.seed, _task_ids(args.tasks), args.device,
+                                    progress=not args.no_progress, floor=not args.no_floor)
+    high = "" if args.replan_high_every is None else f"-high{args.replan_high_every}"
+    prefix = f"ogbench-hierarchy-nfe{result['high']['nfe']}-{result['nfe']}-ep{episodes}"
+    return _write(result, args, Path(args.low), prefix, execution.tag() + high)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,6 +85,9 @@ class PlanningPolicy:
     """Wall time of every call (one per environment step of a batch)."""
     prior_only: bool = False
     """Execute the prior's sample itself (no network): the floor a planner must beat."""
+    decisions: Callable[[int], Callable] | None = None
+    """A hierarchy's decisions instead of ``planner``'s plans: given a batch's size n, the callable
+    ``(states, goals, episodes, t) -> planned states`` (``hierarchy.HierarchySource``) that plans for it."""
 
     def __post_init__(self):
         self.execution.validate()
@@ -99,6 +103,8 @@ class PlanningPolicy:
         self._active = np.ones(n, dtype=bool)
         self._made = np.zeros(n, dtype=np.int64)
         self._follower = PointFollower(n, self.execution.controller, self.execution.lookahead)
+        self._t = 0
+        self._decide = self.decisions(n) if self.decisions is not None else None
 
     def end_episodes(self, rows: np.ndarray) -> None:
         """Rows ``rows`` of the batch have ended: they plan no more."""
@@ -126,7 +132,8 @@ class PlanningPolicy:
         t0 = time.perf_counter()
         due = self._due()
         if len(due):
-            positions = self.plan(observations[due], goals[due])
+            positions = (self.plan(observations[due], goals[due]) if self._decide is None
+                         else self.decide(observations[due], goals[due], due))
             if self._plans is None:
                 self._plans = positions
             else:  # a plan's span is fixed, so replans fit the same array
@@ -136,6 +143,7 @@ class PlanningPolicy:
             self._follower.new_plans(due)
         actions = self._follower.actions(observations, self._plans, self._age)
         self._age += 1
+        self._t += 1
         seconds = time.perf_counter() - t0
         self.step_seconds.append(seconds)
         if len(due):
@@ -151,6 +159,16 @@ class PlanningPolicy:
         self.plan_seconds += plan.prior_seconds + plan.sample_seconds
         self.plans_sampled += len(positions)
         return np.array(layout.state_positions(plan.states), dtype=np.float64)
+
+
+    def decide(self, positions: np.ndarray, goals: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+        """Planned positions ``[N, S, 2]`` from the hierarchy's decision for ``episodes`` of the batch."""
+        layout = self.planner.layout
+        t0 = time.perf_counter()
+        states = self._decide(layout.at_rest(positions), goals, episodes, self._t)
+        self.plan_seconds += time.perf_counter() - t0
+        self.plans_sampled += len(positions)
+        return np.array(layout.state_positions(states), dtype=np.float64)
 
 
 def expected_plans(steps: int, replan_every: int | None) -> int:
@@ -174,73 +192,158 @@ def batch1_latency(planner: Planner, nfe: int, start: np.ndarray, goal: np.ndarr
     return percentiles_ms(seconds)
 
 
-def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | None = None,
-                 episodes_per_task: int = 50, seed: int = 0, task_ids: list[int] | None = None,
-                 device: str = "auto", snapshot: int | None = None, progress: bool = False,
-                 floor: bool = True) -> dict:
-    """Load an OGBench pointmaze run and score it on its maze's protocol; returns the result as
-    ``bridgeplan ogbench eval`` writes it (every setting, success per task and overall, cost and latency, the
-    run's portable config and the code version).
-
-    ``floor``: also run the same episodes, executed the same way, from the straight line start -> goal with no
-    network (``floor_line``: its success per task and overall). Why: the kinematic point slides along walls, so
-    stepping toward the goal through them already solves some tasks; what the planner adds is over that."""
-    from bridgeplan.evaluate import environment_of
+def _protocol(policy: PlanningPolicy, maze: str, episodes_per_task: int, seed: int, task_ids, progress: bool):
+    """Run the protocol with ``policy``; returns the result and the first episode's start and goal (what the
+    batch-1 latency plans)."""
     from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
-    from bridgeplan.priors import make_prior
-    from bridgeplan.replan import percentiles_ms
-    from bridgeplan.runs import load_planner, require_family
 
-    execution = execution or PointExecution()
-    execution.validate()
-    if episodes_per_task <= 0:
-        raise BridgeplanError(f"--episodes-per-task must be positive, got {episodes_per_task}")
-    planner, info = load_planner(run, snapshot=snapshot, device=device)
-    require_family(info, "ogbench")
-    nfe = planner.process.max_nfe if nfe is None else nfe
-    spec = parse_dataset_name(info.config.maze)
-    policy = PlanningPolicy(planner, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed))
-    first: list[np.ndarray] = []  # the first episode's start and goal: the batch-1 latency plans them
+    first: list[np.ndarray] = []
 
     def act(observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
         if not first:
             first.extend([observations[0].copy(), goals[0].copy()])
         return policy(observations, goals)
 
-    result = evaluate_policy(spec.maze, act, episodes_per_task=episodes_per_task, seed=seed, task_ids=task_ids,
+    result = evaluate_policy(maze, act, episodes_per_task=episodes_per_task, seed=seed, task_ids=task_ids,
                              progress=progress, on_batch_start=policy.begin_batch, on_episodes_end=policy.end_episodes)
     policy.finish()
-    floors = {}
-    if floor:
-        line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
-        floor_policy = PlanningPolicy(line, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed),
-                                      prior_only=True)
-        f = evaluate_policy(spec.maze, floor_policy, episodes_per_task=episodes_per_task, seed=seed,
-                            task_ids=task_ids, on_batch_start=floor_policy.begin_batch,
-                            on_episodes_end=floor_policy.end_episodes)
-        floors["floor_line"] = {"success_rate": f.success_rate,
-                                "tasks": {i: t.success_rate for i, t in f.tasks.items()}}
+    return result, first
+
+
+def _floor_line(planner: Planner, nfe: int, execution: PointExecution, maze: str, episodes_per_task: int, seed: int,
+                task_ids) -> dict:
+    """The same episodes planned by the straight line start -> goal at ``planner``'s shape, no network, executed
+    alike. Why: the kinematic point slides along walls, so stepping toward the goal through them already solves
+    some tasks; what the planner adds is over that."""
+    from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+    from bridgeplan.priors import make_prior
+
+    line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
+    policy = PlanningPolicy(line, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed),
+                            prior_only=True)
+    f = evaluate_policy(maze, policy, episodes_per_task=episodes_per_task, seed=seed, task_ids=task_ids,
+                        on_batch_start=policy.begin_batch, on_episodes_end=policy.end_episodes)
+    return {"floor_line": {"success_rate": f.success_rate, "tasks": {i: t.success_rate for i, t in f.tasks.items()}}}
+
+
+def _row(result, policy: PlanningPolicy, execution: PointExecution, episodes_per_task: int, seed: int) -> dict:
+    """The protocol's result and the policy's plans and timings, as every planner's JSON has them."""
+    from bridgeplan.replan import percentiles_ms
+
     made = np.asarray(policy.plans_per_episode)
     per_batch = percentiles_ms(policy.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(policy.decision_batch))
     protocol = result.to_dict()
+    return {"env_id": result.env_id, "execution": execution.to_dict(), "episodes_per_task": episodes_per_task,
+            "seed": seed, "success_rate": protocol["success_rate"], "successes": protocol["successes"],
+            "episodes": protocol["episodes"], "tasks": protocol["tasks"],
+            "plans_per_episode": {"mean": float(made.mean()), "min": int(made.min()), "max": int(made.max())},
+            "plan_ms_per_plan": 1000.0 * policy.plan_seconds / policy.plans_sampled,
+            "decision_ms_per_batch": per_batch, "step_ms": percentiles_ms(policy.step_seconds),
+            "protocol_seconds": result.seconds}
+
+
+def _check_episodes(episodes_per_task: int) -> None:
+    if episodes_per_task <= 0:
+        raise BridgeplanError(f"--episodes-per-task must be positive, got {episodes_per_task}")
+
+
+def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | None = None,
+                 episodes_per_task: int = 50, seed: int = 0, task_ids: list[int] | None = None,
+                 device: str = "auto", snapshot: int | None = None, progress: bool = False,
+                 floor: bool = True) -> dict:
+    """Load an OGBench pointmaze run and score it on its maze's protocol; returns the result as
+    ``bridgeplan ogbench eval`` writes it (every setting, success per task and overall, cost and latency, the
+    run's portable config and the code version). ``floor``: also the straight line alone (:func:`_floor_line`)."""
+    from bridgeplan.evaluate import environment_of
+    from bridgeplan.runs import load_planner, require_family
+
+    execution = execution or PointExecution()
+    execution.validate()
+    _check_episodes(episodes_per_task)
+    planner, info = load_planner(run, snapshot=snapshot, device=device)
+    require_family(info, "ogbench")
+    nfe = planner.process.max_nfe if nfe is None else nfe
+    spec = parse_dataset_name(info.config.maze)
+    policy = PlanningPolicy(planner, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed))
+    result, first = _protocol(policy, spec.maze, episodes_per_task, seed, task_ids, progress)
+    row = _row(result, policy, execution, episodes_per_task, seed)
+    floors = _floor_line(planner, nfe, execution, spec.maze, episodes_per_task, seed, task_ids) if floor else {}
     process, config = planner.process, info.config
     return {
         "run": info.name, "step": info.step, "train_seconds": info.elapsed_seconds,
-        "dataset": config.maze, "maze": spec.maze, "env_id": result.env_id, "method": config.label(),
+        "dataset": config.maze, "maze": spec.maze, "method": config.label(),
         "process": process.name, "prior": planner.prior.name, "process_params": process.to_dict(),
         "diffusion_steps": process.steps, "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
-        "plan_span": span(planner.horizon, planner.stride),
-        "execution": execution.to_dict(), "episodes_per_task": episodes_per_task, "seed": seed,
-        "success_rate": protocol["success_rate"], "successes": protocol["successes"],
-        "episodes": protocol["episodes"], "tasks": protocol["tasks"],
-        "plans_per_episode": {"mean": float(made.mean()), "min": int(made.min()), "max": int(made.max())},
-        "calls_per_episode": float(nfe * made.mean()),
-        "plan_ms_per_plan": 1000.0 * policy.plan_seconds / policy.plans_sampled,
-        "decision_ms_per_batch": per_batch,
+        "plan_span": span(planner.horizon, planner.stride), **row,
+        "calls_per_episode": float(nfe * np.mean(policy.plans_per_episode)),
         "decision_ms_batch1": batch1_latency(planner, nfe, first[0], first[1], seed),
-        "step_ms": percentiles_ms(policy.step_seconds), "protocol_seconds": result.seconds,
         **floors, "environment": environment_of(planner), "config": info.portable_config,
+    }
+
+
+def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None = None, nfe_low: int | None = None,
+                           execution: PointExecution | None = None, replan_high_every: int | None = None,
+                           episodes_per_task: int = 50, seed: int = 0, task_ids: list[int] | None = None,
+                           device: str = "auto", progress: bool = False, floor: bool = True) -> dict:
+    """Two OGBench pointmaze runs as a hierarchy (``bridgeplan.hierarchy``: the high level's coarse plan, the low
+    level through its next coarse states, replanned every ``execution.replan_every`` steps; the high level again
+    every ``replan_high_every``) on the maze's protocol; returns what ``bridgeplan ogbench hierarchy-eval`` writes:
+    as ``ogbench eval``'s JSON, with ``method`` naming both levels, ``nfe`` the low level's, and each level's
+    settings under ``high`` and ``low``. ``floor``: the straight line alone at the high level's shape."""
+    from bridgeplan.evaluate import environment_of
+    from bridgeplan.hierarchy import Hierarchy, HierarchySource, check_high_replanning, level_dict
+    from bridgeplan.replan import percentiles_ms
+    from bridgeplan.runs import load_planner, require_family
+
+    execution = execution or PointExecution()
+    execution.validate()
+    _check_episodes(episodes_per_task)
+    if execution.replan_every is None:
+        raise BridgeplanError("a hierarchy replans its low level as the agent moves: give --replan-every K (one "
+                              "high-level step, the high level's stride, is the natural K)")
+    check_high_replanning(replan_high_every, EVAL_EPISODE_STEPS)
+    high, high_info = load_planner(high_run, device=device)
+    low, low_info = load_planner(low_run, device=device)
+    for info in (high_info, low_info):
+        require_family(info, "ogbench")
+    if high_info.config.maze != low_info.config.maze:
+        raise BridgeplanError(f"the levels were trained on different datasets ({high_info.config.maze} and "
+                              f"{low_info.config.maze})")
+    hierarchy = Hierarchy(high, low)
+    gen = torch.Generator(device=high.device).manual_seed(seed)
+    sources: list[HierarchySource] = []
+
+    def decisions(n: int) -> HierarchySource:
+        sources.append(HierarchySource(hierarchy, nfe_high, nfe_low, gen, n, replan_high_every))
+        return sources[-1]
+
+    probe = HierarchySource(hierarchy, nfe_high, nfe_low, gen, 1)  # the NFE defaults, checked before any episode
+    nfe_high, nfe_low = probe.nfe_high, probe.nfe_low
+    spec = parse_dataset_name(high_info.config.maze)
+    policy = PlanningPolicy(low, nfe_low, execution, gen, decisions=decisions)
+    result, first = _protocol(policy, spec.maze, episodes_per_task, seed, task_ids, progress)
+    row = _row(result, policy, execution, episodes_per_task, seed)
+    floors = (_floor_line(high, high.process.max_nfe, PointExecution(execution.controller, execution.lookahead),
+                          spec.maze, episodes_per_task, seed, task_ids) if floor else {})
+    lone = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device).manual_seed(seed + 1), 1,
+                           replan_high_every)
+    seconds, layout = [], low.layout
+    for t in range(0, 6 * execution.replan_every, execution.replan_every):  # the first decision plans both levels
+        t0 = time.perf_counter()
+        lone(layout.at_rest(first[0][None]), first[1][None], np.arange(1), t)
+        seconds.append(time.perf_counter() - t0)
+    label = f"hierarchy {high_info.config.label()} H{high.horizon}k{high.stride} -> {low_info.config.label()} " \
+            f"H{low.horizon}k{low.stride}"
+    return {
+        "kind": "hierarchy", "run": f"{high_info.name} + {low_info.name}", "step": low_info.step,
+        "dataset": high_info.config.maze, "maze": spec.maze, "method": label, "nfe": nfe_low,
+        "horizon": low.horizon, "stride": low.stride, "plan_span": span(low.horizon, low.stride),
+        "high": level_dict(high, high_info, nfe_high), "low": level_dict(low, low_info, nfe_low),
+        "replan_high_every": replan_high_every, **row,
+        "calls_per_episode": float(sum(s.calls.sum() for s in sources) / result.to_dict()["episodes"]),
+        "decision_ms_batch1": percentiles_ms(seconds[1:]),
+        **floors, "environment": environment_of(high), "config": low_info.portable_config,
     }
 
 

@@ -34,11 +34,12 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.studies.spec import NamedRun, command_argv
 
 EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task",
-                 "ogbench evaluate-oracle": "--episodes", "ogbench gcbc-eval": "--episodes"}
+                 "ogbench hierarchy-eval": "--episodes-per-task", "ogbench evaluate-oracle": "--episodes",
+                 "ogbench gcbc-eval": "--episodes"}
 """Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
 task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
-QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "ogbench eval": 4, "ogbench evaluate-oracle": 4,
-                  "ogbench gcbc-eval": 4}
+QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "ogbench eval": 4, "ogbench hierarchy-eval": 4,
+                  "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4}
 """Episodes at the quick scale: Maze2D's per evaluation, OGBench's per task."""
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------

@@ -407,8 +407,10 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 # --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
 
 COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval"),
+            "ogbench hierarchy-eval": ("ogbench", "hierarchy-eval"),
             "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench evaluate-oracle": 0, "ogbench gcbc-eval": 1}
+LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench hierarchy-eval": 2, "ogbench evaluate-oracle": 0,
+          "ogbench gcbc-eval": 1}
 """How many runs each command takes (a hierarchy: the high level, then the low one; the oracle none)."""
 POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
