@@ -49,7 +49,8 @@ def method_of(row: dict) -> str:
 def controller_of(row: dict) -> str:
     ex = row["execution"]
     name = ex["controller"] + (f" {ex['lookahead']:g}" if ex.get("lookahead") else "")
-    return name + (f", replan {ex['replan_every']}" if ex.get("replan_every") else "")
+    name += f", replan {ex['replan_every']}" if ex.get("replan_every") else ""
+    return name + (f", high level every {row['replan_high_every']}" if row.get("replan_high_every") else "")
 
 
 def by_seed(rows: list[dict], method: str, controller: str, seed: int, value) -> dict[int, float]:
