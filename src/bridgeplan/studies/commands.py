@@ -143,11 +143,10 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     return written
 
 
-def run_commands(study, results: Path, out_root: Path, dataset: Path, quick: bool, workers: int,
-                 progress: bool) -> int:
+def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int, progress: bool) -> int:
     """Run every missing JSON's command (after training what it needs), training seeds on ``workers`` processes;
     the JSONs written."""
-    todo = [job for job in jobs(study, results, out_root, quick) if not job.path.exists()]
+    todo = [job for job in jobs(study, results, results, quick) if not job.path.exists()]
     by_seed: dict[int, list[Job]] = {}
     for job in todo:
         by_seed.setdefault(job.seed, []).append(job)

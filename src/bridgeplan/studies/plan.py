@@ -311,7 +311,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
         from bridgeplan.studies.commands import jobs, needed_runs
 
         results = results_dir(study, root, scale)
-        jsons = tuple(j for j in jobs(scaled, results, json_root(study, root, scale), not scale.committed)
+        jsons = tuple(j for j in jobs(scaled, results, results, not scale.committed)
                       if not j.path.exists())
         needed = {(r, j.seed) for j in jsons for r in j.runs}
         for run, n, done in needed_runs(scaled, results):
@@ -319,12 +319,6 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                 trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
     return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
-
-
-def json_root(study: Study, root: Path, scale: Scale) -> Path:
-    """Where ``study run`` writes a study's evaluation JSONs (their ``out`` paths under it): its results directory,
-    as a store's rows; ``study export`` copies them to docs/results, where its reports read them."""
-    return results_dir(study, root, scale)
 
 
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
@@ -336,7 +330,7 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         return [f"study {study.name} ({scale_note}): trains and evaluates nothing of its own (its reports read: "
                 f"{', '.join(study.uses) or 'none'})"]
     where = (f"store {store}{'' if store.exists() else ' (absent)'}" if study.experiments else
-             f"runs under {results_dir(study, root, scale)}, evaluation JSONs under {json_root(study, root, scale)}")
+             f"runs and evaluation JSONs under {results_dir(study, root, scale)}")
     lines = [f"study {study.name} ({scale_note}): {where}"]
     for run, n, done in m.trains:
         lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
@@ -451,6 +445,6 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     if study.evaluations:
         from bridgeplan.studies.commands import run_commands
 
-        added += run_commands(scaled, results_dir(study, root, scale), json_root(study, root, scale), dataset,
+        added += run_commands(scaled, results_dir(study, root, scale), dataset,
                               not scale.committed, workers, progress)
     return added
