@@ -436,7 +436,8 @@ class CommandEvaluation:
     command: str
     runs: tuple[str, ...]
     out: str
-    """The JSON's path under docs/results, with ``{seed}``, ``{eval_seed}``, ``{tasks}``."""
+    """The JSON's path under the study's results directory and, exported, under docs/results; it may name ``{seed}``,
+    ``{eval_seed}`` and ``{tasks}``."""
     args: tuple[tuple[str, Any], ...] = ()
     splits: tuple[str, ...] = ("test",)
     task_sets: tuple[str, ...] = ("single",)
@@ -522,7 +523,8 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
     return tuple(out)
 
 
-def command_flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
+def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
+    """``name = value`` as ``--name value`` (True: the bare flag; False: nothing)."""
     argv = []
     for name, value in args:
         flag = "--" + name.replace("_", "-")
@@ -537,7 +539,7 @@ def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...
     """``bridgeplan``'s arguments for ``command`` on ``runs`` with ``args``: its positional ones, then flags."""
     positional = POSITIONAL.get(command, ())
     return [*COMMANDS[command], *runs, *(str(v) for k, v in args if k in positional),
-            *command_flags(tuple((k, v) for k, v in args if k not in positional))]
+            *_flags(tuple((k, v) for k, v in args if k not in positional))]
 
 
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
