@@ -18,6 +18,7 @@ from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import make_tasks
 from bridgeplan.runs import load_planner, resolve_run, run_dir_of
+from tests.test_experiments import TINY_STUDY
 
 REPO = Path(__file__).resolve().parents[1]
 NAMES = ["umaze", "medium", "large"]
@@ -123,24 +124,7 @@ def test_planners_list(capsys):
     assert [d["name"] for d in json.loads(capsys.readouterr().out)] == NAMES
 
 
-TINY = """
-[dataset]
-maze = "umaze"
-path = "{dataset}"
-
-[training]
-steps = 2
-checkpoint_every = 1
-seeds = [0]
-diffusion_steps = 6
-horizon = 32
-batch_size = 4
-device = "cpu"
-model = {{ dim = 8, dim_mults = [1, 2] }}
-
-[evaluation]
-episodes = 2
-
+TINY = TINY_STUDY.replace("{steps}", "2").replace("{seeds}", "[0]").replace("episodes = 4", "episodes = 2") + """
 [methods.flow-line]
 process = "flow"
 prior = "line"

@@ -13,6 +13,7 @@ from bridgeplan.cli import main
 from bridgeplan.studies import load_studies, parse_study
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, missing
 from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
+from tests.test_experiments import TINY_STUDY
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -136,25 +137,7 @@ def test_study_list(capsys):
     assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop, candidates)"
 
 
-GOOD = """
-[dataset]
-maze = "umaze"
-path = "{dataset}"
-
-[training]
-steps = 2
-checkpoint_every = 1
-prior_steps = 2
-seeds = [0]
-diffusion_steps = 6
-horizon = 32
-batch_size = 4
-device = "cpu"
-model = {{ dim = 8, dim_mults = [1, 2] }}
-
-[evaluation]
-episodes = 4
-
+GOOD = TINY_STUDY.replace("{steps}", "2").replace("{seeds}", "[0]") + """
 [methods.ddpm]
 process = "ddpm"
 
