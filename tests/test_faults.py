@@ -420,6 +420,12 @@ def test_sweep_over_damaged_run(tiny_dataset, tmp_path, finished_sweep):
     shutil.copytree(finished_sweep, results)
     ckpt = next((results / "runs").glob("*/checkpoint.pt"))
     truncate(ckpt)
+    # a run whose evaluations are all stored is not opened again: take one of its evaluations out, so it must be
+    with sqlite3.connect(results / "results.sqlite") as con:
+        (last,) = con.execute("SELECT MAX(id) FROM evaluations WHERE run_name = ?", (ckpt.parent.name,)).fetchone()
+        con.execute("DELETE FROM memberships WHERE evaluation = ?", (last,))
+        con.execute("DELETE FROM evaluations WHERE id = ?", (last,))
+    con.close()
     before, rows = files(results, skip=("results.sqlite",)), store_rows(results)
     assert str(ckpt) in error_line(*args)
     # opening the store may rewrite its header: its rows must be the same
