@@ -16,13 +16,13 @@ FIELDS = ["id", "experiment", "run_name", "maze", "process", "prior", "diffusion
           "plan_dynamics_rms", "config", "code_version"]
 
 
-def _row(experiment, process, prior, step, nfe, score, seed, sampler="", calls=None):
+def _row(experiment, process, prior, step, nfe, score, seed, sampler="", calls=None, execution="", maze="medium"):
     config = {"process": process.to_dict(), "prior": prior, "hold_share": 0.0}
-    return {"experiment": experiment, "run_name": f"{process.name}-s{seed}", "maze": "medium",
+    return {"experiment": experiment, "run_name": f"{process.name}-s{seed}", "maze": maze,
             "process": process.name, "prior": prior if process.uses_prior else "gaussian",
             "diffusion_steps": process.steps, "seed": seed, "step": step, "nfe": nfe, "episodes": 200,
             "eval_seed": seed, "score_minari": score + 0.1 * seed, "score_minari_se": 1.0, "success_rate": 0.5,
-            "plan_ms": 2.0, "floor_minari": 30.0, "execution": "", "multi_task": 0, "sampler": sampler,
+            "plan_ms": 2.0, "floor_minari": 30.0, "execution": execution, "multi_task": 0, "sampler": sampler,
             "calls_per_episode": nfe, "network_calls_per_plan": calls or nfe, "plan_kinematics_rms": 0.5,
             "plan_dynamics_rms": 0.25, "config": json.dumps(config), "code_version": "0.1.0+test"}
 
@@ -46,7 +46,10 @@ def write_rows(root):
                          _row("cddb-validation", bridge, "line", 8000, nfe, validation + nfe, seed, sampler)]
         rows += [_row("cddb", bridge, "line", 8000, 1, 71.0, seed, "cddb-deep dynamics=0.0001", calls=3),
                  _row("cddb-validation", bridge, "line", 8000, 1, 60.0, seed, "cddb-deep dynamics=0.0001", calls=3)]
-    path = root / cddb.DATA / "results.csv"
+    _write(root / cddb.SOURCES[0] / "results.csv", rows)
+
+
+def _write(path, rows):
     path.parent.mkdir(parents=True)
     with path.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=FIELDS)
@@ -78,7 +81,32 @@ def test_the_report_chooses_on_validation_and_judges_on_test(tmp_path):
     assert goal[0].startswith("- uncorrected: chosen on validation uncorrected at NFE 1")
     # the README's block: the same verdicts, each naming its method, snapshot and seeds
     block = cddb.block(tmp_path).splitlines()
-    assert block[1] == "- bridge (line; consistent=True), step 8000, 3 training seeds, " + goal[1][2:]
+    assert block[1] == "- medium, tracked, bridge (line; consistent=True), step 8000, 3 training seeds, " + goal[1][2:]
+
+
+def test_each_maze_and_execution_is_judged_against_its_own_ddpm(tmp_path):
+    """Large's rows, tracked and pursued in one folder: two parts after medium's, each bridge against the DDPM of
+    its own execution (the pursued DDPM is 20 higher: a bridge that would reach the tracked bar does not)."""
+    write_rows(tmp_path)
+    ddpm = make_process("ddpm", steps=16)
+    bridge = make_process("bridge", steps=16, consistent=True)
+    rows = []
+    for seed in SEEDS:
+        for execution, ddpm_score in (("", 70.0), ("pursuit1.5", 90.0)):
+            rows += [_row("u", ddpm, "gaussian", 8000, 2, ddpm_score, seed, execution=execution, maze="large"),
+                     _row("u", bridge, "line", 8000, 1, 80.0, seed, execution=execution, maze="large"),
+                     _row("u-validation", bridge, "line", 8000, 1, 80.0, seed, execution=execution, maze="large")]
+    _write(tmp_path / "large-cddb" / "results.csv", rows)
+    text = GENERATORS["cddb"].render(tmp_path)
+    titles = [line for line in text.splitlines() if line.startswith("## ")]
+    assert titles == ["## medium, tracked", "## large, tracked", "## large, pursued (lookahead 1.5)"]
+    block = cddb.block(tmp_path).splitlines()
+    large = [line for line in block if line.startswith("- large")]
+    assert large[0] == ("- large, tracked, bridge (line; consistent=True), step 8000, 3 training seeds, uncorrected: "
+                        "chosen on validation uncorrected at NFE 1: test 80.1 ± 0.1, reaches DDPM's best "
+                        "(70.1 ± 0.1 at NFE 2): yes (+10.0 ± 0.0)")
+    assert large[1].startswith("- large, pursued (lookahead 1.5), bridge")
+    assert large[1].endswith("(90.1 ± 0.1 at NFE 2): no (-10.0 ± 0.0)")
 
 
 def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_path):

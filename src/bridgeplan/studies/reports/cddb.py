@@ -1,10 +1,14 @@
 """Issue 27's decisive table: do consistency corrections of the x0 predictions (CDDB, bridgeplan.consistency)
-bring the consistent bridge or flow matching from the line prior at NFE <= 2 up to DDPM's best on medium?
+bring the consistent bridge or flow matching from the line prior at NFE <= 2 up to DDPM's best, on medium and on
+large, with the plans tracked and pursued?
 
-Rows: docs/results/medium-cddb/results.csv (studies/medium-cddb.toml: 5 training seeds, 200 episodes per
-evaluation; `cddb-uncorrected` at every snapshot, `cddb` the corrected samplers at the final snapshot, each with
-its `-validation` rows on other episodes). A correction is a sampler tag ``cddb-<form> <residual>=<step>`` on the
-same trained runs; the corrections are found in the rows, not listed here.
+Rows: the folders of :data:`SOURCES` under docs/results (studies/medium-cddb.toml: medium, 5 training seeds,
+tracked; studies/medium-cddb-pursued.toml: medium, 3 seeds retrained, pursued; studies/large-cddb.toml: large, 3
+seeds, both), 200 episodes per evaluation; ``cddb-uncorrected*`` uncorrected (tracked at every snapshot), ``cddb*``
+the corrected samplers at the final snapshot, each with its ``-validation`` rows on other episodes. A correction
+is a sampler tag ``cddb-<form> <residual>=<step>`` on the same trained runs; the corrections are found in the rows,
+not listed here. Each folder's rows are split by their execution (tracked, pursued): one part each, compared only
+within itself (a pursued bridge against the pursued DDPM of the same runs).
 
 Choices: DDPM's bar at a step is its best NFE by mean over seeds on the test episodes themselves (the bar raised
 for the bridges, as in prior-curves.md). A corrected setting (residual, step size, form; uncorrected among them)
@@ -12,23 +16,26 @@ is chosen per method and NFE on the validation episodes at the final snapshot an
 Differences are per seed (first minus second, Minari score), mean ± standard error over seeds; "reaches": yes
 when the mean is not below zero, "within noise" when below by less than two standard errors, else no.
 
-Made by `bridgeplan study report medium-cddb` (studies/medium-cddb.toml) into docs/results/cddb.md.
+Made by `bridgeplan study report cddb` (studies/cddb.toml) into docs/results/cddb.md.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.analysis.keys import MethodKey, label, method
+from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, label, method
 from bridgeplan.analysis.load import Point, Results, read_csv
 from bridgeplan.analysis.selection import best, split_mean
 from bridgeplan.analysis.stats import goal_verdict, paired
 from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
+from bridgeplan.replan import Execution
 
-DATA = "medium-cddb"
-"""The study's folder under docs/results."""
+SOURCES = ("medium-cddb", "medium-cddb-pursued", "large-cddb")
+"""The studies' folders under docs/results, in the report's order (a folder not exported yet is left out)."""
+MAZES = ("umaze", "medium", "large")
 N = 16
 DDPM = method("ddpm", steps=N)
 BRIDGES = (method("bridge", "line", steps=N, consistent=True), method("flow", "line", steps=N))
@@ -37,6 +44,55 @@ READS = (DDPM, *BRIDGES)
 GOAL_NFE = (1, 2)
 CORRECTED = "cddb-"
 """The prefix of a corrected sampler's tag (``consistency.Correction.tag``)."""
+
+
+def execution_name(execution: Execution) -> str:
+    if execution == OPEN_LOOP:
+        return "tracked"
+    if execution.plans_once and execution.controller == "pursuit":
+        return f"pursued (lookahead {execution.lookahead:g})"
+    return execution.tag()
+
+
+@dataclass(frozen=True)
+class Part:
+    """One maze's rows of one execution: a table of its own."""
+
+    folder: str
+    maze: str
+    execution: Execution
+    results: Results
+
+    @property
+    def title(self) -> str:
+        return f"{self.maze}, {execution_name(self.execution)}"
+
+    @property
+    def ddpm(self) -> MethodKey:
+        return DDPM.replace(execution=self.execution)
+
+    def measured(self) -> list[MethodKey]:
+        """The bridges with test rows."""
+        bridges = [b.replace(execution=self.execution) for b in BRIDGES]
+        return [b for b in bridges if self.results.steps(b)]
+
+    def seeds(self) -> list[int]:
+        return sorted({r.seed for r in self.results})
+
+
+def parts(root: Path) -> list[Part]:
+    """The parts of every exported folder of :data:`SOURCES`: by maze, then tracked before the other executions."""
+    found = []
+    for folder in SOURCES:
+        path = Path(root) / folder / "results.csv"
+        if not path.exists():
+            continue
+        rows = read_csv(path)
+        for maze, execution in dict.fromkeys((r.maze, r.key.execution) for r in rows):
+            found.append(Part(folder, maze, execution,
+                              Results(r for r in rows if (r.maze, r.key.execution) == (maze, execution))))
+    return sorted(found, key=lambda p: (MAZES.index(p.maze) if p.maze in MAZES else len(MAZES),
+                                        p.execution != OPEN_LOOP))
 
 
 def settings(results: Results, base: MethodKey) -> list[MethodKey]:
@@ -50,14 +106,9 @@ def setting_name(key: MethodKey) -> str:
     return key.sampler if key.sampler else "uncorrected"
 
 
-def measured(results: Results) -> list[MethodKey]:
-    """The bridges with test rows."""
-    return [b for b in BRIDGES if results.steps(b)]
-
-
-def ddpm_bar(results: Results, step: int) -> Point | None:
+def ddpm_bar(part: Part, step: int) -> Point | None:
     """DDPM's NFE with the best mean over seeds on the test episodes at ``step``."""
-    return best(results, results.points(DDPM, step), split="test")
+    return best(part.results, part.results.points(part.ddpm, step), split="test")
 
 
 def reaches(ours: dict[int, float], bar: dict[int, float]) -> str:
@@ -76,15 +127,15 @@ def mean_of(results: Results, point: Point, field: str) -> str:
     return f"{np.mean(values):.3g}" if values else "-"
 
 
-def curves_table(results: Results) -> list[str]:
+def curves_table(part: Part) -> list[str]:
     """Uncorrected, at every snapshot: DDPM's bar against each bridge at NFE 1, 2, 4."""
-    bridges = measured(results)
+    results, bridges = part.results, part.measured()
     nfes = sorted({n for b in bridges for s in results.steps(b) for n in results.nfes(b, s)})
     header = ["step", "DDPM best (NFE)"] + [f"{label(b)}, NFE {n}" for b in bridges for n in nfes]
     header += [f"{label(b)} at NFE <= 2 reaches DDPM's best" for b in bridges]
     rows = []
-    for step in results.steps(DDPM):
-        bar = ddpm_bar(results, step)
+    for step in results.steps(part.ddpm):
+        bar = ddpm_bar(part, step)
         bar_scores = results.values(bar) if bar else {}
         cells = [step, f"{cell(bar_scores)} ({bar.nfe})" if bar else "-"]
         cells += [cell(results.values(Point(b, step, n))) for b in bridges for n in nfes]
@@ -149,41 +200,44 @@ def goal_lines(results: Results, base: MethodKey, step: int, bar: Point) -> list
 
 
 def block(root: Path) -> str:
-    """The README's lines: per method and residual, the verdict at the final snapshot (goal_lines)."""
-    results = Results(read_csv(Path(root) / DATA / "results.csv"))
-    seeds = len({r.seed for r in results})
+    """The README's lines: per maze, execution, method and residual, the verdict at the final snapshot
+    (goal_lines)."""
     lines = []
-    for base in measured(results):
-        step = max(results.steps(base))
-        bar = ddpm_bar(results, step)
-        if bar is not None:
-            lines += [f"- {label(base)}, step {step}, {seeds} training seeds, {line[2:]}"
-                      for line in goal_lines(results, base, step, bar)]
+    for part in parts(root):
+        for base in part.measured():
+            step = max(part.results.steps(base))
+            bar = ddpm_bar(part, step)
+            if bar is not None:
+                lines += [f"- {part.title}, {label(base)}, step {step}, {len(part.seeds())} training seeds, {line[2:]}"
+                          for line in goal_lines(part.results, base, step, bar)]
     return "\n".join(lines)
 
 
 def render(root: Path) -> str:
-    results = Results(read_csv(Path(root) / DATA / "results.csv"))
-    seeds = sorted({r.seed for r in results})
-    episodes = sorted({r.episodes for r in results})
-    versions = sorted({r.code_version for r in results})
-    lines = ["# CDDB consistency corrections on medium: the consistent bridge and flow (line prior) against DDPM", "",
-             f"Generated by `bridgeplan study report medium-cddb` from docs/results/{DATA}/results.csv "
-             f"(studies/medium-cddb.toml; training seeds {', '.join(map(str, seeds))}; "
-             f"{', '.join(map(str, episodes))} episodes per evaluation; code {', '.join(versions)}). Scores: Minari "
-             "convention, mean ± standard error over training seeds. DDPM's bar: its best NFE on the test episodes. "
-             "The corrections were evaluated at the final snapshot only.", "",
-             "## Uncorrected, at every snapshot", "", *curves_table(results), ""]
-    for base in measured(results):
-        step = max(results.steps(base))
-        bar = ddpm_bar(results, step)
-        if bar is None:
-            continue
-        lines += [f"## {label(base)} at step {step}, each setting", "",
-                  f"DDPM's best at step {step}: {cell(results.values(bar))} at NFE {bar.nfe}. Bold: the setting "
-                  "chosen on the validation episodes at that NFE. Residuals: rms over the plans as sampled (m/s); "
-                  "network calls: NFE plus two per backward pass of a deep correction.", "",
-                  *corrections_table(results, base, step, results.values(bar)), "",
-                  "The goal at NFE <= 2, per residual (step size and NFE chosen on validation):", "",
-                  *goal_lines(results, base, step, bar), ""]
+    lines = ["# CDDB consistency corrections: the consistent bridge and flow (line prior) against DDPM", "",
+             "Generated by `bridgeplan study report cddb` from the results.csv of "
+             f"{', '.join(f'docs/results/{folder}' for folder in SOURCES)} (studies/cddb.toml and the studies it "
+             "uses). Scores: Minari convention, mean ± standard error over training seeds, 200 episodes per "
+             "evaluation. DDPM's bar: its best NFE on the test episodes, of the same part (maze and execution). The "
+             "corrections were evaluated at the final snapshot only.", ""]
+    for part in parts(root):
+        results = part.results
+        versions = sorted({r.code_version for r in results})
+        episodes = sorted({r.episodes for r in results})
+        lines += [f"## {part.title}", "",
+                  f"docs/results/{part.folder}: training seeds {', '.join(map(str, part.seeds()))}; "
+                  f"{', '.join(map(str, episodes))} episodes per evaluation; code {', '.join(versions)}.", "",
+                  "### Uncorrected", "", *curves_table(part), ""]
+        for base in part.measured():
+            step = max(results.steps(base))
+            bar = ddpm_bar(part, step)
+            if bar is None:
+                continue
+            lines += [f"### {label(base)} at step {step}, each setting", "",
+                      f"DDPM's best at step {step}: {cell(results.values(bar))} at NFE {bar.nfe}. Bold: the setting "
+                      "chosen on the validation episodes at that NFE. Residuals: rms over the plans as sampled (m/s); "
+                      "network calls: NFE plus two per backward pass of a deep correction.", "",
+                      *corrections_table(results, base, step, results.values(bar)), "",
+                      "The goal at NFE <= 2, per residual (step size and NFE chosen on validation):", "",
+                      *goal_lines(results, base, step, bar), ""]
     return "\n".join(lines).rstrip("\n")
