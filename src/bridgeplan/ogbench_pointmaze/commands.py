@@ -121,6 +121,22 @@ def _add_eval_command(og) -> None:
                    help="plan the coarse plan again from the current position every K steps (default: once)")
     _protocol_flags(h, "plan the low level again every K steps (required: one high-level step is the natural K)")
     h.set_defaults(func=_cmd_hierarchy_eval)
+    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS
+
+    g = og.add_parser("graph-eval", help="the dataset's own states as a graph (no network, no map): its shortest "
+                                         "paths executed on the 5-task protocol, the floor of stitching")
+    g.add_argument("name", help="the dataset's name (pointmaze-large-stitch-v0)")
+    g.add_argument("--dataset", default=None,
+                   help="its .npz (default: NAME.npz where `ogbench generate` writes, datasets/ogbench)")
+    g.add_argument("--keep", type=int, default=DEFAULTS["keep"], help="every keep-th state of an episode is a node")
+    g.add_argument("--radius", type=float, default=DEFAULTS["radius"],
+                   help="nodes of other episodes within this distance are joined (below a wall's thickness)")
+    g.add_argument("--neighbours", type=int, default=DEFAULTS["neighbours"],
+                   help="at most this many such joins per node")
+    g.add_argument("--reach", type=float, default=DEFAULTS["reach"],
+                   help="the start and the goal join the nodes within this distance (else the nearest)")
+    _protocol_flags(g, "plan again from the current position every K steps (default: open loop)")
+    g.set_defaults(func=_cmd_graph_eval)
 
 
 def _protocol_flags(p, replan_help: str) -> None:
@@ -135,7 +151,8 @@ def _protocol_flags(p, replan_help: str) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
     p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json)")
+    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json; graph-eval: "
+                                               "results/graph/NAME/ogbench-graph-<settings>.json)")
     p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: 1 on a CPU device)")
     p.add_argument("--no-floor", action="store_true",
@@ -154,14 +171,20 @@ def _execution(args):
     return execution, EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
 
 
-def _write(result: dict, args, run: Path, prefix: str, suffix: str) -> int:
-    from bridgeplan.evaluate import write_result
+def _run_eval_dir(run: Path) -> Path:
     from bridgeplan.layout import eval_dir
-    from bridgeplan.ogbench_pointmaze.planning import format_result
     from bridgeplan.runs import run_dir_of
 
+    return eval_dir(run_dir_of(run))
+
+
+def _write(result: dict, args, out_dir: Path, prefix: str, suffix: str) -> int:
+    """Write ``result`` to ``--out``, else into ``out_dir`` named by its settings; print it."""
+    from bridgeplan.evaluate import write_result
+    from bridgeplan.ogbench_pointmaze.planning import format_result
+
     tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
-    out = Path(args.out) if args.out else eval_dir(run_dir_of(run)) / f"{prefix}-seed{args.seed}{tasks}-{suffix}.json"
+    out = Path(args.out) if args.out else out_dir / f"{prefix}-seed{args.seed}{tasks}-{suffix}.json"
     write_result(result, out)
     if args.json:
         print(json.dumps(result, indent=2))
@@ -179,8 +202,8 @@ def _cmd_eval(args) -> int:
                           seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
                           snapshot=args.snapshot, progress=not args.no_progress,
                           floor=not args.no_floor)
-    return _write(result, args, Path(args.run), f"ogbench-step{result['step']}-nfe{result['nfe']}-ep{episodes}",
-                  execution.tag())
+    prefix = f"ogbench-step{result['step']}-nfe{result['nfe']}-ep{episodes}"
+    return _write(result, args, _run_eval_dir(Path(args.run)), prefix, execution.tag())
 
 
 def _cmd_hierarchy_eval(args) -> int:
@@ -192,4 +215,21 @@ def _cmd_hierarchy_eval(args) -> int:
                                     progress=not args.no_progress, floor=not args.no_floor)
     high = "" if args.replan_high_every is None else f"-high{args.replan_high_every}"
     prefix = f"ogbench-hierarchy-nfe{result['high']['nfe']}-{result['nfe']}-ep{episodes}"
-    return _write(result, args, Path(args.low), prefix, execution.tag() + high)
+    return _write(result, args, _run_eval_dir(Path(args.low)), prefix, execution.tag() + high)
+
+
+def _cmd_graph_eval(args) -> int:
+    from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
+    from bridgeplan.ogbench_pointmaze.planning import evaluate_graph
+
+    parse_dataset_name(args.name)
+    dataset = Path(args.dataset) if args.dataset else default_out_dir() / f"{args.name}.npz"
+    if not dataset.exists():
+        raise BridgeplanError(f"no dataset file {dataset}: give --dataset FILE, or make it with `bridgeplan ogbench "
+                              f"generate {args.name}`")
+    execution, episodes = _execution(args)
+    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
+    result = evaluate_graph(args.name, dataset, settings, execution, episodes, args.seed, _task_ids(args.tasks),
+                            progress=not args.no_progress)
+    prefix = f"ogbench-graph-keep{args.keep}-r{args.radius:g}-ep{episodes}"
+    return _write(result, args, Path("results") / "graph" / args.name, prefix, execution.tag())

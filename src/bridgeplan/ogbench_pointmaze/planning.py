@@ -32,7 +32,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.ogbench_pointmaze.controllers import DEFAULT_LOOKAHEAD, PointFollower, check_controller
 from bridgeplan.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
 from bridgeplan.planner import Planner
-from bridgeplan.trajectory import span
+from bridgeplan.trajectory import KINEMATIC_POINT, Layout, span
 
 
 @dataclass(frozen=True)
@@ -66,9 +66,10 @@ class PointExecution:
 @dataclass
 class PlanningPolicy:
     """``planner`` as a batched policy (``nfe`` network calls per plan), executing its plans as ``execution``
-    says. Pass :meth:`begin_batch` and :meth:`end_episodes` to ``evaluate_policy`` as its hooks."""
+    says. Pass :meth:`begin_batch` and :meth:`end_episodes` to ``evaluate_policy`` as its hooks. With
+    ``decisions`` and no planner (the dataset graph's paths, ``graph.GraphSource``), plans need no network."""
 
-    planner: Planner
+    planner: Planner | None
     nfe: int
     execution: PointExecution
     generator: torch.Generator
@@ -91,8 +92,15 @@ class PlanningPolicy:
 
     def __post_init__(self):
         self.execution.validate()
-        self.planner.process.validate_nfe(self.nfe)
+        if self.planner is not None:
+            self.planner.process.validate_nfe(self.nfe)
+        elif self.decisions is None:
+            raise BridgeplanError("a planning policy needs a planner or decisions")
         self._n = 0
+
+    @property
+    def layout(self) -> Layout:
+        return self.planner.layout if self.planner is not None else KINEMATIC_POINT
 
     def begin_batch(self, n: int) -> None:
         """A batch of ``n`` new episodes starts: each plans at its first step."""
@@ -162,8 +170,8 @@ class PlanningPolicy:
 
 
     def decide(self, positions: np.ndarray, goals: np.ndarray, episodes: np.ndarray) -> np.ndarray:
-        """Planned positions ``[N, S, 2]`` from the hierarchy's decision for ``episodes`` of the batch."""
-        layout = self.planner.layout
+        """Planned positions ``[N, S, 2]`` from the decisions (a hierarchy's, the graph's) for ``episodes``."""
+        layout = self.layout
         t0 = time.perf_counter()
         states = self._decide(layout.at_rest(positions), goals, episodes, self._t)
         self.plan_seconds += time.perf_counter() - t0
@@ -344,6 +352,59 @@ def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None =
         "calls_per_episode": float(sum(s.calls.sum() for s in sources) / result.to_dict()["episodes"]),
         "decision_ms_batch1": percentiles_ms(seconds[1:]),
         **floors, "environment": environment_of(high), "config": low_info.portable_config,
+    }
+
+
+def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
+                   execution: PointExecution | None = None, episodes_per_task: int = 50, seed: int = 0,
+                   task_ids: list[int] | None = None, progress: bool = False) -> dict:
+    """The dataset graph's paths (``graph.DatasetGraph`` over dataset ``name``'s file ``dataset``, built with
+    ``graph_settings``: keep, radius, neighbours, reach) executed on the maze's protocol, replanned from the
+    current position every ``execution.replan_every`` steps if given; returns what ``bridgeplan ogbench
+    graph-eval`` writes: ``ogbench eval``'s JSON with the graph's size and its paths' lengths, no network."""
+    from bridgeplan.files import code_version
+    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS, DatasetGraph, GraphSource
+    from bridgeplan.ogbench_pointmaze.reading import load_stream
+    from bridgeplan.replan import percentiles_ms
+
+    execution = execution or PointExecution()
+    execution.validate()
+    _check_episodes(episodes_per_task)
+    spec = parse_dataset_name(name)
+    settings = {**DEFAULTS, **(graph_settings or {})}
+    stream = load_stream(dataset, name)
+    t0 = time.perf_counter()
+    graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings)
+    build_seconds = time.perf_counter() - t0
+    sources: list[GraphSource] = []
+
+    def decisions(n: int) -> GraphSource:
+        sources.append(GraphSource(graph, EVAL_EPISODE_STEPS + 1))
+        return sources[-1]
+
+    policy = PlanningPolicy(None, 0, execution, torch.Generator(), decisions=decisions)
+    result, first = _protocol(policy, spec.maze, episodes_per_task, seed, task_ids, progress)
+    row = _row(result, policy, execution, episodes_per_task, seed)
+    steps = np.concatenate([s.path_steps for s in sources])
+    found = np.concatenate([s.found for s in sources])
+    pieces = np.concatenate([s.pieces for s in sources])
+    lone = GraphSource(graph, EVAL_EPISODE_STEPS + 1)
+    seconds = []
+    for _ in range(5):
+        t1 = time.perf_counter()
+        lone(first[0][None], first[1][None], np.arange(1), 0)
+        seconds.append(time.perf_counter() - t1)
+    return {
+        "kind": "graph", "run": f"graph over {name}", "step": 0, "dataset": name, "maze": spec.maze,
+        "method": "dataset graph", "nfe": 0, "horizon": EVAL_EPISODE_STEPS + 1, "stride": 1,
+        "plan_span": EVAL_EPISODE_STEPS, **row, "calls_per_episode": 0.0,
+        "decision_ms_batch1": percentiles_ms(seconds),
+        "graph": {**settings, "nodes": int(len(graph.nodes)), "edges": int(graph.costs.nnz // 2),
+                  "jumps": graph.jumps, "build_seconds": build_seconds, "paths_found": float(found.mean()),
+                  "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
+                  "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}},
+        "environment": {"code_version": code_version()},
+        "config": {"dataset": name, "dataset_identity": stream.identity(), "graph": settings},
     }
 
 

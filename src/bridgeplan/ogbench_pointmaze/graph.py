@@ -1,0 +1,211 @@
+"""The dataset as a graph of its own states: a map-free coarse plan that stitches pieces of data together.
+
+OGBench's stitch datasets hold 200-step pieces of the 1000-step tasks (and navigate's episodes wander between
+random goals): no window of the data goes from a task's start to its goal, so a planner trained on windows
+never saw such a path. But the pieces cross one another. Search on the replay buffer (Eysenbach et al., NeurIPS
+2019) plans over the data's states instead; here without a learned distance, with the data's own steps:
+
+- nodes: every ``keep``-th state of each episode (and its last);
+- edges: consecutive nodes of one episode, their cost the steps between them (``keep``, or fewer at an
+  episode's end); and each node to its ``neighbours`` nearest nodes within ``radius`` of any episode, the cost
+  the steps the point needs to cross the gap at full speed (distance / :data:`STEP`). Edges are undirected: the
+  kinematic point's steps can be walked back in free space. A jump never crosses a wall when ``radius`` is
+  below the wall's thickness (a 4-unit cell here), except across a corner where two free cells touch diagonally;
+  a small radius (default 0.5, a few steps) keeps such jumps rare and short;
+- a query joins the start to the nodes within ``reach`` of it (the nearest one if none is) and the goal
+  likewise, and takes the cheapest path (Dijkstra);
+- the path, densified: the dataset's own states between consecutive nodes of an episode, straight lines at
+  most :data:`STEP` apart across jumps and to the start and the goal; one position per step, the goal
+  repeated to a fixed length.
+
+Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into a policy's decisions
+(``ogbench_pointmaze.planning.PlanningPolicy.decisions``), ``bridgeplan ogbench graph-eval`` scores it on the
+protocol: what the data's connectivity alone allows, the floor a stitching planner must beat.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.controllers import GAIN
+
+STEP = GAIN
+"""Distance the point moves in one step at full speed along an axis (0.2): a jump's cost is its length / STEP."""
+DEFAULT_KEEP = 10
+DEFAULT_RADIUS = 0.5
+DEFAULT_NEIGHBOURS = 8
+DEFAULT_REACH = 2.0
+DEFAULTS = {"keep": DEFAULT_KEEP, "radius": DEFAULT_RADIUS, "neighbours": DEFAULT_NEIGHBOURS, "reach": DEFAULT_REACH}
+
+
+def check_graph_settings(keep: int, radius: float, neighbours: int, reach: float) -> None:
+    """Bad settings raise BridgeplanError (the CLI's one-line ``error:``)."""
+    if keep < 1:
+        raise BridgeplanError(f"--keep must be >= 1 (every keep-th state is a node), got {keep}")
+    if not np.isfinite(radius) or radius < 0:
+        raise BridgeplanError(f"--radius must be a distance >= 0, got {radius}")
+    if neighbours < 0:
+        raise BridgeplanError(f"--neighbours must be >= 0, got {neighbours}")
+    if not np.isfinite(reach) or reach <= 0:
+        raise BridgeplanError(f"--reach must be a positive distance, got {reach}")
+
+
+@dataclass
+class DatasetGraph:
+    """The graph over a dataset's states (:meth:`build`); :meth:`paths` answers queries."""
+
+    observations: np.ndarray
+    """``[T, 2]`` every state of the dataset, episodes one after another."""
+    nodes: np.ndarray
+    """``[V]`` the nodes' rows in ``observations``, ascending."""
+    episode: np.ndarray
+    """``[V]`` each node's episode."""
+    costs: object
+    """``[V, V]`` sparse symmetric matrix of edge costs (steps)."""
+    tree: cKDTree
+    reach: float = DEFAULT_REACH
+    jumps: int = 0
+    """Edges between nodes not consecutive in one episode."""
+
+    @classmethod
+    def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULT_KEEP,
+              radius: float = DEFAULT_RADIUS, neighbours: int = DEFAULT_NEIGHBOURS,
+              reach: float = DEFAULT_REACH) -> DatasetGraph:
+        """The graph of ``observations [T, 2]`` whose episodes begin at rows ``starts`` (ascending, 0 first)."""
+        check_graph_settings(keep, radius, neighbours, reach)
+        observations = np.asarray(observations, np.float64)
+        starts = np.asarray(starts, np.int64)
+        ends = np.append(starts[1:], len(observations)) - 1
+        if len(starts) == 0 or starts[0] != 0 or np.any(ends < starts):
+            raise BridgeplanError("episodes must begin at ascending rows, the first at 0")
+        rows, episode = [], []
+        for e, (s, t) in enumerate(zip(starts, ends)):
+            r = np.arange(s, t + 1, keep)
+            if r[-1] != t:
+                r = np.append(r, t)
+            rows.append(r)
+            episode.append(np.full(len(r), e))
+        nodes, episode = np.concatenate(rows), np.concatenate(episode)
+        xy = observations[nodes]
+        same = episode[1:] == episode[:-1]  # consecutive nodes of one episode
+        i, j = np.flatnonzero(same), np.flatnonzero(same) + 1
+        w = (nodes[j] - nodes[i]).astype(np.float64)
+        tree = cKDTree(xy)
+        if neighbours and radius > 0:
+            dist, nn = tree.query(xy, k=neighbours + 1, distance_upper_bound=radius)
+            a = np.repeat(np.arange(len(xy)), neighbours + 1)
+            b, d = nn.ravel(), dist.ravel()
+            ok = np.isfinite(d) & (b != a)
+            ok[ok] &= episode[a[ok]] != episode[b[ok]]  # within an episode, its own steps say the way
+            i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
+            w = np.concatenate([w, np.maximum(d[ok], 1e-9) / STEP])
+        # one edge per pair, its cheapest cost (a pair found from both ends, or both a step and a jump)
+        lo, hi = np.minimum(i, j), np.maximum(i, j)
+        order = np.lexsort((w, hi, lo))
+        lo, hi, w = lo[order], hi[order], w[order]
+        first = np.ones(len(lo), dtype=bool)
+        first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
+        lo, hi, w = lo[first], hi[first], w[first]
+        jumps = int(np.sum(episode[lo] != episode[hi]))
+        n = len(nodes)
+        costs = coo_matrix((np.concatenate([w, w]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
+                           shape=(n, n)).tocsr()
+        return cls(observations, nodes, episode, costs, tree, reach, jumps)
+
+    def _ends(self, points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per point, the nodes it joins (within ``reach``, else the nearest) and the steps to each."""
+        near = self.tree.query_ball_point(points, self.reach)
+        out = []
+        for p, idx in zip(points, near):
+            idx = np.asarray(idx, np.int64)
+            if len(idx) == 0:
+                idx = np.array([self.tree.query(p)[1]], np.int64)
+            out.append((idx, np.linalg.norm(self.tree.data[idx] - p, axis=1) / STEP))
+        return out
+
+    def path_nodes(self, start: np.ndarray, goal: np.ndarray) -> list[int]:
+        """The cheapest node path from ``start`` to ``goal`` (positions ``[2]``); [] when no path joins them.
+        The start enters the graph as one more node, joined to its nodes by the steps to them."""
+        (s_idx, s_cost), (g_idx, g_cost) = self._ends(np.stack([start, goal]))
+        n, c = self.costs.shape[0], self.costs
+        with_start = csr_matrix((np.concatenate([c.data, np.maximum(s_cost, 1e-9)]),
+                                 np.concatenate([c.indices, s_idx]), np.append(c.indptr, c.indptr[-1] + len(s_idx))),
+                                shape=(n + 1, n + 1))
+        dist, pred = dijkstra(with_start, indices=n, return_predecessors=True)
+        through = dist[g_idx] + g_cost
+        if not np.isfinite(through).any():
+            return []
+        node = int(g_idx[np.argmin(through)])
+        path = [node]
+        while pred[node] != n:
+            node = int(pred[node])
+            path.append(node)
+        return path[::-1]
+
+    def densify(self, start: np.ndarray, goal: np.ndarray, path: list[int]) -> np.ndarray:
+        """``[L, 2]`` positions at most :data:`STEP` apart per axis from ``start`` through ``path`` to ``goal``:
+        the dataset's states between consecutive nodes of one episode, straight lines elsewhere."""
+        pieces = [np.asarray(start, np.float64)[None]]
+        for a, b in zip(path, path[1:]):
+            if self.episode[a] == self.episode[b]:
+                lo, hi = sorted((self.nodes[a], self.nodes[b]))
+                seg = self.observations[lo:hi + 1]
+                pieces.append((seg if self.nodes[a] < self.nodes[b] else seg[::-1])[1:])
+            else:
+                pieces.append(_line(self.observations[self.nodes[a]], self.observations[self.nodes[b]]))
+        if path:
+            pieces.insert(1, _line(start, self.observations[self.nodes[path[0]]]))
+            pieces.append(_line(pieces[-1][-1], goal))
+        else:
+            pieces.append(_line(start, goal))
+        return np.concatenate(pieces)
+
+
+def _line(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Points from ``a`` (excluded) to ``b`` (included), at most :data:`STEP` apart per axis."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    n = max(1, int(np.ceil(np.abs(b - a).max() / STEP)))
+    return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
+
+
+def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
+    """``[length, 2]``: ``path`` cut to ``length`` positions, or its last repeated up to it."""
+    if len(path) >= length:
+        return path[:length]
+    return np.concatenate([path, np.repeat(path[-1:], length - len(path), axis=0)])
+
+
+@dataclass
+class GraphSource:
+    """The graph's paths as a policy's decisions (``PlanningPolicy.decisions``): each decision plans from the
+    episodes' current positions to their goals, paths ``length`` positions long."""
+
+    graph: DatasetGraph
+    length: int
+    path_steps: list[int] = field(default_factory=list)
+    """Each path's length in positions (before padding): the steps it asks for."""
+    found: list[bool] = field(default_factory=list)
+    """Whether each query found a path (else the straight line)."""
+    pieces: list[int] = field(default_factory=list)
+    """How many of the data's episodes each path runs through (1: no stitching)."""
+    seconds: float = 0.0
+
+    def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
+        t0 = time.perf_counter()
+        out = np.empty((len(states), self.length, 2))
+        for k, (s, g) in enumerate(zip(np.asarray(states, np.float64)[:, :2], np.asarray(goals, np.float64))):
+            nodes = self.graph.path_nodes(s, g)
+            path = self.graph.densify(s, g, nodes)
+            self.path_steps.append(len(path))
+            self.found.append(bool(nodes))
+            self.pieces.append(len(set(self.graph.episode[nodes].tolist())))
+            out[k] = fixed_length(path, self.length)
+        self.seconds += time.perf_counter() - t0
+        return out

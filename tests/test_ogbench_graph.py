@@ -1,0 +1,122 @@
+"""The dataset graph (``ogbench_pointmaze.graph``): paths over the data's own states, stitched across episodes
+where they pass close, densified from the data; and ``bridgeplan ogbench graph-eval`` on OGBench's protocol."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridgeplan.cli import main
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.ogbench_pointmaze.graph import STEP, DatasetGraph, GraphSource, fixed_length
+
+
+def _walk(a, b, steps):
+    """``steps + 1`` states from ``a`` to ``b`` at constant speed."""
+    return np.asarray(a, float) + (np.asarray(b, float) - np.asarray(a, float)) * np.linspace(0, 1, steps + 1)[:, None]
+
+
+def two_pieces(gap: float = 0.1):
+    """Episode 0 walks (0, 0) -> (10, 0); episode 1 walks (10, gap) -> (10, 10): they meet near (10, 0)."""
+    a, b = _walk((0, 0), (10, 0), 50), _walk((10, gap), (10, 10), 50)
+    return np.concatenate([a, b]), np.array([0, len(a)])
+
+
+def test_a_path_stitches_two_episodes_where_they_meet():
+    obs, starts = two_pieces()
+    g = DatasetGraph.build(obs, starts, keep=5, radius=0.5, neighbours=4)
+    assert g.jumps >= 1
+    nodes = g.path_nodes(np.array([0.0, 0.0]), np.array([10.0, 10.0]))
+    assert {int(g.episode[n]) for n in nodes} == {0, 1} and g.episode[nodes[0]] == 0 and g.episode[nodes[-1]] == 1
+    path = g.densify(np.array([0.0, 0.0]), np.array([10.0, 10.0]), nodes)
+    assert np.allclose(path[0], [0, 0]) and np.allclose(path[-1], [10, 10])
+    assert np.abs(np.diff(path, axis=0)).max() <= STEP + 1e-9  # one step apart at most, per axis
+    # the data's own states, in order: all of episode 0, then all of episode 1
+    assert any(np.allclose(p, obs[25]) for p in path) and any(np.allclose(p, obs[51 + 25]) for p in path)
+    # walked back (undirected): episode 1, then 0 (where the ends join is a tie between nodes within reach)
+    back = [int(g.episode[n]) for n in g.path_nodes(np.array([10.0, 10.0]), np.array([0.0, 0.0]))]
+    assert back[0] == 1 and back[-1] == 0 and back == sorted(back, reverse=True)
+
+
+def test_no_jump_beyond_the_radius():
+    obs, starts = two_pieces(gap=1.0)
+    g = DatasetGraph.build(obs, starts, keep=5, radius=0.5, neighbours=4)
+    assert g.jumps == 0
+    assert g.path_nodes(np.array([0.0, 0.0]), np.array([10.0, 10.0])) == []
+    # no path: the straight line, at most a step apart
+    line = g.densify(np.array([0.0, 0.0]), np.array([10.0, 10.0]), [])
+    assert np.allclose(line[0], 0) and np.allclose(line[-1], 10) and len(line) == 10 / STEP + 1
+    assert len(DatasetGraph.build(obs, starts, keep=5, radius=1.5, neighbours=4).path_nodes(
+        np.array([0.0, 0.0]), np.array([10.0, 10.0]))) > 0
+
+
+def test_the_cheapest_path_is_taken():
+    """Two ways from (0, 0) to (10, 0): straight (50 steps) and a detour over (5, 5) (100 steps)."""
+    straight = _walk((0, 0), (10, 0), 50)
+    detour = np.concatenate([_walk((0, 0.1), (5, 5), 50), _walk((5, 5), (10, 0.1), 50)[1:]])
+    obs = np.concatenate([detour, straight])
+    g = DatasetGraph.build(obs, np.array([0, len(detour)]), keep=5, radius=0.5, neighbours=4)
+    nodes = g.path_nodes(np.array([0.0, 0.0]), np.array([10.0, 0.0]))
+    assert {int(g.episode[n]) for n in nodes} == {1}
+    path = g.densify(np.array([0.0, 0.0]), np.array([10.0, 0.0]), nodes)
+    assert np.abs(path[:, 1]).max() < 0.2
+
+
+def test_settings_and_episodes_are_checked():
+    obs, starts = two_pieces()
+    for bad in ({"keep": 0}, {"radius": -1.0}, {"neighbours": -1}, {"reach": 0.0}, {"radius": float("nan")}):
+        with pytest.raises(BridgeplanError):
+            DatasetGraph.build(obs, starts, **bad)
+    with pytest.raises(BridgeplanError):
+        DatasetGraph.build(obs, np.array([3, 10]))
+
+
+def test_paths_have_a_fixed_length():
+    path = np.arange(10.0).reshape(5, 2)
+    assert np.array_equal(fixed_length(path, 3), path[:3])
+    padded = fixed_length(path, 8)
+    assert padded.shape == (8, 2) and np.array_equal(padded[5:], np.repeat(path[-1:], 3, axis=0))
+    obs, starts = two_pieces()
+    source = GraphSource(DatasetGraph.build(obs, starts, keep=5), length=400)
+    out = source(np.array([[0.0, 0.0], [10.0, 10.0]]), np.array([[10.0, 10.0], [0.0, 0.0]]), np.arange(2), 0)
+    assert out.shape == (2, 400, 2) and source.found == [True, True] and source.pieces == [2, 2]
+    assert np.allclose(out[0, -1], [10, 10]) and np.allclose(out[1, -1], [0, 0])
+
+
+NAME = "pointmaze-medium-stitch-v0"
+
+
+@pytest.fixture(scope="module")
+def stitch(tmp_path_factory) -> Path:
+    """A small stitch dataset (150 episodes of 201 steps, each to a cell 4 BFS steps away) by the real generator."""
+    out = tmp_path_factory.mktemp("ogbench-stitch")
+    assert main(["ogbench", "generate", NAME, "--episodes", "150", "--out", str(out), "--no-progress"]) == 0
+    return out / f"{NAME}.npz"
+
+
+def test_graph_eval_stitches_the_pieces_on_the_protocol(stitch, tmp_path, capsys):
+    """Task 1 crosses the maze (more than 4 cells): no episode of the data does, so every path found joins
+    several; the JSON says how the graph was built and what its paths asked for."""
+    out = tmp_path / "g.json"
+    assert main(["ogbench", "graph-eval", NAME, "--dataset", str(stitch), "--episodes-per-task", "2", "--tasks", "1",
+                 "--controller", "pursuit", "--no-progress", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["kind"] == "graph" and r["nfe"] == 0 and r["calls_per_episode"] == 0 and r["episodes"] == 2
+    g = r["graph"]
+    assert (g["keep"], g["radius"], g["neighbours"], g["reach"]) == (10, 0.5, 8, 2.0)
+    assert g["nodes"] > 150 * 20 and g["jumps"] > 0 and g["paths_found"] == 1.0
+    assert g["episodes_per_path"]["mean"] >= 2  # no episode of the data goes from a task's start to its goal
+    assert r["config"]["dataset_identity"].startswith(f"{NAME}.npz (")
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_graph_eval_refuses_bad_input(stitch, tmp_path, capsys):
+    for args in (["--keep", "0"], ["--radius", "-1"], ["--episodes-per-task", "0"]):
+        assert main(["ogbench", "graph-eval", NAME, "--dataset", str(stitch), "--no-progress", *args]) == 2
+        assert capsys.readouterr().err.startswith("error: ")
+    assert main(["ogbench", "graph-eval", NAME, "--dataset", str(tmp_path / "none.npz"), "--no-progress"]) == 2
+    assert "no dataset file" in capsys.readouterr().err
+    assert main(["ogbench", "graph-eval", "pointmaze-huge-stitch-v0", "--no-progress"]) == 2
