@@ -460,6 +460,8 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }', "evaluations[0].args: unrecognized"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { seed = 2 }', "evaluations[0].args.seed: set by"),
     ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
+    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"', "evaluations[0].command: ogbench graph-eval reads"),
+    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
 ])
 def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation, message):
     root = tmp_path / "repo"
@@ -503,11 +505,19 @@ runs = []
 args = {{ maze = "medium", episodes = 1, tasks = "1" }}
 out = "cal/oracle-medium.json"
 task_seed = 0
+
+[[evaluations]]
+command = "ogbench graph-eval"
+runs = []
+args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5 }}
+out = "cal/graph.json"
+task_seed = 0
 """
 
 
 def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_path, capsys):
-    """GCBC runs (trainer = "gcbc") and the oracle (no run, the maze a positional argument) in a command study."""
+    """GCBC runs (trainer = "gcbc"), the oracle (no run, the maze a positional argument) and the dataset graph (no
+    run, the study's dataset given by the runner) in a command study."""
     import json
 
     root = tmp_path / "repo"
@@ -518,11 +528,14 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
-    assert "cal: 2 new results" in capsys.readouterr().out
+    assert "cal: 3 new results" in capsys.readouterr().out
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
     oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())
     assert oracle["policy"] == "oracle" and oracle["maze"] == "medium" and oracle["episodes"] == 1
+    graph = json.loads((root / "results" / "cal" / "cal" / "graph.json").read_text())
+    assert graph["kind"] == "graph" and graph["dataset"] == "pointmaze-medium-navigate-v0" and graph["episodes"] == 1
+    assert graph["graph"]["keep"] == 5 and graph["config"]["dataset_identity"].startswith("pointmaze-medium-navigate")
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
     assert "cal: 0 new results" in capsys.readouterr().out
     assert main(["ogbench", "gcbc-eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",

@@ -9,7 +9,8 @@ run``)::
     stride = 12
 
     [[evaluations]]
-    command = "hierarchy eval"           # eval | hierarchy eval | ogbench eval | ogbench evaluate-oracle | gcbc-eval
+    command = "hierarchy eval"           # eval | hierarchy eval | ogbench eval | ogbench hierarchy-eval |
+                                         # ogbench evaluate-oracle | ogbench gcbc-eval | ogbench graph-eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
     args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
@@ -21,7 +22,7 @@ run``)::
 writes each under the study's results directory (results/NAME/OUT): a JSON there is done; it trains what the missing
 ones need and runs their commands (``--workers`` training seeds side by side, one torch thread each). ``study
 export`` copies them to docs/results/OUT, where the study's report reads them; ``study import`` copies the committed
-ones back.
+ones back. ``ogbench graph-eval`` takes no run (``runs = []``): the runner gives it the study's dataset.
 """
 
 from __future__ import annotations
@@ -31,15 +32,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import NamedRun, command_argv
+from bridgeplan.studies.spec import READS_THE_DATASET, NamedRun, command_argv
 
 EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task",
                  "ogbench hierarchy-eval": "--episodes-per-task", "ogbench evaluate-oracle": "--episodes",
-                 "ogbench gcbc-eval": "--episodes"}
+                 "ogbench gcbc-eval": "--episodes", "ogbench graph-eval": "--episodes-per-task"}
 """Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
 task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
 QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "ogbench eval": 4, "ogbench hierarchy-eval": 4,
-                  "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4}
+                  "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4, "ogbench graph-eval": 4}
 """Episodes at the quick scale: Maze2D's per evaluation, OGBench's per task."""
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
@@ -50,8 +51,10 @@ class Job:
 
     path: Path
     argv: tuple[str, ...]
+    """Without the study's dataset file, which :func:`run_seed` adds for a command that reads it."""
     seed: int
     runs: tuple[str, ...]
+    reads_dataset: bool = False
 
 
 def run_dir(results: Path, run: str, seed: int) -> Path:
@@ -97,11 +100,13 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if quick:
                         cap = QUICK_EPISODES[e.command]
                         episodes = cap if episodes is None else min(episodes, cap)
-                    argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
-                                          tuple(sorted(args.items()))),
+                    positional = [str(run_dir(results, r, seed)) for r in e.runs]
+                    if e.command in READS_THE_DATASET:
+                        positional.append(study.dataset.maze)
+                    argv = [*command_argv(e.command, positional, tuple(sorted(args.items()))),
                             *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
                             *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
-                    out.append(Job(path, tuple(argv), seed, e.runs))
+                    out.append(Job(path, tuple(argv), seed, e.runs, e.command in READS_THE_DATASET))
     return out
 
 
@@ -137,7 +142,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
-        if main(list(job.argv)) != 0:
+        if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else [])]) != 0:
             raise BridgeplanError(f"bridgeplan {' '.join(job.argv)} failed (its error above)")
         written += 1
     return written

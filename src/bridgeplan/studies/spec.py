@@ -62,7 +62,8 @@ Example (the keys and their defaults: the dataclasses below)::
     maze = "medium"
 
     [[evaluations]]
-    command = "eval"                     # or hierarchy eval, ogbench eval, ogbench evaluate-oracle, ogbench gcbc-eval
+    command = "eval"                     # or hierarchy eval, ogbench eval, ogbench hierarchy-eval, ogbench
+                                         # evaluate-oracle, ogbench gcbc-eval, ogbench graph-eval
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -408,16 +409,20 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 
 COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval"),
             "ogbench hierarchy-eval": ("ogbench", "hierarchy-eval"),
-            "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval")}
+            "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval"),
+            "ogbench graph-eval": ("ogbench", "graph-eval")}
 LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench hierarchy-eval": 2, "ogbench evaluate-oracle": 0,
-          "ogbench gcbc-eval": 1}
+          "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
 """How many runs each command takes (a hierarchy: the high level, then the low one; the oracle none)."""
 POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
+READS_THE_DATASET = {"ogbench graph-eval"}
+"""Commands that read the study's dataset itself: the runner gives them its name and file (``NAME --dataset
+FILE``); their study's dataset must be OGBench's."""
 TRAINERS = ("planner", "gcbc")
 """What trains a named run: ``bridgeplan train`` (a planner), or ``ogbench gcbc-train`` (GCBC, the calibration
 baseline)."""
-SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress"}
+SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress", "dataset"}
 TASK_SETS = ("single", "multi")
 
 
@@ -546,7 +551,8 @@ def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
     """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
     from bridgeplan.cli import build_parser
 
-    argv = command_argv(evaluation.command, ["RUN"] * LEVELS[evaluation.command], evaluation.args)
+    positional = ["RUN"] * LEVELS[evaluation.command] + (["NAME"] if evaluation.command in READS_THE_DATASET else [])
+    argv = command_argv(evaluation.command, positional, evaluation.args)
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err):
@@ -627,6 +633,10 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
     if experiments and dataset.generator != "expert":
         raise StudyError(path, "experiments", "the thesis's grids and declared series run on Maze2D (an expert "
                                               "dataset); an OGBench study declares [runs.NAME] and [[evaluations]]")
+    for i, e in enumerate(evaluations):
+        if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
+            raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
+                                                                f"OGBench's (generator = \"ogbench\")")
     from bridgeplan.studies.plan import check_study
 
     check_study(study)

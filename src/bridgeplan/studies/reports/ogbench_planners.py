@@ -1,8 +1,10 @@
-"""OGBench pointmaze navigate: bridgeplan's planners by OGBench's protocol, beside the straight line alone, the
-oracle and the published methods.
+"""OGBench pointmaze, navigate and stitch: bridgeplan's planners by OGBench's protocol, beside the dataset graph,
+the straight line alone, the oracle and the published methods.
 
-Rows: ``bridgeplan ogbench eval --json`` outputs in docs/results/ogbench-<maze>-navigate/<run>/ (one per run,
-controller and evaluation seed). The test episodes are evaluation seed :data:`TEST_SEED` (the protocol's 5 tasks x
+Rows: ``bridgeplan ogbench eval --json`` outputs (and ``hierarchy-eval``'s, ``graph-eval``'s) in
+docs/results/ogbench-<maze>-<kind>/<run>/ (one per run, controller and evaluation seed). The dataset graph
+(``ogbench_pointmaze.graph``) trains nothing: its rows are one deterministic graph per setting, so their "mean over
+training seeds" is that one value. The test episodes are evaluation seed :data:`TEST_SEED` (the protocol's 5 tasks x
 50 episodes); the controller (Diffuser-style tracking in time, or pursuit of the plan's path) is chosen per method
 on the validation episodes, seed :data:`VALIDATION_SEED`, and reported on the test ones. Success is OGBench's
 ``overall_success`` (the mean of the 5 task rates), in %, mean ± standard error over training seeds; the line
@@ -24,26 +26,45 @@ from bridgeplan.analysis.tables import bold, fmt_mean_se, table
 
 READS = ()
 """Its rows are the protocol's JSONs, not a Maze2D store."""
-MAZES = ("medium", "large", "giant")
-"""The mazes whose folders the report reads (a maze without rows is left out)."""
+DATASETS = tuple((maze, kind) for kind in ("navigate", "stitch") for maze in ("medium", "large", "giant"))
+"""The datasets whose folders the report reads (one without rows is left out)."""
 TEST_SEED, VALIDATION_SEED = 0, 1000
 ORACLE = "ogbench-oracle"
-PUBLISHED = {"medium": {"GCBC": 9, "QRL": 82, "SAW": 97}, "large": {"GCBC": 29, "QRL": 86, "SAW": 85},
-             "giant": {"GCBC": 1, "QRL": 68, "SAW": 68}}
-"""Published navigate success (%): GCBC and QRL from OGBench (Park et al., ICLR 2025), SAW from its paper, as
-reprinted in later papers; 8 seeds at 1 M steps."""
+PUBLISHED = {"navigate": {"medium": {"GCBC": 9, "QRL": 82, "SAW": 97}, "large": {"GCBC": 29, "QRL": 86, "SAW": 85},
+                          "giant": {"GCBC": 1, "QRL": 68, "SAW": 68}},
+             "stitch": {"medium": {"GCBC": 23, "QRL": 80, "CompDiffuser": 100},
+                        "large": {"GCBC": 7, "QRL": 84, "CompDiffuser": 100},
+                        "giant": {"GCBC": 0, "QRL": 50, "CompDiffuser": 68}}}
+"""Published success (%): GCBC and QRL from OGBench (Park et al., ICLR 2025; 8 seeds at 1 M steps), SAW and
+CompDiffuser from their papers, as reprinted in later papers."""
 
 
-def folder(maze: str) -> str:
-    return f"ogbench-{maze}-navigate"
+def folder(maze: str, kind: str = "navigate") -> str:
+    return f"ogbench-{maze}-{kind}"
 
 
-def read_rows(root: Path, maze: str) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted((root / folder(maze)).glob("*/*.json"))]
+def dataset_name(maze: str, kind: str) -> str:
+    return f"pointmaze-{maze}-{kind}-v0"
+
+
+def read_rows(root: Path, maze: str, kind: str = "navigate") -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted((root / folder(maze, kind)).glob("*/*.json"))]
+
+
+def is_graph(row: dict) -> bool:
+    return row.get("kind") == "graph"
 
 
 def method_of(row: dict) -> str:
+    if is_graph(row):
+        g = row["graph"]
+        return f"dataset graph (keep {g['keep']}, radius {g['radius']:g}), no network"
     return f"{row['method']}, NFE {row['nfe']}"
+
+
+def training_seed(row: dict) -> int:
+    """The row's training seed (the dataset graph trains nothing: 0)."""
+    return 0 if is_graph(row) else row["config"]["seed"]
 
 
 def controller_of(row: dict) -> str:
@@ -54,16 +75,16 @@ def controller_of(row: dict) -> str:
 
 
 def by_seed(rows: list[dict], method: str, controller: str, seed: int, value) -> dict[int, float]:
-    return {r["config"]["seed"]: value(r) for r in rows
-            if method_of(r) == method and controller_of(r) == controller and r["seed"] == seed}
+    return {training_seed(r): value(r) for r in rows
+            if method_of(r) == method and controller_of(r) == controller and r["seed"] == seed and value(r) is not None}
 
 
 def success(r: dict) -> float:
     return 100 * r["success_rate"]
 
 
-def floor(r: dict) -> float:
-    return 100 * r["floor_line"]["success_rate"]
+def floor(r: dict) -> float | None:
+    return 100 * r["floor_line"]["success_rate"] if "floor_line" in r else None
 
 
 def cell(values: dict[int, float]) -> str:
@@ -80,34 +101,40 @@ def choose(rows: list[dict], methods: list[str], controllers: list[str]) -> dict
     return out
 
 
-def goal_lines(rows: list[dict], maze: str, methods: list[str], chosen: dict[str, str | None]) -> list[str]:
-    """Per method, its chosen setting's test success against each published method (above at two standard errors)."""
+def goal_lines(rows: list[dict], maze: str, kind: str, methods: list[str],
+               chosen: dict[str, str | None]) -> list[str]:
+    """Per method, its chosen setting's test success against each published method (above at two standard errors;
+    the dataset graph, one deterministic graph: above when its success is)."""
     lines = []
     for m in methods:
         c = chosen[m]
         test = by_seed(rows, m, c, TEST_SEED, success) if c else {}
-        if len(test) < 2:
+        graph = any(is_graph(r) for r in rows if method_of(r) == m)
+        if len(test) < (1 if graph else 2):
             continue
         s = mean_se(test)
         above = ", ".join(f"{name} {value}: {'yes' if s.mean - 2 * s.se > value else 'no'}"
-                          for name, value in PUBLISHED.get(maze, {}).items())
-        lines.append(f"- pointmaze-{maze}-navigate-v0, {m}, {c} (chosen on validation): {fmt_mean_se(test)}% "
-                     f"over {len(test)} training seeds; above at two standard errors: {above}")
+                          for name, value in PUBLISHED[kind].get(maze, {}).items())
+        how = "one graph, no training" if graph else f"over {len(test)} training seeds"
+        lines.append(f"- {dataset_name(maze, kind)}, {m}, {c} (chosen on validation): "
+                     f"{fmt_mean_se(test, one_seed='mean')}% {how}; above"
+                     f"{'' if graph else ' at two standard errors'}: {above}")
     return lines
 
 
 def block(root: Path) -> str:
     """The README's lines: each method's chosen setting against the published methods."""
     lines = []
-    for maze in MAZES:
-        rows = read_rows(Path(root), maze)
+    for maze, kind in DATASETS:
+        rows = read_rows(Path(root), maze, kind)
         methods = sorted({method_of(r) for r in rows})
-        lines += goal_lines(rows, maze, methods, choose(rows, methods, sorted({controller_of(r) for r in rows})))
+        lines += goal_lines(rows, maze, kind, methods,
+                            choose(rows, methods, sorted({controller_of(r) for r in rows})))
     return "\n".join(lines)
 
 
-def maze_lines(root: Path, maze: str) -> list[str]:
-    rows = read_rows(root, maze)
+def dataset_lines(root: Path, maze: str, kind: str) -> list[str]:
+    rows = read_rows(root, maze, kind)
     if not rows:
         return []
     methods = sorted({method_of(r) for r in rows})
@@ -128,31 +155,35 @@ def maze_lines(root: Path, maze: str) -> list[str]:
                          f"{np.mean(list(ms.values())):.0f}" if ms else "-"])
     oracle_path = root / ORACLE / f"{maze}.json"
     oracle = f"{100 * json.loads(oracle_path.read_text())['success_rate']:.1f}" if oracle_path.exists() else "-"
-    published = PUBLISHED.get(maze, {})
-    seeds = sorted({r["config"]["seed"] for r in rows})
-    steps = sorted({r["step"] for r in rows})
+    published = PUBLISHED[kind].get(maze, {})
+    trained = [r for r in rows if not is_graph(r)]
+    seeds = sorted({training_seed(r) for r in trained})
+    steps = sorted({r["step"] for r in trained})
     versions = sorted({r["environment"]["code_version"] for r in rows})
-    goal = goal_lines(rows, maze, methods, chosen)
-    return [f"## pointmaze-{maze}-navigate-v0", "",
-            f"Training seeds {', '.join(map(str, seeds))}; step {', '.join(map(str, steps))}; code "
-            f"{', '.join(versions)}. Bold: the controller the validation episodes choose per method. ms / decision: "
-            "one plan at batch 1 (p50). The noise-free oracle on the same protocol: " + oracle + "%; OGBench's "
-            "published navigate success: " + ", ".join(f"{k} {v}" for k, v in published.items()) + ".", "",
+    training = (f"Training seeds {', '.join(map(str, seeds))}; step {', '.join(map(str, steps))}; " if trained
+                else "No trained planner yet; ")
+    goal = goal_lines(rows, maze, kind, methods, chosen)
+    return [f"## {dataset_name(maze, kind)}", "",
+            f"{training}code {', '.join(versions)}. Bold: the controller the validation episodes choose per method. "
+            "ms / decision: one plan at batch 1 (p50). The noise-free oracle on the same protocol: " + oracle + "%; "
+            f"published {kind} success: " + ", ".join(f"{k} {v}" for k, v in published.items()) + ".", "",
             *table(["method", "controller", "validation", "test", "task 1", "task 2", "task 3", "task 4", "task 5",
                     "line alone", "ms / decision"], body), "", *goal, ""]
 
 
 def render(root: Path) -> str:
     root = Path(root)
-    lines = ["# OGBench pointmaze navigate: the planners by OGBench's protocol", "",
+    lines = ["# OGBench pointmaze: the planners by OGBench's protocol", "",
              "Generated by `bridgeplan study report ogbench-planners` from the `bridgeplan ogbench eval` JSONs in "
-             "docs/results/ogbench-<maze>-navigate/ (and `ogbench hierarchy-eval`'s, the methods named "
-             "`hierarchy HIGH -> LOW`, NFE the low level's). Datasets generated locally in OGBench's recipe; success "
+             "docs/results/ogbench-<maze>-<kind>/ (and `ogbench hierarchy-eval`'s, the methods named "
+             "`hierarchy HIGH -> LOW`, NFE the low level's; and `ogbench graph-eval`'s, the dataset graph: the data's "
+             "own states, their shortest paths executed, no network and no map, one deterministic graph per "
+             "setting). Datasets generated locally in OGBench's recipe; success "
              "(%) over the 5 tasks x 50 episodes, open loop unless the controller says `replan K` (a hierarchy: its "
              "low level every K steps, its high level once or as said); test episodes: evaluation seed "
              f"{TEST_SEED}, validation: "
              f"seed {VALIDATION_SEED}; mean ± standard error over training seeds (OGBench reports 8 seeds at 1 M "
              "steps: these runs train minutes on a CPU).", ""]
-    for maze in MAZES:
-        lines += maze_lines(root, maze)
+    for maze, kind in DATASETS:
+        lines += dataset_lines(root, maze, kind)
     return "\n".join(lines).rstrip("\n")
