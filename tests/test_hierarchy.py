@@ -171,8 +171,9 @@ def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
     hierarchy, _, _ = load_hierarchy(levels["high"], levels["low"], device="cpu")
     starts = MAZE2D.at_rest(np.array([[1.0, 1.0]] * 6))
     goals = np.array([[1.0, -1.0]] * 3 + [[1.0, 1.2]] * 3)  # the last three start within 0.45 of their goal
-    coarse, plan = hierarchy.coarse_plans(starts, goals, 1, torch.Generator().manual_seed(0))
-    assert coarse.shape == (6, 8, 4)
+    coarse, seconds = hierarchy.coarse_plans(starts, goals, 1, torch.Generator().manual_seed(0))
+    assert coarse.shape == (6, 8, 4) and seconds > 0
+    plan = hierarchy.high.plan(starts, goals, 1, torch.Generator().manual_seed(0))  # the same draw, uncut
     full = hierarchy.high.normalizer.unnormalize(plan.sampled.double().numpy())
     arrival, raw = arrival_index(full, goals, MAZE2D), MAZE2D.states(full)
     assert list(arrival[3:]) == [0, 0, 0]

@@ -80,9 +80,11 @@ def test_paths_have_a_fixed_length():
     padded = fixed_length(path, 8)
     assert padded.shape == (8, 2) and np.array_equal(padded[5:], np.repeat(path[-1:], 3, axis=0))
     obs, starts = two_pieces()
-    source = GraphSource(DatasetGraph.build(obs, starts, keep=5), length=400)
-    out = source(np.array([[0.0, 0.0], [10.0, 10.0]]), np.array([[10.0, 10.0], [0.0, 0.0]]), np.arange(2), 0)
-    assert out.shape == (2, 400, 2) and source.found == [True, True] and source.pieces == [2, 2]
+    graph = DatasetGraph.build(obs, starts, keep=5)
+    out = GraphSource(graph, length=400)(np.array([[0.0, 0.0], [10.0, 10.0]]), np.array([[10.0, 10.0], [0.0, 0.0]]),
+                                        np.arange(2), 0)
+    assert out.shape == (2, 400, 2)
+    assert [(found, pieces) for _, found, pieces in graph.queries] == [(True, 2), (True, 2)]
     assert np.allclose(out[0, -1], [10, 10]) and np.allclose(out[1, -1], [0, 0])
 
 
@@ -120,3 +122,56 @@ def test_graph_eval_refuses_bad_input(stitch, tmp_path, capsys):
     assert main(["ogbench", "graph-eval", NAME, "--dataset", str(tmp_path / "none.npz"), "--no-progress"]) == 2
     assert "no dataset file" in capsys.readouterr().err
     assert main(["ogbench", "graph-eval", "pointmaze-huge-stitch-v0", "--no-progress"]) == 2
+
+
+def test_the_graph_as_a_high_level_spaces_its_path_by_the_low_levels_subgoals():
+    """Coarse plans: the path every J = subgoal_every x stride positions, the goal last and repeated; a low level
+    without subgoals, or of another layout, is refused; the graph takes no NFE."""
+    from types import SimpleNamespace
+
+    from bridgeplan.ogbench_pointmaze.graph import GraphHierarchy
+    from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D
+
+    obs, starts = two_pieces()
+    graph = DatasetGraph.build(obs, starts, keep=5)
+    low = SimpleNamespace(subgoal_every=3, stride=4, layout=KINEMATIC_POINT, subgoals_per_plan=3)
+    h = GraphHierarchy(graph, low, episode_steps=1000)
+    assert (h.spacing, h.coarse_length, h.resolve_high_nfe(None)) == (12, 85, 0)
+    start, goal = np.array([[0.0, 0.0]]), np.array([[10.0, 10.0]])
+    coarse, seconds = h.coarse_plans(start, goal, 0, None)
+    path = graph.densify(start[0], goal[0], graph.path_nodes(start[0], goal[0]))
+    n = (len(path) - 1) // 12 + 1
+    assert coarse.shape == (1, 85, 2) and seconds > 0
+    assert np.allclose(coarse[0, :n], path[::12]) and np.allclose(coarse[0, n:], goal)
+    assert np.allclose(h.subgoals(coarse, np.array([n - 2])), [[path[(n - 1) * 12], goal[0], goal[0]]])
+    with pytest.raises(BridgeplanError):
+        h.resolve_high_nfe(4)
+    for bad in (SimpleNamespace(subgoal_every=0, stride=4, layout=KINEMATIC_POINT, subgoals_per_plan=0),
+                SimpleNamespace(subgoal_every=3, stride=4, layout=MAZE2D, subgoals_per_plan=3)):
+        with pytest.raises(BridgeplanError):
+            GraphHierarchy(graph, bad, episode_steps=1000)
+
+
+def test_graph_eval_with_a_low_level(stitch, tmp_path, capsys):
+    """`graph-eval --low RUN`: the low level (10 states 4 apart through every 3rd) plans through the graph's path
+    every 12 steps; one search per episode, no network call for it."""
+    low = tmp_path / "low"
+    assert main(["train", "--maze", NAME, "--dataset", str(stitch), "--preset", "cpu-small", "--steps", "2",
+                 "--checkpoint-every", "2", "--run-dir", str(low), "--device", "cpu", "--no-progress", "--dim", "8",
+                 "--dim-mults", "1,2", "--process", "flow", "--prior", "coarse", "--horizon", "10", "--stride", "4",
+                 "--subgoal-every", "3"]) == 0
+    args = ["ogbench", "graph-eval", NAME, "--dataset", str(stitch), "--episodes-per-task", "1", "--tasks", "1,2",
+            "--controller", "pursuit", "--no-progress", "--device", "cpu"]
+    out = tmp_path / "h.json"
+    assert main([*args, "--low", str(low), "--nfe-low", "1", "--replan-every", "12", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["kind"] == "graph" and r["method"] == "dataset graph -> flow (coarse) H10k4" and r["nfe"] == 1
+    assert r["low"]["subgoal_every"] == 3 and r["config"]["low"]["seed"] == 0
+    steps = [sum(t["steps"]) for t in r["tasks"].values()]
+    assert r["calls_per_episode"] == pytest.approx(sum(-(-s // 12) for s in steps) / 2)  # one call per low plan
+    assert r["graph"]["paths_found"] == 1.0
+    capsys.readouterr()
+    for bad in (["--low", str(low)], ["--nfe-low", "1"], ["--replan-high-every", "50"],
+                ["--low", str(low), "--replan-every", "12", "--replan-high-every", "0"]):
+        assert main([*args, *bad]) == 2
+        assert capsys.readouterr().err.startswith("error: ")

@@ -196,3 +196,38 @@ def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_pat
     assert "minus its high level alone, replanned as often, +11.0 ± 0.6 (better)" in block
     text = GENERATORS["hierarchy"].render(tmp_path)
     assert "| flow (line) NFE 4 (H32k24) alone; replan 96, pursuit 1.5 | 80.0 ± 0.0 | 80.0 ± 0.0 | 0.80 |" in text
+
+
+def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_path):
+    """The dataset graph's rows (no training seed) in a stitch folder: a section of their own, judged on their one
+    value; a graph with a low level counts its low level's training seeds."""
+    from bridgeplan.studies.reports import ogbench_planners as op
+
+    def row(seed, rate, low_seed=None):
+        tasks = {str(i): {"success_rate": rate} for i in range(1, 6)}
+        r = {"kind": "graph", "method": "dataset graph", "nfe": 0, "seed": seed, "success_rate": rate,
+             "tasks": tasks, "step": 0, "decision_ms_batch1": {"p50": 200.0},
+             "execution": {"controller": "pursuit", "lookahead": 2.0, "replan_every": None},
+             "graph": {"keep": 10, "radius": 0.5}, "environment": {"code_version": "v"}, "config": {}}
+        if low_seed is not None:
+            r.update(method="dataset graph -> flow (coarse) H16k4", nfe=1, low={"seed": low_seed}, step=4000,
+                     config={"low": {"seed": low_seed}})
+            r["execution"]["replan_every"] = 12
+        return r
+
+    folder = tmp_path / op.folder("large", "stitch")
+    for name, seed, rate, low in (("g", 0, 0.96, None), ("g", 1000, 0.98, None), ("l0", 0, 0.9, 0),
+                                  ("l1", 0, 0.8, 1), ("l0", 1000, 0.9, 0), ("l1", 1000, 0.7, 1)):
+        (folder / f"{name}").mkdir(parents=True, exist_ok=True)
+        (folder / name / f"seed{seed}.json").write_text(json.dumps(row(seed, rate, low)))
+    text = op.render(tmp_path)
+    assert "## pointmaze-large-stitch-v0" in text and "## pointmaze-large-navigate-v0" not in text
+    assert "Training seeds 0, 1; step 4000;" in text
+    assert "published stitch success: GCBC 7, QRL 84, CompDiffuser 100" in text
+    lines = op.block(tmp_path).splitlines()
+    assert lines[0] == ("- pointmaze-large-stitch-v0, dataset graph (keep 10, radius 0.5), no network, pursuit 2 "
+                        "(chosen on validation): 96.0% one graph, no training; above: GCBC 7: yes, QRL 84: yes, "
+                        "CompDiffuser 100: no")
+    assert lines[1].startswith("- pointmaze-large-stitch-v0, dataset graph -> flow (coarse) H16k4 (graph keep 10, "
+                               "radius 0.5), NFE 1, pursuit 2, replan 12 (chosen on validation): 85.0 ± 5.0% over 2 "
+                               "training seeds")

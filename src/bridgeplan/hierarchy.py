@@ -52,21 +52,32 @@ class Hierarchy:
     def subgoals_per_plan(self) -> int:
         return self.low.subgoals_per_plan
 
-    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int, generator: torch.Generator):
+    def resolve_high_nfe(self, nfe: int | None) -> int:
+        """Network calls per coarse plan: ``nfe``, checked, or (None) the high level's process's most."""
+        nfe = self.high.process.max_nfe if nfe is None else nfe
+        self.high.process.validate_nfe(nfe)
+        return nfe
+
+    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
+                     generator: torch.Generator) -> tuple[np.ndarray, float]:
         """The high level's plans ``[N, H_high, obs_dim]`` (physical states at its planned indices, not
         densified), each cut at its first state within 0.45 of the goal and holding the goal from there on
-        (``replan.truncate_at_arrival``: a high level trained with holds may arrive early), and the
-        :class:`~bridgeplan.planner.Plan` they came from."""
+        (``replan.truncate_at_arrival``: a high level trained with holds may arrive early), and the seconds its
+        prior and sampler took."""
         plan = self.high.plan(starts, goals, nfe, generator)
         traj = self.high.normalizer.unnormalize(plan.sampled.double().cpu().numpy())
         traj, _ = truncate_at_arrival(traj, goals, self.high.layout)
-        return self.high.layout.states(traj), plan
+        return self.high.layout.states(traj), plan.prior_seconds + plan.sample_seconds
 
     def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
-        """``[N, m, obs_dim]``: the ``m`` coarse states after index ``progress [N]``, the last one repeated past
-        the plan's end (the goal at rest: the high level's last state is its goal condition)."""
-        index = np.minimum(progress[:, None] + 1 + np.arange(self.subgoals_per_plan)[None, :], coarse.shape[1] - 1)
-        return np.take_along_axis(coarse, index[..., None], axis=1)
+        return next_subgoals(coarse, progress, self.subgoals_per_plan)
+
+
+def next_subgoals(coarse: np.ndarray, progress: np.ndarray, m: int) -> np.ndarray:
+    """``[N, m, obs_dim]``: the ``m`` coarse states after index ``progress [N]``, the last one repeated past the
+    plan's end (the goal at rest: a coarse plan's last state is its goal)."""
+    index = np.minimum(progress[:, None] + 1 + np.arange(m)[None, :], coarse.shape[1] - 1)
+    return np.take_along_axis(coarse, index[..., None], axis=1)
 
 
 def check_levels(high: Planner, low: Planner) -> None:
@@ -92,6 +103,8 @@ def check_levels(high: Planner, low: Planner) -> None:
 @dataclass
 class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
+    (Or over any high level with its interface: ``low``, ``subgoals_per_plan``, ``resolve_high_nfe``,
+    ``coarse_plans``, ``subgoals``; e.g. ``ogbench_pointmaze.graph.GraphHierarchy``, the dataset graph's paths.)
 
     Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
     plan is made again from its current state at its first decision K or more steps after the last one (its
@@ -99,7 +112,7 @@ class HierarchySource:
     ``nfe_low`` per low-level plan) and times every decision.
     """
 
-    hierarchy: Hierarchy
+    hierarchy: Hierarchy  # or another high level with its interface (above)
     nfe_high: int | None
     """Network calls per coarse plan (None: the high level's process's most)."""
     nfe_low: int | None
@@ -123,11 +136,10 @@ class HierarchySource:
     low_plans: int = 0
 
     def __post_init__(self):
-        high, low = self.hierarchy.high.process, self.hierarchy.low.process
-        self.nfe_high = high.max_nfe if self.nfe_high is None else self.nfe_high
+        low = self.hierarchy.low.process
+        self.nfe_high = self.hierarchy.resolve_high_nfe(self.nfe_high)
         self.nfe_low = low.max_nfe if self.nfe_low is None else self.nfe_low
-        self.hierarchy.high.process.validate_nfe(self.nfe_high)
-        self.hierarchy.low.process.validate_nfe(self.nfe_low)
+        low.validate_nfe(self.nfe_low)
         self.calls = np.zeros(self.n, dtype=np.int64)
 
     def reset(self) -> None:
@@ -136,21 +148,21 @@ class HierarchySource:
 
     def plan_coarse(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> None:
         """New coarse plans for ``episodes`` from their ``states``; their progress starts again at 0."""
-        coarse, plan = self.hierarchy.coarse_plans(states, goals, self.nfe_high, self.generator)
+        coarse, seconds = self.hierarchy.coarse_plans(states, goals, self.nfe_high, self.generator)
         if self.coarse is None:
             self.coarse, self.first_coarse = coarse, coarse.copy()
             self.progress = np.zeros(self.n, dtype=np.int64)
             self.coarse_at = np.zeros(self.n, dtype=np.int64)
         self.coarse[episodes], self.progress[episodes], self.coarse_at[episodes] = coarse, 0, t
         self.calls[episodes] += self.nfe_high
-        self.high_seconds += plan.prior_seconds + plan.sample_seconds
+        self.high_seconds += seconds
 
     def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
         """Move each episode's progress to the coarse state nearest its position among the next ``m + 1``."""
         coarse, progress = self.coarse[episodes], self.progress[episodes]
         window = progress[:, None] + np.arange(self.hierarchy.subgoals_per_plan + 1)[None, :]
         window = np.minimum(window, coarse.shape[1] - 1)
-        layout = self.hierarchy.high.layout
+        layout = self.hierarchy.low.layout  # the levels' layouts are one (check_levels)
         near = np.take_along_axis(layout.state_positions(coarse), window[..., None], axis=1)
         best = np.linalg.norm(near - positions[:, None], axis=2).argmin(axis=1)
         self.progress[episodes] = window[np.arange(len(episodes)), best]

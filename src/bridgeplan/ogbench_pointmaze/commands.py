@@ -135,6 +135,12 @@ def _add_eval_command(og) -> None:
                    help="at most this many such joins per node")
     g.add_argument("--reach", type=float, default=DEFAULTS["reach"],
                    help="the start and the goal join the nodes within this distance (else the nearest)")
+    g.add_argument("--low", default=None, metavar="RUN",
+                   help="a low level (trained with --subgoal-every J) that plans through the graph's path, one "
+                        "state every J x its stride steps, from its next states (default: the path alone)")
+    g.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
+    g.add_argument("--replan-high-every", type=int, default=None, metavar="K",
+                   help="with --low: search the graph again from the current position every K steps (default: once)")
     _protocol_flags(g, "plan again from the current position every K steps (default: open loop)")
     g.set_defaults(func=_cmd_graph_eval)
 
@@ -230,6 +236,11 @@ def _cmd_graph_eval(args) -> int:
     execution, episodes = _execution(args)
     settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
     result = evaluate_graph(args.name, dataset, settings, execution, episodes, args.seed, _task_ids(args.tasks),
-                            progress=not args.no_progress)
+                            progress=not args.no_progress, low_run=Path(args.low) if args.low else None,
+                            nfe_low=args.nfe_low, replan_high_every=args.replan_high_every, device=args.device)
     prefix = f"ogbench-graph-keep{args.keep}-r{args.radius:g}-ep{episodes}"
+    if args.low:
+        high = "" if args.replan_high_every is None else f"-high{args.replan_high_every}"
+        return _write(result, args, _run_eval_dir(Path(args.low)), f"{prefix}-nfe{result['nfe']}",
+                      execution.tag() + high)
     return _write(result, args, Path("results") / "graph" / args.name, prefix, execution.tag())

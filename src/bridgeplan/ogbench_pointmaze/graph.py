@@ -21,12 +21,18 @@ never saw such a path. But the pieces cross one another. Search on the replay bu
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into a policy's decisions
 (``ogbench_pointmaze.planning.PlanningPolicy.decisions``), ``bridgeplan ogbench graph-eval`` scores it on the
 protocol: what the data's connectivity alone allows, the floor a stitching planner must beat.
+
+:class:`GraphHierarchy` makes the graph a hierarchy's high level (``bridgeplan.hierarchy.HierarchySource``): its
+path, one state every ``J`` steps of the data (J = the low level's subgoal spacing), is the coarse plan a low
+level trained with ``--subgoal-every`` plans through, from the coarse plan itself as its prior (``--prior
+coarse``): the thesis's informative prior, here made of the data's own states (``graph-eval --low RUN``).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -35,6 +41,10 @@ from scipy.spatial import cKDTree
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.ogbench_pointmaze.controllers import GAIN
+from bridgeplan.trajectory import KINEMATIC_POINT
+
+if TYPE_CHECKING:
+    from bridgeplan.planner import Planner
 
 STEP = GAIN
 """Distance the point moves in one step at full speed along an axis (0.2): a jump's cost is its length / STEP."""
@@ -73,6 +83,9 @@ class DatasetGraph:
     reach: float = DEFAULT_REACH
     jumps: int = 0
     """Edges between nodes not consecutive in one episode."""
+    queries: list[tuple[int, bool, int]] = field(default_factory=list)
+    """Per :meth:`path` call: the path's positions, whether a path was found (else the straight line), and how
+    many of the data's episodes it runs through (1: no stitching)."""
 
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULT_KEEP,
@@ -149,6 +162,14 @@ class DatasetGraph:
             path.append(node)
         return path[::-1]
 
+    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """``[L, 2]`` the cheapest path from ``start`` to ``goal``, densified (the straight line when none is
+        found); recorded in :attr:`queries`."""
+        nodes = self.path_nodes(start, goal)
+        dense = self.densify(start, goal, nodes)
+        self.queries.append((len(dense), bool(nodes), len(set(self.episode[nodes].tolist()))))
+        return dense
+
     def densify(self, start: np.ndarray, goal: np.ndarray, path: list[int]) -> np.ndarray:
         """``[L, 2]`` positions at most :data:`STEP` apart per axis from ``start`` through ``path`` to ``goal``:
         the dataset's states between consecutive nodes of one episode, straight lines elsewhere."""
@@ -189,23 +210,62 @@ class GraphSource:
 
     graph: DatasetGraph
     length: int
-    path_steps: list[int] = field(default_factory=list)
-    """Each path's length in positions (before padding): the steps it asks for."""
-    found: list[bool] = field(default_factory=list)
-    """Whether each query found a path (else the straight line)."""
-    pieces: list[int] = field(default_factory=list)
-    """How many of the data's episodes each path runs through (1: no stitching)."""
-    seconds: float = 0.0
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
+        return np.stack([fixed_length(self.graph.path(s, g), self.length)
+                         for s, g in zip(np.asarray(states, np.float64), np.asarray(goals, np.float64))])
+
+
+@dataclass
+class GraphHierarchy:
+    """The dataset graph as the high level of a hierarchy over ``low`` (a planner trained with
+    ``--subgoal-every``): coarse plans are the graph's paths, one state every ``low.subgoal_every * low.stride``
+    steps, as many as cover ``episode_steps`` (the goal repeated past the path's end); no network call."""
+
+    graph: DatasetGraph
+    low: Planner
+    episode_steps: int
+
+    def __post_init__(self):
+        if not self.low.subgoal_every:
+            raise BridgeplanError("the low level must plan between subgoals: train it with --subgoal-every J")
+        if self.low.layout != KINEMATIC_POINT:
+            raise BridgeplanError(f"the dataset graph plans the positions of OGBench's point; the low level plans "
+                                  f"in {self.low.layout.name}")
+
+    @property
+    def spacing(self) -> int:
+        """Steps between coarse states: the low level's subgoal spacing."""
+        return self.low.subgoal_every * self.low.stride
+
+    @property
+    def coarse_length(self) -> int:
+        return self.episode_steps // self.spacing + 2
+
+    @property
+    def subgoals_per_plan(self) -> int:
+        return self.low.subgoals_per_plan
+
+    def resolve_high_nfe(self, nfe: int | None) -> int:
+        if nfe not in (None, 0):
+            raise BridgeplanError("the dataset graph calls no network: give no --nfe-high")
+        return 0
+
+    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
+                     generator) -> tuple[np.ndarray, float]:
+        """``[N, coarse_length, 2]`` each episode's path from ``starts`` to ``goals``, every :attr:`spacing`-th
+        position (its last, the goal, kept), and the seconds the searches took."""
         t0 = time.perf_counter()
-        out = np.empty((len(states), self.length, 2))
-        for k, (s, g) in enumerate(zip(np.asarray(states, np.float64)[:, :2], np.asarray(goals, np.float64))):
-            nodes = self.graph.path_nodes(s, g)
-            path = self.graph.densify(s, g, nodes)
-            self.path_steps.append(len(path))
-            self.found.append(bool(nodes))
-            self.pieces.append(len(set(self.graph.episode[nodes].tolist())))
-            out[k] = fixed_length(path, self.length)
-        self.seconds += time.perf_counter() - t0
-        return out
+        out = np.empty((len(starts), self.coarse_length, 2))
+        for k, (s, g) in enumerate(zip(np.asarray(starts, np.float64), np.asarray(goals, np.float64))):
+            path = self.graph.path(s, g)
+            coarse = path[::self.spacing]
+            if len(path) - 1 > (len(coarse) - 1) * self.spacing:
+                coarse = np.concatenate([coarse, path[-1:]])
+            out[k] = fixed_length(coarse, self.coarse_length)
+        return out, time.perf_counter() - t0
+
+    def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
+        from bridgeplan.hierarchy import next_subgoals
+
+        return next_subgoals(coarse, progress, self.subgoals_per_plan)

@@ -357,55 +357,91 @@ def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None =
 
 def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
                    execution: PointExecution | None = None, episodes_per_task: int = 50, seed: int = 0,
-                   task_ids: list[int] | None = None, progress: bool = False) -> dict:
-    """The dataset graph's paths (``graph.DatasetGraph`` over dataset ``name``'s file ``dataset``, built with
-    ``graph_settings``: keep, radius, neighbours, reach) executed on the maze's protocol, replanned from the
-    current position every ``execution.replan_every`` steps if given; returns what ``bridgeplan ogbench
-    graph-eval`` writes: ``ogbench eval``'s JSON with the graph's size and its paths' lengths, no network."""
+                   task_ids: list[int] | None = None, progress: bool = False, low_run: Path | None = None,
+                   nfe_low: int | None = None, replan_high_every: int | None = None, device: str = "auto") -> dict:
+    """The dataset graph (``graph.DatasetGraph`` over dataset ``name``'s file ``dataset``, built with
+    ``graph_settings``: keep, radius, neighbours, reach) on the maze's protocol; returns what ``bridgeplan ogbench
+    graph-eval`` writes: ``ogbench eval``'s JSON with the graph's size and its paths.
+
+    Alone, its paths are executed as plans (replanned from the current position every ``execution.replan_every``
+    steps if given). With ``low_run`` (a planner trained with ``--subgoal-every``), the graph is a hierarchy's high
+    level (``graph.GraphHierarchy``): the low level plans through its path's next states every
+    ``execution.replan_every`` steps, the path searched again every ``replan_high_every`` steps if given."""
+    from bridgeplan.evaluate import environment_of
     from bridgeplan.files import code_version
-    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS, DatasetGraph, GraphSource
+    from bridgeplan.hierarchy import HierarchySource, check_high_replanning, level_dict
+    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS, DatasetGraph, GraphHierarchy, GraphSource
     from bridgeplan.ogbench_pointmaze.reading import load_stream
     from bridgeplan.replan import percentiles_ms
+    from bridgeplan.runs import load_planner, require_family
 
     execution = execution or PointExecution()
     execution.validate()
     _check_episodes(episodes_per_task)
     spec = parse_dataset_name(name)
+    low = low_info = None
+    if low_run is not None:
+        if execution.replan_every is None:
+            raise BridgeplanError("a low level replans as the agent moves: give --replan-every K (its subgoal "
+                                  "spacing is the natural K)")
+        check_high_replanning(replan_high_every, EVAL_EPISODE_STEPS)
+        low, low_info = load_planner(low_run, device=device)
+        require_family(low_info, "ogbench")
+        if parse_dataset_name(low_info.config.maze).maze != spec.maze:
+            raise BridgeplanError(f"the low level was trained on {low_info.config.maze}, another maze than {name}")
+    elif nfe_low is not None or replan_high_every is not None:
+        raise BridgeplanError("--nfe-low and --replan-high-every are the low level's: give --low RUN")
     settings = {**DEFAULTS, **(graph_settings or {})}
     stream = load_stream(dataset, name)
     t0 = time.perf_counter()
     graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings)
     build_seconds = time.perf_counter() - t0
-    sources: list[GraphSource] = []
+    if low is None:
+        def decisions(n: int):
+            return GraphSource(graph, EVAL_EPISODE_STEPS + 1)
+        policy = PlanningPolicy(None, 0, execution, torch.Generator(), decisions=decisions)
+    else:
+        hierarchy = GraphHierarchy(graph, low, EVAL_EPISODE_STEPS)
+        gen = torch.Generator(device=low.device).manual_seed(seed)
+        sources: list[HierarchySource] = []
 
-    def decisions(n: int) -> GraphSource:
-        sources.append(GraphSource(graph, EVAL_EPISODE_STEPS + 1))
-        return sources[-1]
+        def decisions(n: int):
+            sources.append(HierarchySource(hierarchy, None, nfe_low, gen, n, replan_high_every))
+            return sources[-1]
 
-    policy = PlanningPolicy(None, 0, execution, torch.Generator(), decisions=decisions)
+        nfe_low = HierarchySource(hierarchy, None, nfe_low, gen, 1).nfe_low  # the default, checked before any episode
+        policy = PlanningPolicy(low, nfe_low, execution, gen, decisions=decisions)
     result, first = _protocol(policy, spec.maze, episodes_per_task, seed, task_ids, progress)
     row = _row(result, policy, execution, episodes_per_task, seed)
-    steps = np.concatenate([s.path_steps for s in sources])
-    found = np.concatenate([s.found for s in sources])
-    pieces = np.concatenate([s.pieces for s in sources])
-    lone = GraphSource(graph, EVAL_EPISODE_STEPS + 1)
+    steps, found, pieces = (np.array(v) for v in zip(*graph.queries))
+    lone = (GraphSource(graph, EVAL_EPISODE_STEPS + 1) if low is None else
+            HierarchySource(hierarchy, None, nfe_low, torch.Generator(device=low.device).manual_seed(seed + 1), 1,
+                            replan_high_every))
     seconds = []
-    for _ in range(5):
+    every = execution.replan_every or 1
+    for t in range(0, 6 * every, every):  # with a low level: the first decision searches the graph too
         t1 = time.perf_counter()
-        lone(first[0][None], first[1][None], np.arange(1), 0)
+        lone(first[0][None], first[1][None], np.arange(1), t)
         seconds.append(time.perf_counter() - t1)
-    return {
-        "kind": "graph", "run": f"graph over {name}", "step": 0, "dataset": name, "maze": spec.maze,
-        "method": "dataset graph", "nfe": 0, "horizon": EVAL_EPISODE_STEPS + 1, "stride": 1,
-        "plan_span": EVAL_EPISODE_STEPS, **row, "calls_per_episode": 0.0,
-        "decision_ms_batch1": percentiles_ms(seconds),
-        "graph": {**settings, "nodes": int(len(graph.nodes)), "edges": int(graph.costs.nnz // 2),
-                  "jumps": graph.jumps, "build_seconds": build_seconds, "paths_found": float(found.mean()),
-                  "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
-                  "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}},
-        "environment": {"code_version": code_version()},
-        "config": {"dataset": name, "dataset_identity": stream.identity(), "graph": settings},
-    }
+    graph_row = {**settings, "nodes": int(len(graph.nodes)), "edges": int(graph.costs.nnz // 2),
+                 "jumps": graph.jumps, "build_seconds": build_seconds, "paths_found": float(found.mean()),
+                 "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
+                 "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}}
+    config = {"dataset": name, "dataset_identity": stream.identity(), "graph": settings}
+    if low is None:
+        return {"kind": "graph", "run": f"graph over {name}", "step": 0, "dataset": name, "maze": spec.maze,
+                "method": "dataset graph", "nfe": 0, "horizon": EVAL_EPISODE_STEPS + 1, "stride": 1,
+                "plan_span": EVAL_EPISODE_STEPS, **row, "calls_per_episode": 0.0,
+                "decision_ms_batch1": percentiles_ms(seconds), "graph": graph_row,
+                "environment": {"code_version": code_version()}, "config": config}
+    label = f"dataset graph -> {low_info.config.label()} H{low.horizon}k{low.stride}"
+    return {"kind": "graph", "run": f"graph over {name} + {low_info.name}", "step": low_info.step, "dataset": name,
+            "maze": spec.maze, "method": label, "nfe": nfe_low, "horizon": low.horizon, "stride": low.stride,
+            "plan_span": span(low.horizon, low.stride), "low": level_dict(low, low_info, nfe_low),
+            "replan_high_every": replan_high_every, **row,
+            "calls_per_episode": float(sum(s.calls.sum() for s in sources) / result.to_dict()["episodes"]),
+            "decision_ms_batch1": percentiles_ms(seconds[1:]), "graph": graph_row,
+            "environment": environment_of(low), "config": {**config, "low": low_info.portable_config}}
 
 
 def format_result(r: dict) -> str:
