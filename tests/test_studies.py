@@ -462,6 +462,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
     ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"', "evaluations[0].command: ogbench graph-eval reads"),
     ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
+    ('command = "ogbench graph-eval"\nruns = ["high", "low"]\nout = "x.json"', "graph-eval takes 0 or 1 run"),
 ])
 def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation, message):
     root = tmp_path / "repo"
@@ -512,12 +513,28 @@ runs = []
 args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5 }}
 out = "cal/graph.json"
 task_seed = 0
+
+[runs.low]
+process = "flow"
+prior = "coarse"
+horizon = 10
+stride = 4
+subgoal_every = 3
+model = {{ dim = 8, dim_mults = [1, 2] }}
+device = "cpu"
+
+[[evaluations]]
+command = "ogbench graph-eval"
+runs = ["low"]
+args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
+out = "cal/graph-low.json"
+task_seed = 0
 """
 
 
 def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_path, capsys):
     """GCBC runs (trainer = "gcbc"), the oracle (no run, the maze a positional argument) and the dataset graph (no
-    run, the study's dataset given by the runner) in a command study."""
+    run, the study's dataset given by the runner; then with a low level, given as --low) in a command study."""
     import json
 
     root = tmp_path / "repo"
@@ -528,7 +545,7 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
-    assert "cal: 3 new results" in capsys.readouterr().out
+    assert "cal: 4 new results" in capsys.readouterr().out
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
     oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())
@@ -536,6 +553,8 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     graph = json.loads((root / "results" / "cal" / "cal" / "graph.json").read_text())
     assert graph["kind"] == "graph" and graph["dataset"] == "pointmaze-medium-navigate-v0" and graph["episodes"] == 1
     assert graph["graph"]["keep"] == 5 and graph["config"]["dataset_identity"].startswith("pointmaze-medium-navigate")
+    low = json.loads((root / "results" / "cal" / "cal" / "graph-low.json").read_text())
+    assert low["run"].endswith("low-s0") and low["low"]["subgoal_every"] == 3 and low["nfe"] == 1
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
     assert "cal: 0 new results" in capsys.readouterr().out
     assert main(["ogbench", "gcbc-eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",

@@ -22,7 +22,8 @@ run``)::
 writes each under the study's results directory (results/NAME/OUT): a JSON there is done; it trains what the missing
 ones need and runs their commands (``--workers`` training seeds side by side, one torch thread each). ``study
 export`` copies them to docs/results/OUT, where the study's report reads them; ``study import`` copies the committed
-ones back. ``ogbench graph-eval`` takes no run (``runs = []``): the runner gives it the study's dataset.
+ones back. ``ogbench graph-eval`` takes no run (``runs = []``), or its low level (``runs = ["low"]``, given as
+``--low``); the runner gives it the study's dataset.
 """
 
 from __future__ import annotations
@@ -100,10 +101,9 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if quick:
                         cap = QUICK_EPISODES[e.command]
                         episodes = cap if episodes is None else min(episodes, cap)
-                    positional = [str(run_dir(results, r, seed)) for r in e.runs]
-                    if e.command in READS_THE_DATASET:
-                        positional.append(study.dataset.maze)
-                    argv = [*command_argv(e.command, positional, tuple(sorted(args.items()))),
+                    dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
+                    argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
+                                          tuple(sorted(args.items())), dataset),
                             *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
                             *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
                     out.append(Job(path, tuple(argv), seed, e.runs, e.command in READS_THE_DATASET))

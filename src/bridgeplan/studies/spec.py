@@ -414,6 +414,8 @@ COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench
 LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench hierarchy-eval": 2, "ogbench evaluate-oracle": 0,
           "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
 """How many runs each command takes (a hierarchy: the high level, then the low one; the oracle none)."""
+RUN_FLAGS = {"ogbench graph-eval": ("--low",)}
+"""Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
 POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
 READS_THE_DATASET = {"ogbench graph-eval"}
@@ -496,9 +498,11 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
             raise StudyError(file, f"{key}.command", f"unknown command {command!r} (choose from "
                                                      f"{', '.join(COMMANDS)})")
         levels = e["runs"]
-        if (not isinstance(levels, list) or len(levels) != LEVELS[command]
+        counts = (LEVELS[command], len(RUN_FLAGS[command])) if command in RUN_FLAGS else (LEVELS[command],)
+        if (not isinstance(levels, list) or len(levels) not in counts
                 or any(not isinstance(r, str) for r in levels)):
-            raise StudyError(file, f"{key}.runs", f"{command} takes {LEVELS[command]} run name(s), got {levels!r}")
+            raise StudyError(file, f"{key}.runs", f"{command} takes {' or '.join(map(str, counts))} run name(s), got "
+                                                  f"{levels!r}")
         for r in levels:
             if r not in names:
                 raise StudyError(file, f"{key}.runs", f"unknown run {r!r} (declared: "
@@ -540,19 +544,24 @@ def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
     return argv
 
 
-def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...]) -> list[str]:
-    """``bridgeplan``'s arguments for ``command`` on ``runs`` with ``args``: its positional ones, then flags."""
+def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...],
+                 dataset: str | None = None) -> list[str]:
+    """``bridgeplan``'s arguments for ``command`` on ``runs`` (positional, or as :data:`RUN_FLAGS` say) with
+    ``args``: its positional ones (the study's ``dataset`` name first, for a command that reads it), then flags."""
     positional = POSITIONAL.get(command, ())
-    return [*COMMANDS[command], *runs, *(str(v) for k, v in args if k in positional),
-            *_flags(tuple((k, v) for k, v in args if k not in positional))]
+    flags = RUN_FLAGS.get(command)
+    return [*COMMANDS[command], *([] if flags else runs), *([dataset] if dataset is not None else []),
+            *(str(v) for k, v in args if k in positional),
+            *_flags(tuple((k, v) for k, v in args if k not in positional)),
+            *(a for flag, run in zip(flags or (), runs) for a in (flag, run))]
 
 
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
     """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
     from bridgeplan.cli import build_parser
 
-    positional = ["RUN"] * LEVELS[evaluation.command] + (["NAME"] if evaluation.command in READS_THE_DATASET else [])
-    argv = command_argv(evaluation.command, positional, evaluation.args)
+    argv = command_argv(evaluation.command, ["RUN"] * len(evaluation.runs), evaluation.args,
+                        "NAME" if evaluation.command in READS_THE_DATASET else None)
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err):
