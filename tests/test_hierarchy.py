@@ -194,3 +194,22 @@ def test_coarse_diagnostics_measure_walls_and_arrival():
     dense[1, :, :2] = a                   # never arrives: the last step
     out = coarse_diagnostics(dense, np.array([b, b]), maze, MAZE2D)
     assert out == {"in_walls": 0.1, "crossing_walls": 0.5, "arrival_step": (3 + 4) / 2}
+
+
+@pytest.mark.parametrize("rule, expected", [("nearest", [5, 5]), ("sequential", [0, 1])])
+def test_progress_along_a_plan_that_winds_back(rule, expected):
+    """A U-shaped coarse plan (out along y = 0, back along y = 2, a wall between): a position near its start but
+    nearer its last state across the wall. ``nearest`` jumps there (Maze2D's committed rule); ``sequential`` (the
+    dataset graph's) moves one coarse state at a time, only past states it has reached."""
+    from types import SimpleNamespace
+
+    from bridgeplan.hierarchy import HierarchySource
+    from bridgeplan.trajectory import KINEMATIC_POINT
+
+    low = SimpleNamespace(layout=KINEMATIC_POINT, process=SimpleNamespace(max_nfe=1, validate_nfe=lambda n: None))
+    hierarchy = SimpleNamespace(low=low, subgoals_per_plan=5, progress_rule=rule, resolve_high_nfe=lambda n: 0)
+    source = HierarchySource(hierarchy, None, None, None, 1)
+    source.coarse = np.array([[[0, 0], [2, 0], [4, 0], [4, 2], [2, 2], [0, 2.0]]])
+    source.progress = np.zeros(1, dtype=np.int64)
+    reached = [int(source.advance(np.array([p]), np.arange(1))[0]) for p in ([0.5, 1.5], [2.1, 0.1])]
+    assert reached == expected

@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -44,6 +45,8 @@ class Hierarchy:
 
     high: Planner
     low: Planner
+    progress_rule: ClassVar[str] = "nearest"
+    """How :class:`HierarchySource` advances along a coarse plan (:meth:`HierarchySource.advance`)."""
 
     def __post_init__(self):
         check_levels(self.high, self.low)
@@ -103,8 +106,9 @@ def check_levels(high: Planner, low: Planner) -> None:
 @dataclass
 class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
-    (Or over any high level with its interface: ``low``, ``subgoals_per_plan``, ``resolve_high_nfe``,
-    ``coarse_plans``, ``subgoals``; e.g. ``ogbench_pointmaze.graph.GraphHierarchy``, the dataset graph's paths.)
+    (Or over any high level with its interface: ``low``, ``subgoals_per_plan``, ``progress_rule``,
+    ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``; e.g. ``ogbench_pointmaze.graph.GraphHierarchy``, the dataset
+    graph's paths.)
 
     Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
     plan is made again from its current state at its first decision K or more steps after the last one (its
@@ -158,15 +162,27 @@ class HierarchySource:
         self.high_seconds += seconds
 
     def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
-        """Move each episode's progress to the coarse state nearest its position among the next ``m + 1``."""
-        coarse, progress = self.coarse[episodes], self.progress[episodes]
-        window = progress[:, None] + np.arange(self.hierarchy.subgoals_per_plan + 1)[None, :]
-        window = np.minimum(window, coarse.shape[1] - 1)
+        """Move each episode's progress along its coarse plan, by the hierarchy's ``progress_rule``: ``nearest``,
+        to the coarse state nearest its position among the next ``m + 1``; ``sequential``, one coarse state at a
+        time while the next is no farther than the current (a plan that winds back near itself across a wall,
+        as the data's paths do, is not skipped along)."""
+        coarse, progress = self.coarse[episodes], self.progress[episodes].copy()
         layout = self.hierarchy.low.layout  # the levels' layouts are one (check_levels)
-        near = np.take_along_axis(layout.state_positions(coarse), window[..., None], axis=1)
-        best = np.linalg.norm(near - positions[:, None], axis=2).argmin(axis=1)
-        self.progress[episodes] = window[np.arange(len(episodes)), best]
-        return self.progress[episodes]
+        xy, last, rows = layout.state_positions(coarse), coarse.shape[1] - 1, np.arange(len(episodes))
+        if self.hierarchy.progress_rule == "sequential":
+            while True:
+                after = np.minimum(progress + 1, last)
+                move = (after > progress) & (np.linalg.norm(xy[rows, after] - positions, axis=1)
+                                             <= np.linalg.norm(xy[rows, progress] - positions, axis=1))
+                if not move.any():
+                    break
+                progress[move] += 1
+        else:
+            window = np.minimum(progress[:, None] + np.arange(self.hierarchy.subgoals_per_plan + 1)[None, :], last)
+            near = np.take_along_axis(xy, window[..., None], axis=1)
+            progress = window[rows, np.linalg.norm(near - positions[:, None], axis=2).argmin(axis=1)]
+        self.progress[episodes] = progress
+        return progress
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
         t0 = time.perf_counter()

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -225,6 +225,9 @@ class GraphHierarchy:
     graph: DatasetGraph
     low: Planner
     episode_steps: int
+    progress_rule: ClassVar[str] = "sequential"
+    """The data's paths wind, passing near their own later states across walls: progress along them moves one
+    coarse state at a time (``hierarchy.HierarchySource.advance``), never skipping ahead to a nearer later one."""
 
     def __post_init__(self):
         if not self.low.subgoal_every:
