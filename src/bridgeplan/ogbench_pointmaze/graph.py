@@ -69,7 +69,7 @@ def check_graph_settings(keep: int, radius: float, neighbours: int, reach: float
 
 @dataclass
 class DatasetGraph:
-    """The graph over a dataset's states (:meth:`build`); :meth:`paths` answers queries."""
+    """The graph over a dataset's states (:meth:`build`); :meth:`path` answers queries."""
 
     observations: np.ndarray
     """``[T, 2]`` every state of the dataset, episodes one after another."""
@@ -251,7 +251,7 @@ class GraphHierarchy:
 
     def resolve_high_nfe(self, nfe: int | None) -> int:
         if nfe not in (None, 0):
-            raise BridgeplanError("the dataset graph calls no network: give no --nfe-high")
+            raise BridgeplanError("the dataset graph calls no network: it takes no high-level NFE")
         return 0
 
     def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
