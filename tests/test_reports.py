@@ -82,6 +82,12 @@ def test_the_report_chooses_on_validation_and_judges_on_test(tmp_path):
     # the README's block: the same verdicts, each naming its method, snapshot and seeds
     block = cddb.block(tmp_path).splitlines()
     assert block[1] == "- medium, tracked, bridge (line; consistent=True), step 8000, 3 training seeds, " + goal[1][2:]
+    # and what the corrections themselves change: 5 settings, from +3 (x0 1e-4 at NFE 2: 65 - 62) to +15
+    assert block[-1] == (
+        "- what a correction changes, against its uncorrected sampler at the same NFE (test episodes, paired per "
+        "seed; 5 settings over every maze and execution): from +3.0 ± 0.0 (medium, tracked, bridge (line; "
+        "consistent=True) at NFE 2, cddb-x0 dynamics=0.0001) to +15.0 ± 0.0 (medium, tracked, bridge (line; "
+        "consistent=True) at NFE 1, cddb-x0 dynamics=0.0003); beyond two standard errors: 5")
 
 
 def test_each_maze_and_execution_is_judged_against_its_own_ddpm(tmp_path):

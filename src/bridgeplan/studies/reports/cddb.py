@@ -29,7 +29,7 @@ import numpy as np
 from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, label, method
 from bridgeplan.analysis.load import Point, Results, read_csv
 from bridgeplan.analysis.selection import best, split_mean
-from bridgeplan.analysis.stats import goal_verdict, paired
+from bridgeplan.analysis.stats import Paired, goal_verdict, paired
 from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
 from bridgeplan.replan import Execution
 
@@ -199,17 +199,40 @@ def goal_lines(results: Results, base: MethodKey, step: int, bar: Point) -> list
     return lines
 
 
+def correction_effects(part: Part) -> list[tuple[Paired, str]]:
+    """Every corrected setting against its uncorrected sampler at the same NFE and final snapshot, on the test
+    episodes: the paired difference (per seed, Minari score) and what it is of."""
+    effects = []
+    for base in part.measured():
+        step = max(part.results.steps(base))
+        for key in settings(part.results, base)[1:]:
+            for nfe in part.results.nfes(key, step):
+                ours, plain = part.results.values(Point(key, step, nfe)), part.results.values(Point(base, step, nfe))
+                if len(set(ours) & set(plain)) >= 2:
+                    effects.append((paired(ours, plain, seeds="common"),
+                                    f"{part.title}, {label(base)} at NFE {nfe}, {key.sampler}"))
+    return effects
+
+
 def block(root: Path) -> str:
     """The README's lines: per maze, execution, method and residual, the verdict at the final snapshot
-    (goal_lines)."""
-    lines = []
+    (goal_lines); then what the corrections themselves change (correction_effects), over every part."""
+    lines, effects = [], []
     for part in parts(root):
+        effects += correction_effects(part)
         for base in part.measured():
             step = max(part.results.steps(base))
             bar = ddpm_bar(part, step)
             if bar is not None:
                 lines += [f"- {part.title}, {label(base)}, step {step}, {len(part.seeds())} training seeds, {line[2:]}"
                           for line in goal_lines(part.results, base, step, bar)]
+    if effects:
+        low, high = min(effects, key=lambda e: e[0].mean), max(effects, key=lambda e: e[0].mean)
+        resolved = sum(abs(d.mean) > 2 * d.se for d, _ in effects)
+        lines.append(f"- what a correction changes, against its uncorrected sampler at the same NFE (test episodes, "
+                     f"paired per seed; {len(effects)} settings over every maze and execution): from "
+                     f"{fmt_diff(low[0])} ({low[1]}) to {fmt_diff(high[0])} ({high[1]}); beyond two standard "
+                     f"errors: {resolved}")
     return "\n".join(lines)
 
 
