@@ -290,6 +290,17 @@ def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | 
     }
 
 
+def _lone_decisions(decide, state: np.ndarray, goal: np.ndarray, every: int, count: int = 6) -> list[float]:
+    """Seconds of ``count`` decisions of a lone episode (``decide(states, goals, episodes, t)`` at t = 0, every,
+    ...): its first one also plans the coarse level (a hierarchy's) or searches the graph."""
+    seconds = []
+    for t in range(0, count * every, every):
+        t0 = time.perf_counter()
+        decide(state, goal, np.arange(1), t)
+        seconds.append(time.perf_counter() - t0)
+    return seconds
+
+
 def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None = None, nfe_low: int | None = None,
                            execution: PointExecution | None = None, replan_high_every: int | None = None,
                            episodes_per_task: int = 50, seed: int = 0, task_ids: list[int] | None = None,
@@ -336,11 +347,7 @@ def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None =
                           spec.maze, episodes_per_task, seed, task_ids) if floor else {})
     lone = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device).manual_seed(seed + 1), 1,
                            replan_high_every)
-    seconds, layout = [], low.layout
-    for t in range(0, 6 * execution.replan_every, execution.replan_every):  # the first decision plans both levels
-        t0 = time.perf_counter()
-        lone(layout.at_rest(first[0][None]), first[1][None], np.arange(1), t)
-        seconds.append(time.perf_counter() - t0)
+    seconds = _lone_decisions(lone, low.layout.at_rest(first[0][None]), first[1][None], execution.replan_every)
     label = f"hierarchy {high_info.config.label()} H{high.horizon}k{high.stride} -> {low_info.config.label()} " \
             f"H{low.horizon}k{low.stride}"
     return {
@@ -417,12 +424,7 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
     lone = (GraphSource(graph, EVAL_EPISODE_STEPS + 1) if low is None else
             HierarchySource(hierarchy, None, nfe_low, torch.Generator(device=low.device).manual_seed(seed + 1), 1,
                             replan_high_every))
-    seconds = []
-    every = execution.replan_every or 1
-    for t in range(0, 6 * every, every):  # with a low level: the first decision searches the graph too
-        t1 = time.perf_counter()
-        lone(first[0][None], first[1][None], np.arange(1), t)
-        seconds.append(time.perf_counter() - t1)
+    seconds = _lone_decisions(lone, first[0][None], first[1][None], execution.replan_every or 1)
     graph_row = {**settings, "nodes": int(len(graph.nodes)), "edges": int(graph.costs.nnz // 2),
                  "jumps": graph.jumps, "build_seconds": build_seconds, "paths_found": float(found.mean()),
                  "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
