@@ -424,6 +424,8 @@ def _cmd_render(args) -> int:
 
 
 def _add_hierarchy_commands(sub) -> None:
+    from bridgeplan.graph import MAZE2D_DEFAULTS, add_graph_flags
+
     p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
                                          "level (bridgeplan.hierarchy)")
     h = p.add_subparsers(dest="hierarchy_command", required=True)
@@ -434,59 +436,96 @@ def _add_hierarchy_commands(sub) -> None:
     e.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
                                "the high level's stride)")
     e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
-    e.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
     e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
-    e.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
-    e.add_argument("--episodes", type=int, default=200)
-    e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
-    e.add_argument("--replan-every", type=int, default=None, metavar="K",
-                   help="the low level plans again every K steps (default: the high level's stride)")
-    e.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
-                   help="and when the position is more than D from its plan (default: off)")
-    e.add_argument("--replan-high-every", type=int, default=None, metavar="K",
-                   help="the high level plans again from the current state every K steps (default: once per "
-                        "episode)")
-    e.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
-    e.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
-    e.add_argument("--device", default="auto")
-    e.add_argument("--out", default=None, help="JSON path (default LOW/eval/hierarchy-<settings>.json)")
-    _threads_flag(e)
+    _hierarchy_flags(e, "the high level's stride", "the high level plans again from the current state every K "
+                                                    "steps (default: once per episode)")
     e.set_defaults(func=_cmd_hierarchy_eval)
+    g = h.add_parser("graph-eval", help="the dataset graph (the low level's own training data; no network, no map) "
+                                        "as the high level of a low-level run (--subgoal-every)",
+                     description="The coarse plan is the cheapest path through the data's own states "
+                                 "(bridgeplan.graph), one state every J x stride steps; the low level plans through "
+                                 "it every --replan-every steps.")
+    g.add_argument("low", help="the low level's run directory (trained with --subgoal-every J)")
+    add_graph_flags(g, MAZE2D_DEFAULTS)
+    _hierarchy_flags(g, "its subgoal spacing, J x stride", "search the graph again from the current state every K "
+                                                            "steps (default: once per episode)")
+    g.set_defaults(func=_cmd_hierarchy_graph_eval)
 
 
-def _cmd_hierarchy_eval(args) -> int:
+def _hierarchy_flags(p, replan_default: str, replan_high_help: str) -> None:
+    """The flags ``hierarchy eval`` and ``hierarchy graph-eval`` share: the low level, the tasks, the execution."""
+    p.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
+    p.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
+    p.add_argument("--episodes", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
+    p.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help=f"the low level plans again every K steps (default: {replan_default})")
+    p.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
+                   help="and when the position is more than D from its plan (default: off)")
+    p.add_argument("--replan-high-every", type=int, default=None, metavar="K", help=replan_high_help)
+    p.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
+    p.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help="JSON path (default LOW/eval/hierarchy-<settings>.json)")
+    _threads_flag(p)
+
+
+def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str) -> int:
+    """Evaluate ``hierarchy`` as ``args`` say, write its JSON (``--out``, else LOW/eval/NAME-<settings>.json)."""
     from bridgeplan.evaluate import check_multi_task_data, make_tasks, write_result
-    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
+    from bridgeplan.hierarchy import evaluate_hierarchy
     from bridgeplan.layout import eval_dir
     from bridgeplan.replan import Execution
     from bridgeplan.runs import run_dir_of
+
+    if args.multi_task:
+        check_multi_task_data(maze, dataset)
+    execution = Execution(replan_every=args.replan_every or hierarchy.spacing, tolerance=args.replan_tolerance,
+                          controller=args.controller,
+                          **({} if args.lookahead is None else {"lookahead": args.lookahead}))
+    tasks = make_tasks(maze, args.episodes, args.seed, args.multi_task)
+    result = evaluate_hierarchy(hierarchy, high_info, low, tasks, getattr(args, "nfe_high", None), args.nfe_low,
+                                execution, args.replan_high_every)
+    name = (f"{name}-nfe{result['high']['nfe']}-step{low.step}-nfe{result['low']['nfe']}-ep{args.episodes}-seed"
+            f"{args.seed}" + ("-multi" if args.multi_task else "") + f"-{execution.tag()}"
+            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
+    write_result(result, out)
+    minari = result["score"]["minari"]
+    line = result.get("floor_line")
+    print(f"{tasks.maze.name}: hierarchy {minari['mean']:.1f} ± {minari['se']:.1f} (Minari), success "
+          f"{result['success_rate']['mean']:.2f}; the coarse plans alone "
+          f"{result['high_alone']['score']['minari']['mean']:.1f}"
+          + (f"; the line alone {line['score']['minari']['mean']:.1f}" if line else "")
+          + f"; {result['calls_per_episode']:.0f} network calls per episode, decision p50 "
+          f"{result['decision_ms_batch1']['p50']:.1f} ms at batch 1")
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_hierarchy_eval(args) -> int:
+    from bridgeplan.hierarchy import load_hierarchy
 
     _positive("--episodes", args.episodes)
     _check_lookahead(args)
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
-    if args.multi_task:
-        check_multi_task_data(high.config.maze, high.config.dataset)
-    execution = Execution(replan_every=args.replan_every or hierarchy.high.stride, tolerance=args.replan_tolerance,
-                          controller=args.controller,
-                          **({} if args.lookahead is None else {"lookahead": args.lookahead}))
-    tasks = make_tasks(high.config.maze, args.episodes, args.seed, args.multi_task)
-    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution,
-                                args.replan_high_every)
-    name = (f"hierarchy-{high.name}-step{high.step}-nfe{result['high']['nfe']}-step{low.step}-nfe"
-            f"{result['low']['nfe']}-ep{args.episodes}-seed{args.seed}" + ("-multi" if args.multi_task else "")
-            + f"-{execution.tag()}" + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
-    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
-    write_result(result, out)
-    minari = result["score"]["minari"]
-    print(f"{tasks.maze.name}: hierarchy {minari['mean']:.1f} ± {minari['se']:.1f} (Minari), success "
-          f"{result['success_rate']['mean']:.2f}; the coarse plans alone "
-          f"{result['high_alone']['score']['minari']['mean']:.1f}; the line alone "
-          f"{result['floor_line']['score']['minari']['mean']:.1f}; {result['calls_per_episode']:.0f} network calls "
-          f"per episode, decision p50 {result['decision_ms_batch1']['p50']:.1f} ms at batch 1")
-    print(f"wrote {out}")
-    return 0
+    return _run_hierarchy(args, hierarchy, high, low, high.config.maze, high.config.dataset,
+                          f"hierarchy-{high.name}-step{high.step}")
+
+
+def _cmd_hierarchy_graph_eval(args) -> int:
+    from bridgeplan.graph import check_graph_settings, graph_settings
+    from bridgeplan.hierarchy import load_graph_hierarchy
+
+    _positive("--episodes", args.episodes)
+    _check_lookahead(args)
+    check_graph_settings(**graph_settings(args))
+    hierarchy, settings, low = load_graph_hierarchy(Path(args.low), graph_settings(args), args.low_snapshot,
+                                                    args.device)
+    return _run_hierarchy(args, hierarchy, settings, low, low.config.maze, low.config.dataset,
+                          f"hierarchy-graph-keep{args.keep}-r{args.radius:g}")
 
 
 def _add_report_command(sub) -> None:

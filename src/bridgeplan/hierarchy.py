@@ -52,6 +52,11 @@ class Hierarchy:
         check_levels(self.high, self.low)
 
     @property
+    def spacing(self) -> int:
+        """Steps between coarse states: the high level's stride."""
+        return self.high.stride
+
+    @property
     def subgoals_per_plan(self) -> int:
         return self.low.subgoals_per_plan
 
@@ -107,7 +112,7 @@ def check_levels(high: Planner, low: Planner) -> None:
 class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
     (Or over any high level with its interface: ``low``, ``subgoals_per_plan``, ``progress_rule``,
-    ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``; e.g. ``ogbench_pointmaze.graph.GraphHierarchy``, the dataset
+    ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``; e.g. ``bridgeplan.graph.GraphHierarchy``, the dataset
     graph's paths.)
 
     Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
@@ -257,42 +262,68 @@ def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, maze, layout) -> di
             "arrival_step": float(arrival.mean())}
 
 
-def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunInfo, tasks: Tasks,
+def load_graph_hierarchy(low_run: Path, settings: dict | None = None, low_snapshot: int | None = None,
+                         device: str = "auto"):
+    """The dataset graph over a Maze2D low level's own training data as its high level
+    (``graph.GraphHierarchy``, ``graph.for_stream``'s Maze2D settings under ``settings``); returns the hierarchy,
+    the high level's JSON entry (the graph's settings and size, the data's identity) and the low level's info."""
+    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.graph import MAZE2D_DEFAULTS, GraphHierarchy, for_stream
+    from bridgeplan.maze.layouts import get_maze
+
+    low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
+    require_family(low_info, "maze2d")
+    settings = {**MAZE2D_DEFAULTS, **(settings or {})}
+    stream = load_stream(low_info.config.dataset)
+    t0 = time.perf_counter()
+    hierarchy = GraphHierarchy(for_stream(stream, settings), low, get_maze(low_info.config.maze).episode_steps)
+    settings["build_seconds"] = time.perf_counter() - t0
+    settings["dataset_identity"] = stream.identity()
+    return hierarchy, settings, low_info
+
+
+def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo | dict, low_info: RunInfo, tasks: Tasks,
                        nfe_high: int | None = None, nfe_low: int | None = None,
                        execution: Execution | None = None, replan_high_every: int | None = None) -> dict:
-    """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` writes.
+    """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` (and ``graph-eval``)
+    writes. ``hierarchy``: two planners, or the dataset graph over a low level (``graph.GraphHierarchy``, whose
+    ``high_info`` is its settings, :func:`load_graph_hierarchy`).
 
     ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the
     hierarchy's score: ``high_alone``, the first coarse plans densified and executed open loop by the
-    same controller (what the low level adds), and ``floor_line``, the straight line so executed. Decisions are
-    timed in the evaluation's batches and, at batch 1, over the first episode run again alone after one
-    untimed decision.
+    same controller (what the low level adds), and, for a planner as the high level, ``floor_line``, the straight
+    line over its span so executed. Decisions are timed in the evaluation's batches and, at batch 1, over the first
+    episode run again alone after one untimed decision.
     """
-    high, low = hierarchy.high, hierarchy.low
+    low = hierarchy.low
     maze, n = tasks.maze, tasks.episodes
-    execution = execution or Execution(replan_every=high.stride, controller="pursuit")
+    execution = execution or Execution(replan_every=hierarchy.spacing, controller="pursuit")
     check_execution(execution, maze.episode_steps)
     starts, goals = tasks.starts_xy, tasks.goals_xy
     check_high_replanning(replan_high_every, maze.episode_steps)
-    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(high.device), n, replan_high_every)
+    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(low.device), n, replan_high_every)
     nfe_high, nfe_low = source.nfe_high, source.nfe_low
     result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
                                  follower=execution.follower(n))
-    dense = densify(source.first_coarse, high.stride)
+    dense = densify(source.first_coarse, hierarchy.spacing)
     alone = execute_plans(maze, starts, goals, dense, follower=execution.follower(n))
-    single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=high.device)
+    if isinstance(hierarchy, Hierarchy):
+        high = level_dict(hierarchy.high, high_info, nfe_high)
+        floor = {"floor_line": prior_only(hierarchy.high, tasks, "line",
+                                          Execution(controller=execution.controller, lookahead=execution.lookahead))}
+    else:  # the graph: the search's settings and size, the protocol's queries only (before the lone episode's)
+        high, floor = hierarchy.describe(high_info), {}
+    single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=low.device)
                              .manual_seed(tasks.seed + 1), 1, replan_high_every)
     per_batch = percentiles_ms(source.decision_seconds)
     per_batch["mean_batch"] = float(np.mean(source.decision_batch))
     return {
         "kind": "hierarchy", "maze": maze.name, "episodes": n, "seed": tasks.seed, "multi_task": tasks.multi_task,
         "episode_steps": maze.episode_steps,
-        "high": level_dict(high, high_info, nfe_high), "low": level_dict(low, low_info, nfe_low),
+        "high": high, "low": level_dict(low, low_info, nfe_low),
         **score_returns(maze.name, result.returns, result.success),
         "high_alone": score_returns(maze.name, alone.returns, alone.success),
-        "coarse_plans": coarse_diagnostics(dense, goals, maze, high.layout),
-        "floor_line": prior_only(high, tasks, "line", Execution(controller=execution.controller,
-                                                                lookahead=execution.lookahead)),
+        "coarse_plans": coarse_diagnostics(dense, goals, maze, low.layout), **floor,
         "execution": {**execution.to_dict(low.prior.name), "replan_high_every": replan_high_every},
         "plans_per_episode": {"mean": float(result.plans_made.mean()), "min": int(result.plans_made.min()),
                               "max": int(result.plans_made.max())},
@@ -300,5 +331,5 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo, low_info: RunIn
         "high_ms_per_plan": 1000.0 * source.high_seconds / n,
         "low_ms_per_plan": 1000.0 * source.low_seconds / max(source.low_plans, 1),
         "decision_ms_batch1": batch1_latency(single, tasks, execution), "decision_ms_per_batch": per_batch,
-        "environment": environment_of(high),
+        "environment": environment_of(low),
     }

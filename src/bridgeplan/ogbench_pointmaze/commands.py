@@ -121,20 +121,14 @@ def _add_eval_command(og) -> None:
                    help="plan the coarse plan again from the current position every K steps (default: once)")
     _protocol_flags(h, "plan the low level again every K steps (required: one high-level step is the natural K)")
     h.set_defaults(func=_cmd_hierarchy_eval)
-    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS
+    from bridgeplan.graph import DEFAULTS, add_graph_flags
 
     g = og.add_parser("graph-eval", help="the dataset's own states as a graph (no network, no map): its shortest "
                                          "paths executed on the 5-task protocol, the floor of stitching")
     g.add_argument("name", help="the dataset's name (pointmaze-large-stitch-v0)")
     g.add_argument("--dataset", default=None,
                    help="its .npz (default: NAME.npz where `ogbench generate` writes, datasets/ogbench)")
-    g.add_argument("--keep", type=int, default=DEFAULTS["keep"], help="every keep-th state of an episode is a node")
-    g.add_argument("--radius", type=float, default=DEFAULTS["radius"],
-                   help="nodes of other episodes within this distance are joined (below a wall's thickness)")
-    g.add_argument("--neighbours", type=int, default=DEFAULTS["neighbours"],
-                   help="at most this many such joins per node")
-    g.add_argument("--reach", type=float, default=DEFAULTS["reach"],
-                   help="the start and the goal join the nodes within this distance (else the nearest)")
+    add_graph_flags(g, DEFAULTS)
     g.add_argument("--low", default=None, metavar="RUN",
                    help="a low level (trained with --subgoal-every J) that plans through the graph's path, one "
                         "state every J x its stride steps, from its next states (default: the path alone)")
@@ -225,6 +219,7 @@ def _cmd_hierarchy_eval(args) -> int:
 
 
 def _cmd_graph_eval(args) -> int:
+    from bridgeplan.graph import graph_settings
     from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
     from bridgeplan.ogbench_pointmaze.planning import evaluate_graph
 
@@ -234,8 +229,8 @@ def _cmd_graph_eval(args) -> int:
         raise BridgeplanError(f"no dataset file {dataset}: give --dataset FILE, or make it with `bridgeplan ogbench "
                               f"generate {args.name}`")
     execution, episodes = _execution(args)
-    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
-    result = evaluate_graph(args.name, dataset, settings, execution, episodes, args.seed, _task_ids(args.tasks),
+    result = evaluate_graph(args.name, dataset, graph_settings(args), execution, episodes, args.seed,
+                            _task_ids(args.tasks),
                             progress=not args.no_progress, low_run=Path(args.low) if args.low else None,
                             nfe_low=args.nfe_low, replan_high_every=args.replan_high_every, device=args.device)
     prefix = f"ogbench-graph-keep{args.keep}-r{args.radius:g}-ep{episodes}"

@@ -376,8 +376,8 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
     ``execution.replan_every`` steps, the path searched again every ``replan_high_every`` steps if given."""
     from bridgeplan.evaluate import environment_of
     from bridgeplan.files import code_version
+    from bridgeplan.graph import DEFAULTS, GraphHierarchy, GraphSource, for_stream
     from bridgeplan.hierarchy import HierarchySource, check_high_replanning, level_dict
-    from bridgeplan.ogbench_pointmaze.graph import DEFAULTS, DatasetGraph, GraphHierarchy, GraphSource
     from bridgeplan.ogbench_pointmaze.reading import load_stream
     from bridgeplan.replan import percentiles_ms
     from bridgeplan.runs import load_planner, require_family
@@ -401,7 +401,7 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
     settings = {**DEFAULTS, **(graph_settings or {})}
     stream = load_stream(dataset, name)
     t0 = time.perf_counter()
-    graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings)
+    graph = for_stream(stream, settings)
     build_seconds = time.perf_counter() - t0
     if low is None:
         def decisions(n: int):
@@ -420,15 +420,11 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
         policy = PlanningPolicy(low, nfe_low, execution, gen, decisions=decisions)
     result, first = _protocol(policy, spec.maze, episodes_per_task, seed, task_ids, progress)
     row = _row(result, policy, execution, episodes_per_task, seed)
-    steps, found, pieces = (np.array(v) for v in zip(*graph.queries))
+    graph_row = {**settings, **graph.summary(), "build_seconds": build_seconds}  # the protocol's queries only
     lone = (GraphSource(graph, EVAL_EPISODE_STEPS + 1) if low is None else
             HierarchySource(hierarchy, None, nfe_low, torch.Generator(device=low.device).manual_seed(seed + 1), 1,
                             replan_high_every))
     seconds = _lone_decisions(lone, first[0][None], first[1][None], execution.replan_every or 1)
-    graph_row = {**settings, "nodes": int(len(graph.nodes)), "edges": int(graph.costs.nnz // 2),
-                 "jumps": graph.jumps, "build_seconds": build_seconds, "paths_found": float(found.mean()),
-                 "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
-                 "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}}
     config = {"dataset": name, "dataset_identity": stream.identity(), "graph": settings}
     if low is None:
         return {"kind": "graph", "run": f"graph over {name}", "step": 0, "dataset": name, "maze": spec.maze,

@@ -1,7 +1,7 @@
 """Studies whose rows are evaluation JSONs, one command each: named runs trained per training seed as the study
-says, then ``bridgeplan eval``, ``hierarchy eval`` or ``ogbench eval`` per training seed, split and task set, each
-writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table cell one declared line, run by ``study
-run``)::
+says, then ``bridgeplan eval``, ``hierarchy eval`` (or ``graph-eval``) or ``ogbench eval`` per training seed, split
+and task set, each writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table cell one declared
+line, run by ``study run``)::
 
     [runs.high-ddpm-k12]                 # a named run: TrainConfig fields over [training]'s, one per training seed
     process = "ddpm"
@@ -9,8 +9,9 @@ run``)::
     stride = 12
 
     [[evaluations]]
-    command = "hierarchy eval"           # eval | hierarchy eval | ogbench eval | ogbench hierarchy-eval |
-                                         # ogbench evaluate-oracle | ogbench gcbc-eval | ogbench graph-eval
+    command = "hierarchy eval"           # eval | hierarchy eval | hierarchy graph-eval | ogbench eval |
+                                         # ogbench hierarchy-eval | ogbench evaluate-oracle | ogbench gcbc-eval |
+                                         # ogbench graph-eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
     args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
@@ -35,13 +36,15 @@ from pathlib import Path
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.studies.spec import READS_THE_DATASET, NamedRun, command_argv
 
-EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "ogbench eval": "--episodes-per-task",
+EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "hierarchy graph-eval": "--episodes",
+                 "ogbench eval": "--episodes-per-task",
                  "ogbench hierarchy-eval": "--episodes-per-task", "ogbench evaluate-oracle": "--episodes",
                  "ogbench gcbc-eval": "--episodes", "ogbench graph-eval": "--episodes-per-task"}
 """Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
 task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
-QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "ogbench eval": 4, "ogbench hierarchy-eval": 4,
-                  "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4, "ogbench graph-eval": 4}
+QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "hierarchy graph-eval": 20, "ogbench eval": 4,
+                  "ogbench hierarchy-eval": 4, "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4,
+                  "ogbench graph-eval": 4}
 """Episodes at the quick scale: Maze2D's per evaluation, OGBench's per task."""
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------

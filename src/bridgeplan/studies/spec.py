@@ -62,8 +62,9 @@ Example (the keys and their defaults: the dataclasses below)::
     maze = "medium"
 
     [[evaluations]]
-    command = "eval"                     # or hierarchy eval, ogbench eval, ogbench hierarchy-eval, ogbench
-                                         # evaluate-oracle, ogbench gcbc-eval, ogbench graph-eval
+    command = "eval"                     # or hierarchy eval, hierarchy graph-eval, ogbench eval, ogbench
+                                         # hierarchy-eval, ogbench evaluate-oracle, ogbench gcbc-eval, ogbench
+                                         # graph-eval
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -407,13 +408,15 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 
 # --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "ogbench eval": ("ogbench", "eval"),
+COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"),
+            "hierarchy graph-eval": ("hierarchy", "graph-eval"), "ogbench eval": ("ogbench", "eval"),
             "ogbench hierarchy-eval": ("ogbench", "hierarchy-eval"),
             "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval"),
             "ogbench graph-eval": ("ogbench", "graph-eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "ogbench eval": 1, "ogbench hierarchy-eval": 2, "ogbench evaluate-oracle": 0,
-          "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
-"""How many runs each command takes (a hierarchy: the high level, then the low one; the oracle none)."""
+LEVELS = {"eval": 1, "hierarchy eval": 2, "hierarchy graph-eval": 1, "ogbench eval": 1, "ogbench hierarchy-eval": 2,
+          "ogbench evaluate-oracle": 0, "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
+"""How many runs each command takes (a hierarchy: the high level, then the low one; over the dataset graph, the
+low one; the oracle none)."""
 RUN_FLAGS = {"ogbench graph-eval": ("--low",)}
 """Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
 POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}

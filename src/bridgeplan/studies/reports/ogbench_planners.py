@@ -3,7 +3,7 @@ the straight line alone, the oracle and the published methods.
 
 Rows: ``bridgeplan ogbench eval --json`` outputs (and ``hierarchy-eval``'s, ``graph-eval``'s) in
 docs/results/ogbench-<maze>-<kind>/<run>/ (one per run, controller and evaluation seed). The dataset graph
-(``ogbench_pointmaze.graph``) trains nothing: its rows are one deterministic graph per setting, so their "mean over
+(``bridgeplan.graph``) trains nothing: its rows are one deterministic graph per setting, so their "mean over
 training seeds" is that one value. The test episodes are evaluation seed :data:`TEST_SEED` (the protocol's 5 tasks x
 50 episodes); the controller (Diffuser-style tracking in time, or pursuit of the plan's path) is chosen per method
 on the validation episodes, seed :data:`VALIDATION_SEED`, and reported on the test ones. Success is OGBench's

@@ -7,16 +7,21 @@ never saw such a path. But the pieces cross one another. Search on the replay bu
 
 - nodes: every ``keep``-th state of each episode (and its last);
 - edges: consecutive nodes of one episode, their cost the steps between them (``keep``, or fewer at an
-  episode's end); and each node to its ``neighbours`` nearest nodes within ``radius`` of any episode, the cost
-  the steps the point needs to cross the gap at full speed (distance / :data:`STEP`). Edges are undirected: the
-  kinematic point's steps can be walked back in free space. A jump never crosses a wall when ``radius`` is
-  below the wall's thickness (a 4-unit cell here), except across a corner where two free cells touch diagonally;
-  a small radius (default 0.5, a few steps) keeps such jumps rare and short;
+  episode's end); and each node to its ``neighbours`` nearest nodes within ``radius`` of another episode (or,
+  ``within_episodes``, of its own but not next to it), the cost the steps needed to cross the gap at the
+  data's pace (distance / ``step``). Edges are undirected: the data's steps can be walked back in free space (a
+  state walked back has its velocity reversed, where the state has one). A jump never crosses a wall when
+  ``radius`` is below the wall's thickness, except across a corner where two free cells touch diagonally; a small
+  radius (a few steps) keeps such jumps rare and short;
 - a query joins the start to the nodes within ``reach`` of it (the nearest one if none is) and the goal
   likewise, and takes the cheapest path (Dijkstra);
 - the path, densified: the dataset's own states between consecutive nodes of an episode, straight lines at
-  most :data:`STEP` apart across jumps and to the start and the goal; one position per step, the goal
+  most ``step`` apart across jumps and to the start and the goal (at rest); one state per step, the goal
   repeated to a fixed length.
+
+The settings per environment family: OGBench's kinematic point (:data:`DEFAULTS`: 4-unit cells, a step of
+:data:`STEP`, many short episodes) and Maze2D (:data:`MAZE2D_DEFAULTS`, :func:`for_stream`: 1-unit cells, the
+data's median step, one continuous stream whose loops are closed by jumps within it).
 
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into a policy's decisions
 (``ogbench_pointmaze.planning.PlanningPolicy.decisions``), ``bridgeplan ogbench graph-eval`` scores it on the
@@ -25,7 +30,8 @@ protocol: what the data's connectivity alone allows, the floor a stitching plann
 :class:`GraphHierarchy` makes the graph a hierarchy's high level (``bridgeplan.hierarchy.HierarchySource``): its
 path, one state every ``J`` steps of the data (J = the low level's subgoal spacing), is the coarse plan a low
 level trained with ``--subgoal-every`` plans through, from the coarse plan itself as its prior (``--prior
-coarse``): the thesis's informative prior, here made of the data's own states (``graph-eval --low RUN``).
+coarse``): the thesis's informative prior, here made of the data's own states (``ogbench graph-eval --low RUN``;
+on Maze2D ``hierarchy graph-eval LOW``).
 """
 
 from __future__ import annotations
@@ -41,18 +47,19 @@ from scipy.spatial import cKDTree
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.ogbench_pointmaze.controllers import GAIN
-from bridgeplan.trajectory import KINEMATIC_POINT
+from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, Layout
 
 if TYPE_CHECKING:
+    from bridgeplan.data.stream import Stream
     from bridgeplan.planner import Planner
 
 STEP = GAIN
-"""Distance the point moves in one step at full speed along an axis (0.2): a jump's cost is its length / STEP."""
-DEFAULT_KEEP = 10
-DEFAULT_RADIUS = 0.5
-DEFAULT_NEIGHBOURS = 8
+"""Distance OGBench's point moves in one step at full speed along an axis (0.2): its jumps' cost is length / STEP."""
 DEFAULT_REACH = 2.0
-DEFAULTS = {"keep": DEFAULT_KEEP, "radius": DEFAULT_RADIUS, "neighbours": DEFAULT_NEIGHBOURS, "reach": DEFAULT_REACH}
+DEFAULTS = {"keep": 10, "radius": 0.5, "neighbours": 8, "reach": DEFAULT_REACH}
+"""OGBench pointmaze's settings (4-unit cells)."""
+MAZE2D_DEFAULTS = {"keep": 10, "radius": 0.2, "neighbours": 8, "reach": 0.5}
+"""Maze2D's (1-unit cells, ~0.04 per step: a jump of at most ~5 steps)."""
 
 
 def check_graph_settings(keep: int, radius: float, neighbours: int, reach: float) -> None:
@@ -72,7 +79,9 @@ class DatasetGraph:
     """The graph over a dataset's states (:meth:`build`); :meth:`path` answers queries."""
 
     observations: np.ndarray
-    """``[T, 2]`` every state of the dataset, episodes one after another."""
+    """``[T, obs_dim]`` every state of the dataset, episodes one after another."""
+    layout: Layout
+    """Which state columns are the position (searched) and the velocity (reversed where a path walks back)."""
     nodes: np.ndarray
     """``[V]`` the nodes' rows in ``observations``, ascending."""
     episode: np.ndarray
@@ -80,6 +89,9 @@ class DatasetGraph:
     costs: object
     """``[V, V]`` sparse symmetric matrix of edge costs (steps)."""
     tree: cKDTree
+    """Over the nodes' positions."""
+    step: float = STEP
+    """The data's pace: distance per step, what a jump (or a line) of a given length costs in steps."""
     reach: float = DEFAULT_REACH
     jumps: int = 0
     """Edges between nodes not consecutive in one episode."""
@@ -88,11 +100,16 @@ class DatasetGraph:
     many of the data's episodes it runs through (1: no stitching)."""
 
     @classmethod
-    def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULT_KEEP,
-              radius: float = DEFAULT_RADIUS, neighbours: int = DEFAULT_NEIGHBOURS,
-              reach: float = DEFAULT_REACH) -> DatasetGraph:
-        """The graph of ``observations [T, 2]`` whose episodes begin at rows ``starts`` (ascending, 0 first)."""
+    def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULTS["keep"],
+              radius: float = DEFAULTS["radius"], neighbours: int = DEFAULTS["neighbours"],
+              reach: float = DEFAULT_REACH, layout: Layout = KINEMATIC_POINT, step: float = STEP,
+              within_episodes: bool = False) -> DatasetGraph:
+        """The graph of ``observations [T, obs_dim]`` (``layout``'s states) whose episodes begin at rows ``starts``
+        (ascending, 0 first). ``within_episodes``: jumps may also join two nodes of one episode that are not
+        consecutive (a long continuous stream that passes a place again)."""
         check_graph_settings(keep, radius, neighbours, reach)
+        if not np.isfinite(step) or step <= 0:
+            raise BridgeplanError(f"the data's step must be a positive distance, got {step}")
         observations = np.asarray(observations, np.float64)
         starts = np.asarray(starts, np.int64)
         ends = np.append(starts[1:], len(observations)) - 1
@@ -106,7 +123,7 @@ class DatasetGraph:
             rows.append(r)
             episode.append(np.full(len(r), e))
         nodes, episode = np.concatenate(rows), np.concatenate(episode)
-        xy = observations[nodes]
+        xy = layout.state_positions(observations)[nodes]
         same = episode[1:] == episode[:-1]  # consecutive nodes of one episode
         i, j = np.flatnonzero(same), np.flatnonzero(same) + 1
         w = (nodes[j] - nodes[i]).astype(np.float64)
@@ -116,9 +133,12 @@ class DatasetGraph:
             a = np.repeat(np.arange(len(xy)), neighbours + 1)
             b, d = nn.ravel(), dist.ravel()
             ok = np.isfinite(d) & (b != a)
-            ok[ok] &= episode[a[ok]] != episode[b[ok]]  # within an episode, its own steps say the way
+            # within an episode, its own steps say the way: between its consecutive nodes always, elsewhere unless
+            # the episode is a stream that comes back
+            other = episode[a[ok]] != episode[b[ok]]
+            ok[ok] &= other | (within_episodes & (np.abs(a[ok] - b[ok]) > 1))
             i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
-            w = np.concatenate([w, np.maximum(d[ok], 1e-9) / STEP])
+            w = np.concatenate([w, np.maximum(d[ok], 1e-9) / step])
         # one edge per pair, its cheapest cost (a pair found from both ends, or both a step and a jump)
         lo, hi = np.minimum(i, j), np.maximum(i, j)
         order = np.lexsort((w, hi, lo))
@@ -126,11 +146,22 @@ class DatasetGraph:
         first = np.ones(len(lo), dtype=bool)
         first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
         lo, hi, w = lo[first], hi[first], w[first]
-        jumps = int(np.sum(episode[lo] != episode[hi]))
+        jumps = int(np.sum((episode[lo] != episode[hi]) | (hi - lo > 1)))
         n = len(nodes)
         costs = coo_matrix((np.concatenate([w, w]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
                            shape=(n, n)).tocsr()
-        return cls(observations, nodes, episode, costs, tree, reach, jumps)
+        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps)
+
+    def summary(self) -> dict:
+        """The graph's size and what its queries so far found (a result's ``graph`` entry, beside its settings)."""
+        out = {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // 2), "jumps": self.jumps,
+               "step": self.step}
+        if self.queries:
+            steps, found, pieces = (np.array(v) for v in zip(*self.queries))
+            out.update({"paths_found": float(found.mean()),
+                        "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
+                        "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}})
+        return out
 
     def _ends(self, points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per point, the nodes it joins (within ``reach``, else the nearest) and the steps to each."""
@@ -140,12 +171,12 @@ class DatasetGraph:
             idx = np.asarray(idx, np.int64)
             if len(idx) == 0:
                 idx = np.array([self.tree.query(p)[1]], np.int64)
-            out.append((idx, np.linalg.norm(self.tree.data[idx] - p, axis=1) / STEP))
+            out.append((idx, np.linalg.norm(self.tree.data[idx] - p, axis=1) / self.step))
         return out
 
     def path_nodes(self, start: np.ndarray, goal: np.ndarray) -> list[int]:
-        """The cheapest node path from ``start`` to ``goal`` (positions ``[2]``); [] when no path joins them.
-        The start enters the graph as one more node, joined to its nodes by the steps to them."""
+        """The cheapest node path from position ``start`` to position ``goal`` (``[2]`` each); [] when no path
+        joins them. The start enters the graph as one more node, joined to its nodes by the steps to them."""
         (s_idx, s_cost), (g_idx, g_cost) = self._ends(np.stack([start, goal]))
         n, c = self.costs.shape[0], self.costs
         with_start = csr_matrix((np.concatenate([c.data, np.maximum(s_cost, 1e-9)]),
@@ -163,41 +194,69 @@ class DatasetGraph:
         return path[::-1]
 
     def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, 2]`` the cheapest path from ``start`` to ``goal``, densified (the straight line when none is
-        found); recorded in :attr:`queries`."""
-        nodes = self.path_nodes(start, goal)
-        dense = self.densify(start, goal, nodes)
+        """``[L, obs_dim]`` the cheapest path from state ``start`` to position ``goal``, densified (the straight line
+        when none is found), ending at rest at the goal; recorded in :attr:`queries`."""
+        start = np.asarray(start, np.float64)
+        nodes = self.path_nodes(self.layout.state_positions(start), goal)
+        dense = self.densify(start, self.layout.at_rest(np.asarray(goal, np.float64)), nodes)
         self.queries.append((len(dense), bool(nodes), len(set(self.episode[nodes].tolist()))))
         return dense
 
     def densify(self, start: np.ndarray, goal: np.ndarray, path: list[int]) -> np.ndarray:
-        """``[L, 2]`` positions at most :data:`STEP` apart per axis from ``start`` through ``path`` to ``goal``:
-        the dataset's states between consecutive nodes of one episode, straight lines elsewhere."""
+        """``[L, obs_dim]`` states whose positions are at most ``step`` apart per axis, from state ``start``
+        through ``path`` to state ``goal``: the dataset's states between consecutive nodes of one episode (walked
+        back, their velocities reversed), straight lines elsewhere."""
         pieces = [np.asarray(start, np.float64)[None]]
         for a, b in zip(path, path[1:]):
-            if self.episode[a] == self.episode[b]:
+            if self.episode[a] == self.episode[b] and abs(a - b) == 1:
                 lo, hi = sorted((self.nodes[a], self.nodes[b]))
                 seg = self.observations[lo:hi + 1]
-                pieces.append((seg if self.nodes[a] < self.nodes[b] else seg[::-1])[1:])
+                pieces.append((seg if self.nodes[a] < self.nodes[b] else self._reversed(seg))[1:])
             else:
-                pieces.append(_line(self.observations[self.nodes[a]], self.observations[self.nodes[b]]))
+                pieces.append(self._line(self.observations[self.nodes[a]], self.observations[self.nodes[b]]))
         if path:
-            pieces.insert(1, _line(start, self.observations[self.nodes[path[0]]]))
-            pieces.append(_line(pieces[-1][-1], goal))
+            pieces.insert(1, self._line(start, self.observations[self.nodes[path[0]]]))
+            pieces.append(self._line(pieces[-1][-1], goal))
         else:
-            pieces.append(_line(start, goal))
+            pieces.append(self._line(start, goal))
         return np.concatenate(pieces)
 
+    def _reversed(self, states: np.ndarray) -> np.ndarray:
+        out = states[::-1].copy()
+        if self.layout.has_velocity:
+            self.layout.state_velocities(out)[...] *= -1
+        return out
 
-def _line(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Points from ``a`` (excluded) to ``b`` (included), at most :data:`STEP` apart per axis."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    n = max(1, int(np.ceil(np.abs(b - a).max() / STEP)))
-    return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
+    def _line(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """States from ``a`` (excluded) to ``b`` (included), interpolated, positions at most ``step`` apart per
+        axis."""
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+        gap = self.layout.state_positions(b) - self.layout.state_positions(a)
+        n = max(1, int(np.ceil(np.abs(gap).max() / self.step)))
+        return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
+
+
+def data_step(stream: Stream) -> float:
+    """The median distance the data's position moves in one step, within its segments: its pace."""
+    xy = stream.layout.state_positions(stream.states)
+    moves = [np.linalg.norm(np.diff(xy[lo:hi], axis=0), axis=1) for lo, hi in stream.segment_bounds() if hi - lo > 1]
+    if not moves:
+        raise BridgeplanError("the dataset has no two consecutive states: no pace to measure")
+    return float(np.median(np.concatenate(moves)))
+
+
+def for_stream(stream: Stream, settings: dict | None = None) -> DatasetGraph:
+    """The graph of a dataset, with its family's settings (``settings`` over them): OGBench's pointmaze
+    (:data:`DEFAULTS`, the point's full step, episodes apart) or Maze2D (:data:`MAZE2D_DEFAULTS`, the data's median
+    step, loops closed within its continuous segments)."""
+    if stream.layout == MAZE2D:
+        return DatasetGraph.build(stream.states, stream.segment_starts, **{**MAZE2D_DEFAULTS, **(settings or {})},
+                                  layout=MAZE2D, step=data_step(stream), within_episodes=True)
+    return DatasetGraph.build(stream.states, stream.segment_starts, **{**DEFAULTS, **(settings or {})})
 
 
 def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
-    """``[length, 2]``: ``path`` cut to ``length`` positions, or its last repeated up to it."""
+    """``[length, obs_dim]``: ``path`` cut to ``length`` states, or its last repeated up to it."""
     if len(path) >= length:
         return path[:length]
     return np.concatenate([path, np.repeat(path[-1:], length - len(path), axis=0)])
@@ -232,9 +291,9 @@ class GraphHierarchy:
     def __post_init__(self):
         if not self.low.subgoal_every:
             raise BridgeplanError("the low level must plan between subgoals: train it with --subgoal-every J")
-        if self.low.layout != KINEMATIC_POINT:
-            raise BridgeplanError(f"the dataset graph plans the positions of OGBench's point; the low level plans "
-                                  f"in {self.low.layout.name}")
+        if self.low.layout != self.graph.layout:
+            raise BridgeplanError(f"the dataset graph holds {self.graph.layout.name} states; the low level plans "
+                                  f"in {self.low.layout.name} (a planner of another environment)")
 
     @property
     def spacing(self) -> int:
@@ -256,10 +315,10 @@ class GraphHierarchy:
 
     def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
                      generator) -> tuple[np.ndarray, float]:
-        """``[N, coarse_length, 2]`` each episode's path from ``starts`` to ``goals``, every :attr:`spacing`-th
-        position (its last, the goal, kept), and the seconds the searches took."""
+        """``[N, coarse_length, obs_dim]`` each episode's path from states ``starts`` to positions ``goals``, every
+        :attr:`spacing`-th state (its last, the goal at rest, kept), and the seconds the searches took."""
         t0 = time.perf_counter()
-        out = np.empty((len(starts), self.coarse_length, 2))
+        out = np.empty((len(starts), self.coarse_length, self.graph.layout.obs_dim))
         for k, (s, g) in enumerate(zip(np.asarray(starts, np.float64), np.asarray(goals, np.float64))):
             path = self.graph.path(s, g)
             coarse = path[::self.spacing]
@@ -272,3 +331,28 @@ class GraphHierarchy:
         from bridgeplan.hierarchy import next_subgoals
 
         return next_subgoals(coarse, progress, self.subgoals_per_plan)
+
+    def describe(self, settings: dict) -> dict:
+        """The high level's entry in a hierarchy's JSON (as ``hierarchy.level_dict`` a planner's)."""
+        return {"run": "dataset graph", "step": 0, "method": "dataset graph", "process": "graph", "nfe": 0,
+                "horizon": self.coarse_length, "stride": self.spacing, "subgoal_every": None,
+                "graph": {**settings, **self.graph.summary()}}
+
+
+def add_graph_flags(parser, defaults: dict) -> None:
+    """The flags that build a graph (``ogbench graph-eval``, ``hierarchy graph-eval``), defaults its family's."""
+    parser.add_argument("--keep", type=int, default=defaults["keep"],
+                        help=f"every keep-th state of an episode is a node (default {defaults['keep']})")
+    parser.add_argument("--radius", type=float, default=defaults["radius"],
+                        help=f"nodes of other episodes (or farther along one stream) within this distance are joined: "
+                             f"below a wall's thickness (default {defaults['radius']:g})")
+    parser.add_argument("--neighbours", type=int, default=defaults["neighbours"],
+                        help=f"at most this many such joins per node (default {defaults['neighbours']})")
+    parser.add_argument("--reach", type=float, default=defaults["reach"],
+                        help=f"the start and the goal join the nodes within this distance, else the nearest "
+                             f"(default {defaults['reach']:g})")
+
+
+def graph_settings(args) -> dict:
+    """The settings :func:`add_graph_flags` parsed."""
+    return {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}

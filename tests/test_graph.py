@@ -1,4 +1,4 @@
-"""The dataset graph (``ogbench_pointmaze.graph``): paths over the data's own states, stitched across episodes
+"""The dataset graph (``bridgeplan.graph``): paths over the data's own states, stitched across episodes
 where they pass close, densified from the data; and ``bridgeplan ogbench graph-eval`` on OGBench's protocol."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.graph import STEP, DatasetGraph, GraphSource, fixed_length
+from bridgeplan.graph import STEP, DatasetGraph, GraphSource, fixed_length
 
 
 def _walk(a, b, steps):
@@ -129,7 +129,7 @@ def test_the_graph_as_a_high_level_spaces_its_path_by_the_low_levels_subgoals():
     without subgoals, or of another layout, is refused; the graph takes no NFE."""
     from types import SimpleNamespace
 
-    from bridgeplan.ogbench_pointmaze.graph import GraphHierarchy
+    from bridgeplan.graph import GraphHierarchy
     from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D
 
     obs, starts = two_pieces()
