@@ -175,3 +175,42 @@ def test_graph_eval_with_a_low_level(stitch, tmp_path, capsys):
                 ["--low", str(low), "--replan-every", "12", "--replan-high-every", "0"]):
         assert main([*args, *bad]) == 2
         assert capsys.readouterr().err.startswith("error: ")
+
+
+def test_a_stream_that_passes_a_place_again_is_joined_to_itself_and_walked_back_reversed():
+    """Maze2D's data is one continuous stream: east along y = 0 to (10, 0), north to (10, 5), west to (5, 5), south
+    across its own start of way at (5, 0.05), on to (5, -5). Only with ``within_episodes`` does a path from (0, 0)
+    to (5, -5) cut across where the stream passes itself; a stretch walked back has its velocity reversed."""
+    from bridgeplan.trajectory import MAZE2D
+
+    xy = np.concatenate([_walk((0, 0), (10, 0), 100), _walk((10, 0), (10, 5), 50)[1:], _walk((10, 5), (5, 5), 50)[1:],
+                         _walk((5, 5), (5, 0.05), 50)[1:], _walk((5, 0.05), (5, -5), 50)[1:]])
+    states = np.concatenate([xy, np.gradient(xy, axis=0)], axis=1)  # velocity: the step
+    alone = DatasetGraph.build(states, np.array([0]), keep=5, radius=0.2, layout=MAZE2D, step=0.1)
+    joined = DatasetGraph.build(states, np.array([0]), keep=5, radius=0.2, layout=MAZE2D, step=0.1,
+                                within_episodes=True)
+    assert alone.jumps == 0 and joined.jumps > 0
+    start, goal = MAZE2D.at_rest(np.array([0.0, 0.0])), np.array([5.0, -5.0])
+    around, across = alone.path(start, goal), joined.path(start, goal)
+    assert len(around) > 290 and len(across) < 110  # the whole stream, or 50 + 50 steps and the jump
+    for path in (around, across):
+        assert path.shape[1] == 4 and np.allclose(path[0], start) and np.allclose(path[-1], [5, -5, 0, 0])
+    assert np.abs(across[:, 0] - 5).max() <= 5 and across[:, 1].max() < 0.2
+    # walked back from (5, -5) to (0, 0): north (the data went south) then west (it went east)
+    back = joined.path(MAZE2D.at_rest(np.array([5.0, -5.0])), np.array([0.0, 0.0]))
+    south, west = back[(back[:, 1] < -1) & (back[:, 1] > -4)], back[(back[:, 0] > 1) & (back[:, 0] < 4)]
+    assert len(south) and np.all(south[:, 3] > 0) and len(west) and np.all(west[:, 2] < 0)
+
+
+def test_the_maze2d_graph_takes_its_familys_settings(tiny_dataset):
+    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.graph import MAZE2D_DEFAULTS, data_step, for_stream
+    from bridgeplan.trajectory import MAZE2D
+
+    stream = load_stream(tiny_dataset)
+    graph = for_stream(stream, {"keep": 20})
+    moves = np.linalg.norm(np.diff(stream.states[:, :2], axis=0), axis=1)
+    assert graph.layout == MAZE2D and graph.step == data_step(stream)
+    assert 0.5 * moves.mean() < graph.step < 2 * moves.max()
+    assert graph.reach == MAZE2D_DEFAULTS["reach"] and len(graph.nodes) == pytest.approx(len(stream) / 20, abs=5)
+    assert graph.jumps > 0  # the stream comes back to places it passed

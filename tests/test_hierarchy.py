@@ -213,3 +213,30 @@ def test_progress_along_a_plan_that_winds_back(rule, expected):
     source.progress = np.zeros(1, dtype=np.int64)
     reached = [int(source.advance(np.array([p]), np.arange(1))[0]) for p in ([0.5, 1.5], [2.1, 0.1])]
     assert reached == expected
+
+
+def test_graph_eval_makes_the_data_the_high_level(levels, tmp_path, capsys):
+    """`hierarchy graph-eval LOW`: the graph over the low level's own dataset plans once per episode (no network
+    call), the low level every 12 steps; its coarse plans never cross a wall of umaze (the data never does)."""
+    out = tmp_path / "g.json"
+    args = ["hierarchy", "graph-eval", str(levels["low"]), "--episodes", "4", "--nfe-low", "1", "--device", "cpu"]
+    assert main([*args, "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["kind"] == "hierarchy" and r["high"]["method"] == "dataset graph" and r["high"]["nfe"] == 0
+    assert r["high"]["stride"] == 12 and r["execution"]["replan_every"] == 12
+    g = r["high"]["graph"]
+    assert (g["keep"], g["radius"]) == (10, 0.2) and g["paths_found"] == 1.0 and g["nodes"] > 500
+    assert g["dataset_identity"].startswith("umaze-tiny (umaze, ") and "/" not in g["dataset_identity"]
+    assert r["calls_per_episode"] == 25 and "floor_line" not in r  # one low-level call per 12 of 300 steps
+    assert r["coarse_plans"]["in_walls"] == 0.0
+    assert "hierarchy" in capsys.readouterr().out
+    assert main([*args, "--replan-high-every", "100", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["execution"]["replan_high_every"] == 100
+    for bad in (["--keep", "0"], ["--radius", "-1"], ["--nfe-low", "0"], ["--replan-high-every", "0"]):
+        assert main([*args, *bad, "--out", str(tmp_path / "bad.json")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1
+    assert not (tmp_path / "bad.json").exists()
+    # the graph holds Maze2D states; a high level's run is no low level
+    assert main(["hierarchy", "graph-eval", str(levels["high"]), "--episodes", "2", "--device", "cpu"]) == 2
+    assert "low level must plan between subgoals" in capsys.readouterr().err

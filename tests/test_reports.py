@@ -204,6 +204,35 @@ def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_pat
     assert "| flow (line) NFE 4 (H32k24) alone; replan 96, pursuit 1.5 | 80.0 ± 0.0 | 80.0 ± 0.0 | 0.80 |" in text
 
 
+def test_hierarchy_report_reads_the_graph_as_a_high_level(tmp_path):
+    """A `hierarchy graph-eval` row: the graph has no training seed (its low level's counts), no span for a line
+    floor ('-'), and a family of its own; the goal is judged on its test episodes."""
+    from bridgeplan.studies.reports import hierarchy
+
+    for seed in SEEDS:
+        for eval_seed in (seed, 1000 + seed):
+            row = _hierarchy_row(seed, eval_seed, "flow (coarse)", 1, 104.5 + seed, coarse=85.0)
+            row["high"] = {"run": "dataset graph", "step": 0, "method": "dataset graph", "process": "graph", "nfe": 0,
+                           "horizon": 68, "stride": 12, "subgoal_every": None,
+                           "graph": {"keep": 10, "radius": 0.2, "nodes": 100}}
+            row["success_rate"]["mean"] = 0.99
+            del row["floor_line"]
+            out = tmp_path / "large-hierarchy" / "graph" / f"single-seed{eval_seed}.json"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(row))
+    (tmp_path / "expert-on-eval-tasks.json").write_text(json.dumps({"rows": []}))
+    rows = hierarchy.read_rows(tmp_path, "large")
+    assert list(hierarchy.chosen_settings(rows, False)) == ["dataset graph -> flow (coarse) H16k8"]
+    block = hierarchy.block(tmp_path)
+    assert block.startswith("- large single-task, dataset graph -> flow (coarse) H16k8: 105.5 ± 0.6 (success 0.99)")
+    assert "+20.5 ± 0.6 (better)" in block and block.endswith("goal (success >= 0.98, Minari >= 104): met")
+    text = GENERATORS["hierarchy"].render(tmp_path)
+    assert ("| **dataset graph (keep 10, radius 0.2; every 12) -> flow (coarse) NFE 1 (H16k8, subgoal every 3); "
+            "replan 24, pursuit 1.5** | 105.5 ± 0.6 | **105.5 ± 0.6** | 0.99 | 85.0 ± 0.0 | 0.70 | +20.5 ± 0.6 "
+            "(better) | - |") in text
+    assert "Training seeds 0, 1, 2;" in text
+
+
 def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_path):
     """The dataset graph's rows (no training seed) in a stitch folder: a section of their own, judged on their one
     value; a graph with a low level counts its low level's training seeds."""

@@ -59,6 +59,8 @@ def matching_high_alone(r: dict, alone_rows: list[dict]) -> str | None:
     """The high-level-alone setting that replans the same high level as often as hierarchy row ``r`` does."""
     every = r["execution"].get("replan_high_every")
     high = r["high"]
+    if is_graph(high):
+        return None
     for a in alone_rows:
         if (every and a["execution"]["replan_every"] == every and a["nfe"] == high["nfe"]
                 and (a["horizon"], a["stride"]) == (high["horizon"], high["stride"])
@@ -67,20 +69,37 @@ def matching_high_alone(r: dict, alone_rows: list[dict]) -> str | None:
     return None
 
 
+def is_graph(high: dict) -> bool:
+    """Whether a row's high level is the dataset graph (``hierarchy graph-eval``), not a trained planner."""
+    return high.get("process") == "graph"
+
+
+def high_label(high: dict) -> str:
+    if is_graph(high):
+        g = high["graph"]
+        return f"dataset graph (keep {g['keep']}, radius {g['radius']:g}; every {high['stride']})"
+    return f"{high['method']} NFE {high['nfe']} (H{high['horizon']}k{high['stride']})"
+
+
 def setting_of(r: dict) -> str:
     high, low, ex = r["high"], r["low"], r["execution"]
     control = ex["controller"] + (f" {ex['lookahead']:g}" if ex.get("lookahead") else "")
     if ex.get("replan_high_every"):
         control += f", high level replanned every {ex['replan_high_every']}"
-    return (f"{high['method']} NFE {high['nfe']} (H{high['horizon']}k{high['stride']}) -> {low['method']} NFE "
-            f"{low['nfe']} (H{low['horizon']}k{low['stride']}, subgoal every {low['subgoal_every']}); replan "
-            f"{ex['replan_every']}, {control}")
+    return (f"{high_label(high)} -> {low['method']} NFE {low['nfe']} (H{low['horizon']}k{low['stride']}, subgoal "
+            f"every {low['subgoal_every']}); replan {ex['replan_every']}, {control}")
 
 
 def family_of(r: dict) -> str:
     """The two levels' methods and shapes: a setting is chosen on validation within each family."""
     high, low = r["high"], r["low"]
-    return f"{high['method']} H{high['horizon']}k{high['stride']} -> {low['method']} H{low['horizon']}k{low['stride']}"
+    first = "dataset graph" if is_graph(high) else f"{high['method']} H{high['horizon']}k{high['stride']}"
+    return f"{first} -> {low['method']} H{low['horizon']}k{low['stride']}"
+
+
+def training_seed(r: dict) -> int:
+    """The row's training seed: its low level's (a planner high level shares it; the graph has none)."""
+    return r["low"]["config"]["seed"]
 
 
 def split_of(r: dict) -> str:
@@ -88,7 +107,7 @@ def split_of(r: dict) -> str:
 
 
 def by_seed(rows: list[dict], setting: str, split: str, multi_task: bool, value) -> dict[int, float]:
-    return {r["high"]["config"]["seed"]: value(r) for r in rows
+    return {training_seed(r): value(r) for r in rows
             if setting_of(r) == setting and split_of(r) == split and bool(r["multi_task"]) == multi_task}
 
 
@@ -98,6 +117,11 @@ def minari(r: dict) -> float:
 
 def alone(r: dict) -> float:
     return r["high_alone"]["score"]["minari"]["mean"]
+
+
+def line_alone(r: dict) -> float | None:
+    """The straight line over the high level's span, pursued (None for the graph, which has no span)."""
+    return r["floor_line"]["score"]["minari"]["mean"] if "floor_line" in r else None
 
 
 def average(values: dict[int, float]) -> float:
@@ -190,7 +214,7 @@ def maze_lines(root: Path, maze: str) -> list[str]:
     if not rows:
         return []
     expert = expert_scores(root)
-    seeds = sorted({r["high"]["config"]["seed"] for r in rows})
+    seeds = sorted({training_seed(r) for r in rows})
     steps = sorted({(r["high"]["step"], r["low"]["step"]) for r in rows})
     versions = sorted({r["environment"]["code_version"] for r in rows})
     out = [f"## {maze}", "",
@@ -213,7 +237,7 @@ def maze_lines(root: Path, maze: str) -> list[str]:
                          f"{average(test(lambda r: r['success_rate']['mean'])):.2f}", cell(co),
                          f"{average(test(lambda r: r['high_alone']['success_rate']['mean'])):.2f}",
                          verdict(paired(sc, co)) if sc and co else "-",
-                         cell(test(lambda r: r["floor_line"]["score"]["minari"]["mean"])),
+                         cell({k: v for k, v in test(line_alone).items() if v is not None}),
                          diagnostic(test, "in_walls", "{:.2f}"), diagnostic(test, "arrival_step", "{:.0f}"),
                          f"{average(test(lambda r: r['calls_per_episode'])):.0f}",
                          ms])
