@@ -214,3 +214,23 @@ def test_the_maze2d_graph_takes_its_familys_settings(tiny_dataset):
     assert 0.5 * moves.mean() < graph.step < 2 * moves.max()
     assert graph.reach == MAZE2D_DEFAULTS["reach"] and len(graph.nodes) == pytest.approx(len(stream) / 20, abs=5)
     assert graph.jumps > 0  # the stream comes back to places it passed
+
+
+def test_one_search_per_goal_serves_every_start(monkeypatch):
+    """The graph is searched once per goal; later starts (replans, other episodes) look the way up, and find the
+    same paths a fresh search would."""
+    import bridgeplan.graph as graph_module
+
+    obs, starts = two_pieces()
+    calls = []
+    real = graph_module.dijkstra
+    monkeypatch.setattr(graph_module, "dijkstra", lambda *a, **k: calls.append(1) or real(*a, **k))
+    g = DatasetGraph.build(obs, starts, keep=5, radius=0.5, neighbours=4)
+    goal = np.array([10.0, 10.0])
+    paths = [g.path_nodes(np.array(s), goal) for s in ([0.0, 0.0], [5.0, 0.0], [10.0, 3.0])]
+    assert len(calls) == 1 and g.path_nodes(np.array([0.0, 0.0]), np.array([0.0, 0.0])) and len(calls) == 2
+    for s, nodes in zip(([0.0, 0.0], [5.0, 0.0], [10.0, 3.0]), paths):
+        fresh = DatasetGraph.build(obs, starts, keep=5, radius=0.5, neighbours=4)
+        assert fresh.path_nodes(np.array(s), goal) == nodes and g.episode[nodes[-1]] == 1
+    for s, nodes in zip(([5.0, 0.0], [10.0, 3.0]), paths[1:]):  # each starts where it stands, not at (0, 0)
+        assert np.linalg.norm(obs[g.nodes[nodes[0]]] - s) <= g.reach and nodes[0] != paths[0][0]

@@ -58,6 +58,8 @@ STEP = GAIN
 DEFAULT_REACH = 2.0
 DEFAULTS = {"keep": 10, "radius": 0.5, "neighbours": 8, "reach": DEFAULT_REACH}
 """OGBench pointmaze's settings (4-unit cells)."""
+GOALS_KEPT = 256
+"""Goals whose search :meth:`DatasetGraph.to_goal` keeps (a Multi2D evaluation's 200 goals; ~1 MB each)."""
 MAZE2D_DEFAULTS = {"keep": 10, "radius": 0.2, "neighbours": 8, "reach": 0.5}
 """Maze2D's (1-unit cells, ~0.04 per step: a jump of at most ~5 steps)."""
 
@@ -98,6 +100,8 @@ class DatasetGraph:
     queries: list[tuple[int, bool, int]] = field(default_factory=list)
     """Per :meth:`path` call: the path's positions, whether a path was found (else the straight line), and how
     many of the data's episodes it runs through (1: no stitching)."""
+    _to_goal: dict = field(default_factory=dict, repr=False)
+    """:meth:`to_goal`'s searches, by goal."""
 
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULTS["keep"],
@@ -176,22 +180,36 @@ class DatasetGraph:
 
     def path_nodes(self, start: np.ndarray, goal: np.ndarray) -> list[int]:
         """The cheapest node path from position ``start`` to position ``goal`` (``[2]`` each); [] when no path
-        joins them. The start enters the graph as one more node, joined to its nodes by the steps to them."""
-        (s_idx, s_cost), (g_idx, g_cost) = self._ends(np.stack([start, goal]))
-        n, c = self.costs.shape[0], self.costs
-        with_start = csr_matrix((np.concatenate([c.data, np.maximum(s_cost, 1e-9)]),
-                                 np.concatenate([c.indices, s_idx]), np.append(c.indptr, c.indptr[-1] + len(s_idx))),
-                                shape=(n + 1, n + 1))
-        dist, pred = dijkstra(with_start, indices=n, return_predecessors=True)
-        through = dist[g_idx] + g_cost
+        joins them. The search runs once per goal (:meth:`to_goal`); from any start it is then a lookup."""
+        cost, toward = self.to_goal(goal)
+        (s_idx, s_cost), = self._ends(np.asarray(start, np.float64)[None])
+        through = cost[s_idx] + s_cost
         if not np.isfinite(through).any():
             return []
-        node = int(g_idx[np.argmin(through)])
+        node, goal_node = int(s_idx[np.argmin(through)]), len(self.nodes)
         path = [node]
-        while pred[node] != n:
-            node = int(pred[node])
+        while toward[node] != goal_node:
+            node = int(toward[node])
             path.append(node)
-        return path[::-1]
+        return path
+
+    def to_goal(self, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every node's cheapest cost to position ``goal`` (steps; inf where none) and its next node on the way
+        (``len(nodes)``: the goal itself): one search (Dijkstra, the goal one more node joined to its nodes by the
+        steps from them), kept for the goal's next queries (replanning from wherever the agent is, other episodes
+        to the same goal; at most :data:`GOALS_KEPT` goals, the oldest forgotten)."""
+        key = np.asarray(goal, np.float64).tobytes()
+        if key not in self._to_goal:
+            (g_idx, g_cost), = self._ends(np.asarray(goal, np.float64)[None])
+            n, c = len(self.nodes), self.costs
+            with_goal = csr_matrix((np.concatenate([c.data, np.maximum(g_cost, 1e-9)]),
+                                    np.concatenate([c.indices, g_idx]), np.append(c.indptr, c.indptr[-1] + len(g_idx))),
+                                   shape=(n + 1, n + 1))
+            cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # undirected: from = to
+            if len(self._to_goal) >= GOALS_KEPT:
+                self._to_goal.pop(next(iter(self._to_goal)))
+            self._to_goal[key] = (cost[:n].astype(np.float32), toward[:n].astype(np.int32))
+        return self._to_goal[key]
 
     def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """``[L, obs_dim]`` the cheapest path from state ``start`` to position ``goal``, densified (the straight line
