@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from bridgeplan.cli import main
 from bridgeplan.data.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
 from bridgeplan.data.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
 from bridgeplan.data.generate import DATA_VERSION, _plan, generate_stream, generate_streams
@@ -146,6 +147,27 @@ def test_parallel_workers_give_independent_continuous_streams():
     assert stream.segment_starts.tolist() == [0, 1501] and len(stream) == 3001
     with pytest.raises(BridgeplanError, match="workers"):
         generate_streams(UMAZE, 10, seed=0, workers=0)
+
+
+def test_pieces_are_independent_short_streams(tmp_path, capsys):
+    """``--piece-steps N``: ceil(steps / N) pieces of about N steps, each from its own seed and a random start, read
+    back as that many segments (the same for 1 or 2 workers)."""
+    pieces = generate_streams(UMAZE, 1000, seed=5, progress=False, piece_steps=300)
+    assert [len(s) for s in pieces] == [250, 250, 250, 250]
+    starts = np.array([s.observations[0, :2] for s in pieces])
+    assert len(np.unique(starts.round(6), axis=0)) == 4 and np.allclose([s.observations[0, 2:] for s in pieces], 0)
+    two = generate_streams(UMAZE, 1000, seed=5, workers=2, progress=False, piece_steps=300)
+    assert all(np.array_equal(a.observations, b.observations) for a, b in zip(pieces, two))
+    out = tmp_path / "pieces"
+    assert main(["data", "generate", "--maze", "umaze", "--steps", "1000", "--piece-steps", "300", "--out", str(out),
+                 "--no-progress"]) == 0
+    stream = load_stream(str(out))
+    assert stream.segment_starts.tolist() == [0, 250, 500, 750] and len(stream) == 1000
+    for bad in ("0", "1001"):
+        assert main(["data", "generate", "--maze", "umaze", "--steps", "1000", "--piece-steps", bad, "--out",
+                     str(tmp_path / "bad"), "--no-progress"]) == 2
+        assert capsys.readouterr().err.startswith("error: --piece-steps must be in 1..1000")
+    assert not (tmp_path / "bad").exists()
 
 
 def test_join_rule():

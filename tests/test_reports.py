@@ -233,6 +233,36 @@ def test_hierarchy_report_reads_the_graph_as_a_high_level(tmp_path):
     assert "Training seeds 0, 1, 2;" in text
 
 
+def test_hierarchy_report_has_a_stitching_section_with_its_own_flat_planners(tmp_path):
+    """docs/results/large-stitch-hierarchy{,-flat}: a section of its own, whose flat planner is the best of its
+    -flat folder on validation (trained on the same pieces), paired on test."""
+    from bridgeplan.studies.reports import hierarchy
+
+    for seed in SEEDS:
+        for eval_seed in (seed, 1000 + seed):
+            row = _hierarchy_row(seed, eval_seed, "flow (coarse)", 1, 100.0 + seed, coarse=85.0)
+            out = tmp_path / "large-stitch-hierarchy" / "graph" / f"single-seed{eval_seed}.json"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(row))
+            for every, score in ((48, 40.0), (96, 60.0 if eval_seed < 1000 else 30.0)):
+                flat = {"method": "DDPM", "process": "ddpm", "nfe": 16, "horizon": 24, "stride": 8, "seed": eval_seed,
+                        "multi_task": False, "config": {"seed": seed},
+                        "execution": {"replan_every": every, "controller": "pursuit", "lookahead": 1.5},
+                        "score": {"minari": {"mean": score + seed}}, "success_rate": {"mean": 0.4},
+                        "calls_per_episode": 272, "decision_ms_batch1": {"p50": 20.0, "p95": 30.0}}
+                out = tmp_path / "large-stitch-hierarchy-flat" / f"r{every}" / f"single-seed{eval_seed}.json"
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(json.dumps(flat))
+    (tmp_path / "expert-on-eval-tasks.json").write_text(json.dumps({"rows": []}))
+    block = hierarchy.block(tmp_path)
+    # replan 48 wins on validation (40 > 30) though 96 is higher on test: 100, 101, 102 minus 40, 41, 42
+    assert block.startswith("- large from 200-step pieces (stitching) single-task, flow (line) H32k24 -> ")
+    assert "minus the best flat planner (DDPM NFE 16 (H24k8) alone; replan 48, pursuit 1.5) +60.0 ± 0.0" in block
+    text = GENERATORS["hierarchy"].render(tmp_path)
+    assert "## large from 200-step pieces (stitching)" in text and "## large\n" not in text
+    assert "Flat planners trained on the same pieces, replanned from the current state" in text
+
+
 def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_path):
     """The dataset graph's rows (no training seed) in a stitch folder: a section of their own, judged on their one
     value; a graph with a low level counts its low level's training seeds."""

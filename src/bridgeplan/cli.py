@@ -30,6 +30,9 @@ def _add_data_commands(sub) -> None:
                         "$BRIDGEPLAN_DATASETS when set)")
     g.add_argument("--workers", type=int, default=1,
                    help="parallel processes, each generating its own independently seeded stream (default 1)")
+    g.add_argument("--piece-steps", type=int, default=None, metavar="N",
+                   help="independent pieces of N steps, each from a random start, instead of one stream per worker: "
+                        "a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
     g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
     g.add_argument("--no-progress", action="store_true")
     g.set_defaults(func=_cmd_data_generate)
@@ -48,9 +51,9 @@ def _cmd_data_generate(args) -> int:
     maze = get_maze(args.maze)
     _positive("--steps", args.steps)
     _positive("--workers", args.workers)
-    out = Path(args.out) if args.out else default_dataset_path(maze.name, args.steps)
+    out = Path(args.out) if args.out else default_dataset_path(maze.name, args.steps, piece_steps=args.piece_steps)
     generate_dataset(maze.name, args.steps, args.seed, out, force=args.force, progress=not args.no_progress,
-                     workers=args.workers)
+                     workers=args.workers, piece_steps=args.piece_steps)
     print(format_summary(summarize(load_stream(out))))
     print(f"wrote {out}")
     return 0

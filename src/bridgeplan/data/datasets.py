@@ -39,9 +39,12 @@ DATASETS_ENV = "BRIDGEPLAN_DATASETS"
 """Environment variable: the default root of generated datasets (default ``datasets`` in the cwd)."""
 
 
-def default_dataset_path(maze_name: str, steps: int, root: str | Path | None = None) -> Path:
-    """``<root>/<maze>-<steps>``; root: the argument, else ``$BRIDGEPLAN_DATASETS``, else ``datasets``."""
-    return Path(root or os.environ.get(DATASETS_ENV) or "datasets") / f"{maze_name}-{steps}"
+def default_dataset_path(maze_name: str, steps: int, root: str | Path | None = None,
+                         piece_steps: int | None = None) -> Path:
+    """``<root>/<maze>-<steps>`` (``-pieces<N>`` for pieces of N steps); root: the argument, else
+    ``$BRIDGEPLAN_DATASETS``, else ``datasets``."""
+    pieces = f"-pieces{piece_steps}" if piece_steps else ""
+    return Path(root or os.environ.get(DATASETS_ENV) or "datasets") / f"{maze_name}-{steps}{pieces}"
 
 
 def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
@@ -54,9 +57,11 @@ def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
 
 
 def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Path | None = None,
-                     force: bool = False, progress: bool = True, workers: int = 1) -> Path:
-    """Generate a noisy expert dataset of ``steps`` transitions and write it as a Minari dataset
-    directory ``out`` (default :func:`default_dataset_path`), with its cache; returns ``out``.
+                     force: bool = False, progress: bool = True, workers: int = 1,
+                     piece_steps: int | None = None) -> Path:
+    """Generate a noisy expert dataset of ``steps`` transitions (one stream per worker, or independent pieces of
+    ``piece_steps``: ``generate.generate_streams``) and write it as a Minari dataset directory ``out`` (default
+    :func:`default_dataset_path`), with its cache; returns ``out``.
 
     Atomic: the dataset is built in a temporary directory beside ``out`` and renamed into place; an
     existing ``out`` is only replaced with ``force``. Nothing is left behind on error or interrupt.
@@ -66,12 +71,12 @@ def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Pat
         raise BridgeplanError(f"steps must be positive, got {steps}")
     if workers <= 0:
         raise BridgeplanError(f"workers must be positive, got {workers}")
-    out = Path(out) if out is not None else default_dataset_path(maze.name, steps)
+    out = Path(out) if out is not None else default_dataset_path(maze.name, steps, piece_steps=piece_steps)
     if (out.exists() or out.is_symlink()) and not force:
         raise BridgeplanError(f"{out} already exists; pass --force to overwrite it")
     if out.exists() and not out.is_dir():
         raise BridgeplanError(f"{out} exists and is not a directory")
-    streams = generate_streams(maze, steps, seed, workers=workers, progress=progress)
+    streams = generate_streams(maze, steps, seed, workers=workers, progress=progress, piece_steps=piece_steps)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp.", dir=out.parent))
     try:

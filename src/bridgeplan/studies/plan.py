@@ -386,7 +386,7 @@ def ensure_dataset(study: Study, root: Path, progress: bool = True) -> Path:
     if not path.exists():
         from bridgeplan.data import generate_dataset
 
-        generate_dataset(d.maze, d.steps, seed=d.seed, out=path, progress=progress)
+        generate_dataset(d.maze, d.steps, seed=d.seed, out=path, progress=progress, piece_steps=d.piece_steps or None)
     return path
 
 

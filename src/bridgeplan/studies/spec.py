@@ -15,6 +15,7 @@ Example (the keys and their defaults: the dataclasses below)::
     maze = "medium"
     steps = 1_000_000                    # transitions `bridgeplan data generate` makes
     seed = 123
+    # piece_steps = 200                  # as independent pieces of 200 steps (a stitching dataset)
     version = 2                          # the generator's data version (bridgeplan.data.generate.DATA_VERSION)
     # generator = "ogbench"              # OGBench's recipe instead; maze = "pointmaze-medium-navigate-v0"
 
@@ -114,6 +115,8 @@ class Dataset:
     ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
     version: int = 2
     """The data version the expert generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
+    piece_steps: int = 0
+    """The expert's data as independent pieces of this many steps (`data generate --piece-steps`; 0: one stream)."""
     path: str = ""
     """Dataset directory (or file), relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``,
     or ``datasets/ogbench/<name>.npz`` (generated there when absent, as the campaigns did)."""
@@ -123,7 +126,8 @@ class Dataset:
             return self.path
         if self.generator == "ogbench":
             return f"datasets/ogbench/{self.maze}.npz"
-        return f"datasets/{self.maze}-{self.steps}-v{self.version}"
+        pieces = f"-pieces{self.piece_steps}" if self.piece_steps else ""
+        return f"datasets/{self.maze}-{self.steps}{pieces}-v{self.version}"
 
 
 @dataclass(frozen=True)
@@ -269,7 +273,7 @@ def _dataclass_fields(cls, value: dict, file, key: str) -> dict:
             kind = type(default) if isinstance(default, (int, float, str, bool)) else str
             out[f.name] = _typed(file, f"{key}.{f.name}", value[f.name], kind, positive=kind in (int,) and
                                  f.name in ("steps", "episodes", "workers", "checkpoint_every", "prior_steps",
-                                            "diffusion_steps"))
+                                            "diffusion_steps", "piece_steps"))
     return out
 
 

@@ -1,13 +1,15 @@
 """Hierarchical planning on Maze2D (bridgeplan.hierarchy): a coarse plan refined by a low level, beside the same
 coarse plans executed alone, the best flat planner, the line alone and the expert.
 
-Rows: ``bridgeplan hierarchy eval`` JSONs in docs/results/<maze>-hierarchy/<setting>/ (one per training seed,
+Rows: ``bridgeplan hierarchy eval`` (and ``graph-eval``) JSONs in docs/results/<section>-hierarchy/<setting>/ (a
+section: :data:`SECTIONS`; one per training seed,
 task set and split; the test episodes are evaluation seed = training seed, the validation ones 1000 + it, as the
 study runner's). A setting is the two levels' methods and NFEs and the execution; per family (the levels' methods
 and shapes) the setting with the best mean validation score is chosen and reported on the test episodes. "Coarse
 alone" is the same coarse plans, densified and pursued open loop: the paired difference says what the low level
 adds. The flat planner is the headline's best pursued one (docs/results/<maze>-v2-*/results.csv, chosen on
-validation, its final snapshot), paired by training seed on the same test episodes. Issue 26's goal on large:
+validation, its final snapshot), or in the stitching section the best of its own flat planners (trained on the same
+pieces), paired by training seed on the same test episodes. Issue 26's goal on large:
 success >= 0.98 and a Minari score >= 104.
 
 Made by `bridgeplan study report hierarchy` (studies/large-hierarchy.toml) into docs/results/hierarchy.md and
@@ -29,19 +31,23 @@ from bridgeplan.studies.reports.headline import STORES, candidates, describe, ex
 
 READS = ()
 """Its rows are `bridgeplan hierarchy eval` JSONs (and the flat stores the headline reads)."""
-MAZES = ("large",)
+SECTIONS = {"large": ("large", "large"),
+            "large-stitch": ("large", "large from 200-step pieces (stitching)")}
+"""Each section's folder prefix (docs/results/<prefix>-hierarchy, <prefix>-hierarchy-flat) -> (maze, heading). The
+stitching section's flat planners were trained on its own pieces (its -flat folder), not on the full stream."""
 VALIDATION_OFFSET = 1000
 GOAL = {"large": (0.98, 104.0)}
 """Issue 26's goal per maze: (success rate, Minari score)."""
 
 
-def read_rows(root: Path, maze: str) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted((root / f"{maze}-hierarchy").glob("*/*.json"))]
+def read_rows(root: Path, section: str) -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted((root / f"{section}-hierarchy").glob("*/*.json"))]
 
 
-def read_high_alone(root: Path, maze: str) -> list[dict]:
-    """``bridgeplan eval`` JSONs of high-level runs executed alone, replanned (docs/results/<maze>-hierarchy-flat)."""
-    return [json.loads(p.read_text()) for p in sorted((root / f"{maze}-hierarchy-flat").glob("*/*.json"))]
+def read_high_alone(root: Path, section: str) -> list[dict]:
+    """``bridgeplan eval`` JSONs of single planners, replanned (docs/results/<section>-hierarchy-flat): high levels
+    executed alone, or the stitching section's flat planners."""
+    return [json.loads(p.read_text()) for p in sorted((root / f"{section}-hierarchy-flat").glob("*/*.json"))]
 
 
 def high_alone_setting(r: dict) -> str:
@@ -156,8 +162,18 @@ def chosen_settings(rows: list[dict], multi_task: bool) -> dict[str, str]:
     return {family: setting for family, (_, setting) in out.items()}
 
 
-def flat_best(root: Path, maze: str, multi_task: bool):
-    """The headline's best pursued flat planner: (description, {seed: test score}, {seed: success})."""
+def flat_best(root: Path, section: str, multi_task: bool):
+    """The best pursued flat planner: (description, {seed: test score}, {seed: success}). The stitching section's:
+    of its own (-flat folder), chosen on validation; the others': the headline's, trained on the full stream."""
+    maze = SECTIONS[section][0]
+    if section != maze:
+        rows = [r for r in read_high_alone(root, section) if bool(r["multi_task"]) == multi_task]
+        settings = sorted({high_alone_setting(r) for r in rows})
+        if not settings:
+            return None
+        chosen = max(settings, key=lambda s: average(high_alone_values(rows, s, "validation", multi_task, minari)))
+        return (chosen, high_alone_values(rows, chosen, "test", multi_task, minari),
+                high_alone_values(rows, chosen, "test", multi_task, lambda r: r["success_rate"]["mean"]))
     results = load_csvs(p for store in STORES for p in [root / f"{maze}-v2-{store}" / "results.csv"] if p.exists())
     point = best(results, candidates(results, multi_task, True))
     if point is None:
@@ -170,10 +186,11 @@ def verdict(d) -> str:
     return f"{fmt_diff(d)} ({compare(d)})" if d.n >= 2 else fmt_diff(d)
 
 
-def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> list[str]:
+def summary_lines(root: Path, section: str, rows: list[dict], multi_task: bool) -> list[str]:
     """Per family, its chosen setting against the coarse plans alone, the flat planner and the goal."""
     lines = []
-    flat = flat_best(root, maze, multi_task)
+    maze, heading = SECTIONS[section]
+    flat = flat_best(root, section, multi_task)
     goal_success, goal_score = GOAL.get(maze, (None, None))
     for family, setting in sorted(chosen_settings(rows, multi_task).items()):
         test = by_seed(rows, setting, "test", multi_task, minari)
@@ -183,7 +200,7 @@ def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> 
         coarse = by_seed(rows, setting, "test", multi_task, alone)
         parts = [f"{fmt_mean_se(test)} (success {success.mean:.2f})",
                  f"minus the coarse plans alone {verdict(paired(test, coarse))}"]
-        alone_rows = read_high_alone(root, maze)
+        alone_rows = read_high_alone(root, section)
         first = next(r for r in rows if setting_of(r) == setting)
         replanned = matching_high_alone(first, alone_rows)
         if replanned is not None:
@@ -199,25 +216,26 @@ def summary_lines(root: Path, maze: str, rows: list[dict], multi_task: bool) -> 
             parts.append("goal (success >= " f"{goal_success}, Minari >= {goal_score:g}): " + (
                 "met" if met else f"missed by {max(goal_success - success.mean, 0):.2f} success and "
                                   f"{max(goal_score - s.mean, 0):.1f} points"))
-        lines.append(f"- {maze} {'Multi2D' if multi_task else 'single-task'}, {family}: " + "; ".join(parts))
+        lines.append(f"- {heading} {'Multi2D' if multi_task else 'single-task'}, {family}: " + "; ".join(parts))
     return lines
 
 
 def block(root: Path) -> str:
     root = Path(root)
-    return "\n".join(line for maze in MAZES for multi in (False, True)
-                     for line in summary_lines(root, maze, read_rows(root, maze), multi))
+    return "\n".join(line for section in SECTIONS for multi in (False, True)
+                     for line in summary_lines(root, section, read_rows(root, section), multi))
 
 
-def maze_lines(root: Path, maze: str) -> list[str]:
-    rows = read_rows(root, maze)
+def section_lines(root: Path, section: str) -> list[str]:
+    rows = read_rows(root, section)
     if not rows:
         return []
+    maze, heading = SECTIONS[section]
     expert = expert_scores(root)
     seeds = sorted({training_seed(r) for r in rows})
     steps = sorted({(r["high"]["step"], r["low"]["step"]) for r in rows})
     versions = sorted({r["environment"]["code_version"] for r in rows})
-    out = [f"## {maze}", "",
+    out = [f"## {heading}", "",
            f"Training seeds {', '.join(map(str, seeds))}; steps (high, low) {', '.join(map(str, steps))}; code "
            f"{', '.join(versions)}; {rows[0]['episodes']} episodes per split.", ""]
     for multi_task in (False, True):
@@ -242,8 +260,8 @@ def maze_lines(root: Path, maze: str) -> list[str]:
                          f"{average(test(lambda r: r['calls_per_episode'])):.0f}",
                          ms])
         scores = expert.get((maze, multi_task))
-        flat = flat_best(root, maze, multi_task)
-        alone_rows = [r for r in read_high_alone(root, maze) if bool(r["multi_task"]) == multi_task]
+        flat = flat_best(root, section, multi_task)
+        alone_rows = [r for r in read_high_alone(root, section) if bool(r["multi_task"]) == multi_task]
         alone_body = []
         for setting in sorted({high_alone_setting(r) for r in alone_rows}):
             def values(value, s=setting):
@@ -257,15 +275,16 @@ def maze_lines(root: Path, maze: str) -> list[str]:
                 *table(["setting", "validation", "test", "success", "coarse alone", "success", "hierarchy - coarse",
                         "line alone", "coarse in walls", "coarse arrival (step)", "calls / episode",
                         "ms / decision p50 / p95"], body), "",
-                *(["The high level alone, replanned from the current state (`bridgeplan eval --replan-every K`, "
-                   "pursued; no low level):", "",
+                *([("The high level alone" if section == maze else "Flat planners trained on the same pieces")
+                   + ", replanned from the current state (`bridgeplan eval --replan-every K`, pursued; no low level):",
+                   "",
                    *table(["setting", "validation", "test", "success", "calls / episode",
                            "ms / decision p50 / p95"],
                           alone_body), ""] if alone_body else []),
                 f"The expert on the same test episodes: {fmt_mean_se(scores) if scores else '-'}; the best flat "
                 f"pursued planner: " + (f"{flat[0]}, {fmt_mean_se(flat[1])} (success "
                                         f"{average(flat[2]):.2f})" if flat else "-") + ".", "",
-                *summary_lines(root, maze, rows, multi_task), ""]
+                *summary_lines(root, section, rows, multi_task), ""]
     return out
 
 
@@ -273,8 +292,10 @@ def render(root: Path) -> str:
     root = Path(root)
     lines = ["# Hierarchical planning: a coarse plan over the episode, refined by a low level", "",
              "Generated by `bridgeplan study report hierarchy` from the `bridgeplan hierarchy eval` JSONs in "
-             "docs/results/<maze>-hierarchy/ (studies/large-hierarchy.toml says how the runs were trained). The high "
-             "level plans at a long stride once per episode (or again every K steps where the setting says so); the "
+             "docs/results/<section>-hierarchy/ (studies/large-hierarchy.toml and large-stitch-hierarchy.toml say how "
+             "the runs were trained). The high "
+             "level plans at a long stride once per episode (or again every K steps where the setting says so), or is "
+             "the dataset graph's cheapest path through the data's own states (`bridgeplan hierarchy graph-eval`); the "
              "low level plans from the current state through the next coarse states every `replan` steps and is "
              "pursued. "
              "Minari score, mean ± standard error over training seeds; bold: the setting the validation episodes "
@@ -285,6 +306,6 @@ def render(root: Path) -> str:
              "walls; coarse arrival: the mean step at which they first come within 0.45 of the goal (both measured "
              "with the maze's map, which no planner reads: what limits the coarse plans). ms / decision: p50 and p95 "
              "of one decision at batch 1 (a hierarchy's decisions that make a coarse plan are its slow ones).", ""]
-    for maze in MAZES:
-        lines += maze_lines(root, maze)
+    for section in SECTIONS:
+        lines += section_lines(root, section)
     return "\n".join(lines).rstrip("\n")
