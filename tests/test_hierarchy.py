@@ -164,6 +164,20 @@ def test_hierarchy_as_a_policy(levels):
     assert policy.plans_made == 1
 
 
+def test_the_graph_hierarchy_as_a_policy(levels):
+    """One search per goal, one low-level plan every 12 steps; a new goal plans afresh."""
+    from bridgeplan.policy import PlannerPolicy
+
+    policy = PlannerPolicy.from_graph(levels["low"], nfe_low=1, lookahead=1.0)
+    obs = {"observation": np.array([1.0, 1.0, 0.0, 0.0]), "desired_goal": np.array([1.0, -1.0])}
+    for _ in range(13):
+        action = policy(obs)
+    graph = policy.source.hierarchy.graph
+    assert action.shape == (2,) and policy.plans_made == 2 and len(graph.queries) == 1
+    policy(obs | {"desired_goal": np.array([-1.0, -1.0])})
+    assert policy.plans_made == 3 and len(graph.queries) == 2
+
+
 def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
     from bridgeplan.hierarchy import load_hierarchy
     from bridgeplan.replan import arrival_index

@@ -32,7 +32,8 @@ from bridgeplan.trajectory import MAZE2D
 class PlannerPolicy:
     """One episode at a time: ``policy(obs_dict) -> action [2]``; ``reset()`` between episodes.
 
-    Built from a run (:meth:`from_run`) or from a hierarchy's two runs (:meth:`from_hierarchy`). Attributes:
+    Built from a run (:meth:`from_run`), from a hierarchy's two runs (:meth:`from_hierarchy`) or from a low level
+    under the dataset graph (:meth:`from_graph`). Attributes:
     ``source`` (the closed loop's ``plan_fn``: a ``replan.PlanSource`` or a ``hierarchy.HierarchySource``),
     ``maze`` (the run's maze: make the env with ``maze.gym_id``), ``execution``, ``steps`` (steps since the
     last reset) and ``plans_made`` (plans in this episode).
@@ -87,6 +88,26 @@ class PlannerPolicy:
         check_high_replanning(replan_high_every, maze.episode_steps)
         source = HierarchySource(hierarchy, nfe_high, nfe_low,
                                  torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1, replan_high_every)
+        return cls(source, maze, execution)
+
+    @classmethod
+    def from_graph(cls, low_run: str | Path, nfe_low: int | None = None, replan_every: int | None = None,
+                   tolerance: float | None = None, controller: str = "pursuit", lookahead: float = DEFAULT_LOOKAHEAD,
+                   device: str = "cpu", seed: int = 0, replan_high_every: int | None = None,
+                   graph: dict | None = None) -> PlannerPolicy:
+        """The dataset graph over a low level's own training data as its high level (``bridgeplan.graph``; settings
+        ``graph`` over Maze2D's), the low level through its path every ``replan_every`` steps (default: its subgoal
+        spacing), as ``bridgeplan hierarchy graph-eval`` executes them."""
+        from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning, load_graph_hierarchy
+
+        hierarchy, _, low = load_graph_hierarchy(Path(low_run), graph, device=device)
+        maze = get_maze(low.config.maze)
+        execution = Execution(replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
+                              controller=controller, lookahead=lookahead)
+        check_execution(execution, maze.episode_steps)
+        check_high_replanning(replan_high_every, maze.episode_steps)
+        source = HierarchySource(hierarchy, None, nfe_low,
+                                 torch.Generator(device=hierarchy.low.device).manual_seed(seed), 1, replan_high_every)
         return cls(source, maze, execution)
 
     def reset(self) -> None:
