@@ -412,6 +412,12 @@ runs = ["high"]
 args = {{ nfe = 2, replan_every = 24, controller = "pursuit" }}
 out = "tiny-hierarchy-flat/{{tasks}}-seed{{eval_seed}}.json"
 task_sets = ["single", "multi"]
+
+[[evaluations]]
+command = "hierarchy graph-eval"
+runs = ["low"]
+args = {{ nfe_low = 1, keep = 20 }}
+out = "tiny-hierarchy/graph/{{tasks}}-seed{{eval_seed}}.json"
 """
 
 
@@ -420,6 +426,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     import json
 
     import bridgeplan.cli
+    import bridgeplan.studies.plan
 
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
@@ -428,22 +435,29 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     out = capsys.readouterr().out
     assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
+    assert "  hierarchy graph-eval: 1 evaluation JSONs" in out
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
-    assert "tiny: 4 new results" in capsys.readouterr().out
+    assert "tiny: 5 new results" in capsys.readouterr().out
     results = root / "results" / "tiny"
     test, validation = (json.loads((results / "tiny-hierarchy" / "nfe2" / f"single-seed{s}.json").read_text())
                         for s in (0, 1000))
     assert (test["seed"], validation["seed"], test["episodes"]) == (0, 1000, 3)
     assert (test["high"]["run"], test["low"]["run"], test["high"]["nfe"], test["low"]["nfe"]) == ("high-s0", "low-s0",
                                                                                                    2, 1)
+    graph = json.loads((results / "tiny-hierarchy" / "graph" / "single-seed0.json").read_text())
+    assert graph["high"]["graph"]["keep"] == 20 and graph["low"]["run"] == "low-s0" and graph["episodes"] == 3
     multi = json.loads((results / "tiny-hierarchy-flat" / "multi-seed0.json").read_text())
     assert multi["multi_task"] and multi["execution"]["replan_every"] == 24 and multi["nfe"] == 2
     assert (root / "results" / "tiny" / "runs" / "low-s0" / "checkpoint.pt").exists()
-    calls = []
+    calls, datasets = [], []
     real = bridgeplan.cli.main
     monkeypatch.setattr(bridgeplan.cli, "main", lambda argv: calls.append(argv) or real(argv))
+    real_dataset = bridgeplan.studies.plan.ensure_dataset
+    monkeypatch.setattr(bridgeplan.studies.plan, "ensure_dataset", lambda *a, **k: datasets.append(a) or
+                        real_dataset(*a, **k))
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
-    assert "tiny: 0 new results" in capsys.readouterr().out and calls == []  # nothing run again
+    out = capsys.readouterr().out
+    assert "tiny: 0 new results" in out and calls == [] and datasets == []  # nothing run again, no dataset made
     (results / "tiny-hierarchy-flat" / "single-seed0.json").unlink()
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
     assert "tiny: 1 new results" in capsys.readouterr().out and len(calls) == 1  # only what is missing

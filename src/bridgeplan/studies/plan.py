@@ -414,6 +414,9 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
 
     if not study.experiments and not study.evaluations:
         return 0
+    m = missing(study, root, scale)
+    if not (m.trains or m.evaluations or m.jsons or any(m.wanted.values())):
+        return 0  # all stored (imported, say): no dataset to make either
     scaled = scale.apply(study)
     dataset = ensure_dataset(scaled, root, progress)
     workers = workers or study.evaluation.workers
@@ -422,7 +425,6 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
         from bridgeplan import layout
         from bridgeplan.experiments.store import ResultsStore, stored_keys
 
-        m = missing(study, root, scale)
         path = layout.store_path(results_dir(study, root, scale))
         keys, _ = stored_keys(path)
         links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
