@@ -132,10 +132,16 @@ def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_pa
         for step, rate in zip((1, 2, 3, 4), rates):
             (tmp_path / oc.GCBC / f"s{seed}-{step}.json").write_text(json.dumps(
                 row(seed, step, rate, dataset="pointmaze-large-navigate-v0", train_seed=seed)))
+    stitch = tmp_path / f"{oc.GCBC}-medium-stitch"  # another dataset's study writes a folder of its own
+    stitch.mkdir()
+    for step, rate in zip((1, 2, 3), (0.2, 0.25, 0.3)):
+        (stitch / f"s0-{step}.json").write_text(json.dumps(
+            row(0, step, rate, dataset="pointmaze-medium-stitch-v0", train_seed=0)))
     text = oc.render(tmp_path)
     # seed 0: mean(10, 20, 30) = 20; seed 1: mean(30, 40, 50) = 40; over seeds 30 ± 10
     assert "**30.0 ± 10.0**; OGBench's published GCBC: 29" in text
     assert "| pointmaze-large-v0 | 50 | 90 | 90 | 90 | 90 | 90 | 90.0 | v |" in text
+    assert "### pointmaze-medium-stitch-v0" in text and "**25.0**; OGBench's published GCBC: 23" in text
 
 
 def _hierarchy_row(seed, eval_seed, low, nfe_low, score, coarse, multi=False):

@@ -352,7 +352,11 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),
                                            ("ogbench-planners", ["ogbench-medium-navigate/*"]),
-                                           ("ogbench-calibration", ["ogbench-gcbc", "ogbench-oracle"])])
+                                           ("ogbench-calibration", ["ogbench-gcbc", "ogbench-oracle"]),
+                                           ("large-stitch-hierarchy", ["large-stitch-hierarchy/*",
+                                                                       "large-stitch-hierarchy-flat/*"]),
+                                           ("ogbench-calibration-large-navigate", ["ogbench-gcbc-large-navigate"]),
+                                           ("ogbench-calibration-medium-stitch", ["ogbench-gcbc-medium-stitch"])])
 def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
     them imported, the dry run trains and evaluates nothing."""
