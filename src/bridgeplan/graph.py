@@ -350,11 +350,16 @@ class GraphHierarchy:
 
         return next_subgoals(coarse, progress, self.subgoals_per_plan)
 
-    def describe(self, settings: dict) -> dict:
-        """The high level's entry in a hierarchy's JSON (as ``hierarchy.level_dict`` a planner's)."""
+    def high_entry(self, settings: dict, nfe: int = 0) -> dict:
+        """The high level's entry in a hierarchy's JSON (as ``hierarchy.level_dict`` a planner's): the graph's
+        ``settings``, its size and what its queries so far found."""
         return {"run": "dataset graph", "step": 0, "method": "dataset graph", "process": "graph", "nfe": 0,
                 "horizon": self.coarse_length, "stride": self.spacing, "subgoal_every": None,
                 "graph": {**settings, **self.graph.summary()}}
+
+    def line_floor(self, tasks, execution) -> dict:
+        """None: the graph has no span for a straight line to fill."""
+        return {}
 
 
 def add_graph_flags(parser, defaults: dict) -> None:

@@ -80,6 +80,15 @@ class Hierarchy:
     def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
         return next_subgoals(coarse, progress, self.subgoals_per_plan)
 
+    def high_entry(self, info: RunInfo, nfe: int) -> dict:
+        """The high level's entry in the hierarchy's JSON."""
+        return level_dict(self.high, info, nfe)
+
+    def line_floor(self, tasks: Tasks, execution: Execution) -> dict:
+        """``floor_line``: the straight line over the high level's span, executed as the hierarchy is."""
+        return {"floor_line": prior_only(self.high, tasks, "line", Execution(controller=execution.controller,
+                                                                             lookahead=execution.lookahead))}
+
 
 def next_subgoals(coarse: np.ndarray, progress: np.ndarray, m: int) -> np.ndarray:
     """``[N, m, obs_dim]``: the ``m`` coarse states after index ``progress [N]``, the last one repeated past the
@@ -111,9 +120,9 @@ def check_levels(high: Planner, low: Planner) -> None:
 @dataclass
 class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
-    (Or over any high level with its interface: ``low``, ``subgoals_per_plan``, ``progress_rule``,
-    ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``; e.g. ``bridgeplan.graph.GraphHierarchy``, the dataset
-    graph's paths.)
+    (Or over any high level with its interface: ``low``, ``spacing``, ``subgoals_per_plan``, ``progress_rule``,
+    ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``, ``high_entry``, ``line_floor``; e.g.
+    ``bridgeplan.graph.GraphHierarchy``, the dataset graph's paths.)
 
     Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
     plan is made again from its current state at its first decision K or more steps after the last one (its
@@ -307,12 +316,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo | dict, low_info
                                  follower=execution.follower(n))
     dense = densify(source.first_coarse, hierarchy.spacing)
     alone = execute_plans(maze, starts, goals, dense, follower=execution.follower(n))
-    if isinstance(hierarchy, Hierarchy):
-        high = level_dict(hierarchy.high, high_info, nfe_high)
-        floor = {"floor_line": prior_only(hierarchy.high, tasks, "line",
-                                          Execution(controller=execution.controller, lookahead=execution.lookahead))}
-    else:  # the graph: the search's settings and size, the protocol's queries only (before the lone episode's)
-        high, floor = hierarchy.describe(high_info), {}
+    high = hierarchy.high_entry(high_info, nfe_high)  # the graph's: its queries so far, not the lone episode's
     single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=low.device)
                              .manual_seed(tasks.seed + 1), 1, replan_high_every)
     per_batch = percentiles_ms(source.decision_seconds)
@@ -323,7 +327,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo | dict, low_info
         "high": high, "low": level_dict(low, low_info, nfe_low),
         **score_returns(maze.name, result.returns, result.success),
         "high_alone": score_returns(maze.name, alone.returns, alone.success),
-        "coarse_plans": coarse_diagnostics(dense, goals, maze, low.layout), **floor,
+        "coarse_plans": coarse_diagnostics(dense, goals, maze, low.layout), **hierarchy.line_floor(tasks, execution),
         "execution": {**execution.to_dict(low.prior.name), "replan_high_every": replan_high_every},
         "plans_per_episode": {"mean": float(result.plans_made.mean()), "min": int(result.plans_made.min()),
                               "max": int(result.plans_made.max())},
