@@ -78,17 +78,12 @@ class PlannerPolicy:
         first step, the low level's plan through it every ``replan_every`` steps (default: the high level's
         stride; the high level again every ``replan_high_every`` steps, if given), as ``bridgeplan hierarchy eval``
         executes them."""
-        from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning, load_hierarchy
+        from bridgeplan.hierarchy import load_hierarchy
 
         hierarchy, high, _ = load_hierarchy(Path(high_run), Path(low_run), device=device)
-        maze = get_maze(high.config.maze)
-        execution = Execution(replan_every=replan_every or hierarchy.high.stride, tolerance=tolerance,
-                              controller=controller, lookahead=lookahead)
-        check_execution(execution, maze.episode_steps)
-        check_high_replanning(replan_high_every, maze.episode_steps)
-        source = HierarchySource(hierarchy, nfe_high, nfe_low,
-                                 torch.Generator(device=hierarchy.high.device).manual_seed(seed), 1, replan_high_every)
-        return cls(source, maze, execution)
+        return cls._of_hierarchy(hierarchy, high.config.maze, nfe_high, nfe_low, Execution(
+            replan_every=replan_every or hierarchy.spacing, tolerance=tolerance, controller=controller,
+            lookahead=lookahead), seed, replan_high_every)
 
     @classmethod
     def from_graph(cls, low_run: str | Path, nfe_low: int | None = None, replan_every: int | None = None,
@@ -98,15 +93,23 @@ class PlannerPolicy:
         """The dataset graph over a low level's own training data as its high level (``bridgeplan.graph``; settings
         ``graph`` over Maze2D's), the low level through its path every ``replan_every`` steps (default: its subgoal
         spacing), as ``bridgeplan hierarchy graph-eval`` executes them."""
-        from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning, load_graph_hierarchy
+        from bridgeplan.hierarchy import load_graph_hierarchy
 
         hierarchy, _, low = load_graph_hierarchy(Path(low_run), graph, device=device)
-        maze = get_maze(low.config.maze)
-        execution = Execution(replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
-                              controller=controller, lookahead=lookahead)
+        return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
+            replan_every=replan_every or hierarchy.spacing, tolerance=tolerance, controller=controller,
+            lookahead=lookahead), seed, replan_high_every)
+
+    @classmethod
+    def _of_hierarchy(cls, hierarchy, maze_name: str, nfe_high: int | None, nfe_low: int | None,
+                      execution: Execution, seed: int, replan_high_every: int | None) -> PlannerPolicy:
+        """Any hierarchy (two runs, or the graph over a low level) in ``maze_name``, its execution checked."""
+        from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning
+
+        maze = get_maze(maze_name)
         check_execution(execution, maze.episode_steps)
         check_high_replanning(replan_high_every, maze.episode_steps)
-        source = HierarchySource(hierarchy, None, nfe_low,
+        source = HierarchySource(hierarchy, nfe_high, nfe_low,
                                  torch.Generator(device=hierarchy.low.device).manual_seed(seed), 1, replan_high_every)
         return cls(source, maze, execution)
 
