@@ -355,8 +355,9 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
                                            ("ogbench-calibration", ["ogbench-gcbc", "ogbench-oracle"]),
                                            ("large-stitch-hierarchy", ["large-stitch-hierarchy/*",
                                                                        "large-stitch-hierarchy-flat/*"]),
-                                           ("ogbench-calibration-large-navigate", ["ogbench-gcbc-large-navigate"]),
-                                           ("ogbench-calibration-medium-stitch", ["ogbench-gcbc-medium-stitch"])])
+                                           *((f"ogbench-calibration-{d}", [f"ogbench-gcbc-{d}"])
+                                             for d in ("large-navigate", "giant-navigate", "medium-stitch",
+                                                       "large-stitch", "giant-stitch"))])
 def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
     them imported, the dry run trains and evaluates nothing."""
