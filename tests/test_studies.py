@@ -564,7 +564,8 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
-    assert "cal: 4 new results" in capsys.readouterr().out
+    out = capsys.readouterr()
+    assert "cal: 4 new results" in out.out and "episode/s" not in out.err  # --no-progress reaches the commands
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
     oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())

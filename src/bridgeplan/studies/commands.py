@@ -145,7 +145,8 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
-        if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else [])]) != 0:
+        quiet = ["--no-progress"] if not progress and job.argv[0] == "ogbench" else []  # OGBench's have bars
+        if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else []), *quiet]) != 0:
             raise BridgeplanError(f"bridgeplan {' '.join(job.argv)} failed (its error above)")
         written += 1
     return written
