@@ -474,7 +474,8 @@ def _hierarchy_flags(p, replan_default: str, replan_high_help: str) -> None:
     _threads_flag(p)
 
 
-def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str) -> int:
+def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str,
+                   nfe_high: int | None = None) -> int:
     """Evaluate ``hierarchy`` as ``args`` say, write its JSON (``--out``, else LOW/eval/NAME-<settings>.json)."""
     from bridgeplan.evaluate import check_multi_task_data, make_tasks, write_result
     from bridgeplan.hierarchy import evaluate_hierarchy
@@ -488,8 +489,8 @@ def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, nam
                           controller=args.controller,
                           **({} if args.lookahead is None else {"lookahead": args.lookahead}))
     tasks = make_tasks(maze, args.episodes, args.seed, args.multi_task)
-    result = evaluate_hierarchy(hierarchy, high_info, low, tasks, getattr(args, "nfe_high", None), args.nfe_low,
-                                execution, args.replan_high_every)
+    result = evaluate_hierarchy(hierarchy, high_info, low, tasks, nfe_high, args.nfe_low, execution,
+                                args.replan_high_every)
     name = (f"{name}-nfe{result['high']['nfe']}-step{low.step}-nfe{result['low']['nfe']}-ep{args.episodes}-seed"
             f"{args.seed}" + ("-multi" if args.multi_task else "") + f"-{execution.tag()}"
             + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
@@ -515,7 +516,7 @@ def _cmd_hierarchy_eval(args) -> int:
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
     return _run_hierarchy(args, hierarchy, high, low, high.config.maze, high.config.dataset,
-                          f"hierarchy-{high.name}-step{high.step}")
+                          f"hierarchy-{high.name}-step{high.step}", args.nfe_high)
 
 
 def _cmd_hierarchy_graph_eval(args) -> int:
@@ -524,9 +525,9 @@ def _cmd_hierarchy_graph_eval(args) -> int:
 
     _positive("--episodes", args.episodes)
     _check_lookahead(args)
-    check_graph_settings(**graph_settings(args))
-    hierarchy, settings, low = load_graph_hierarchy(Path(args.low), graph_settings(args), args.low_snapshot,
-                                                    args.device)
+    settings = graph_settings(args)
+    check_graph_settings(**settings)  # before loading anything
+    hierarchy, settings, low = load_graph_hierarchy(Path(args.low), settings, args.low_snapshot, args.device)
     return _run_hierarchy(args, hierarchy, settings, low, low.config.maze, low.config.dataset,
                           f"hierarchy-graph-keep{args.keep}-r{args.radius:g}")
 

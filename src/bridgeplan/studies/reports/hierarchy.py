@@ -191,6 +191,7 @@ def summary_lines(root: Path, section: str, rows: list[dict], multi_task: bool) 
     lines = []
     maze, heading = SECTIONS[section]
     flat = flat_best(root, section, multi_task)
+    alone_rows = read_high_alone(root, section)
     goal_success, goal_score = GOAL.get(maze, (None, None))
     for family, setting in sorted(chosen_settings(rows, multi_task).items()):
         test = by_seed(rows, setting, "test", multi_task, minari)
@@ -200,7 +201,6 @@ def summary_lines(root: Path, section: str, rows: list[dict], multi_task: bool) 
         coarse = by_seed(rows, setting, "test", multi_task, alone)
         parts = [f"{fmt_mean_se(test)} (success {success.mean:.2f})",
                  f"minus the coarse plans alone {verdict(paired(test, coarse))}"]
-        alone_rows = read_high_alone(root, section)
         first = next(r for r in rows if setting_of(r) == setting)
         replanned = matching_high_alone(first, alone_rows)
         if replanned is not None:
