@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
 from bridgeplan.studies import load_studies, parse_study
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, missing
@@ -502,6 +503,7 @@ path = "{dataset}"
 [training]
 steps = 4
 checkpoint_every = 4
+prior_steps = 3
 seeds = [0]
 
 [runs.gcbc]
@@ -548,6 +550,21 @@ runs = ["low"]
 args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
 out = "cal/graph-low.json"
 task_seed = 0
+
+[runs.flow-learned]
+process = "flow"
+prior = "learned"
+horizon = 10
+stride = 4
+model = {{ dim = 8, dim_mults = [1, 2] }}
+device = "cpu"
+
+[[evaluations]]
+command = "ogbench eval"
+runs = ["flow-learned"]
+args = {{ episodes_per_task = 1, tasks = "1", nfe = 1, no_floor = true }}
+out = "cal/flow-learned.json"
+task_seed = 0
 """
 
 
@@ -563,9 +580,15 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     (root / "studies" / "cal.toml").write_text(
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
+    assert main(["study", "run", "cal", "--dry-run", "--root", str(root)]) == 0
+    prior = "pointmaze-medium-navigate-v0-prior-learned-H10k4-s0"
+    assert f"  train {prior}: 3 steps (0 of 3 done)" in capsys.readouterr().out  # the learned run's prior
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
     out = capsys.readouterr()
-    assert "cal: 4 new results" in out.out and "episode/s" not in out.err  # --no-progress reaches the commands
+    assert "cal: 5 new results" in out.out and "episode/s" not in out.err  # --no-progress reaches the commands
+    learned = json.loads((root / "results" / "cal" / "cal" / "flow-learned.json").read_text())
+    assert learned["config"]["prior"] == "learned" and learned["config"]["prior_run"] == prior  # by name, no path
+    assert load_checkpoint(root / "results" / "cal" / "runs" / prior / "checkpoint.pt")["step"] == 3
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
     oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())

@@ -74,6 +74,16 @@ def _trained_step(run_dir: Path) -> int:
     return load_checkpoint(ckpt)["step"] if ckpt.exists() else -1
 
 
+def train_to(trainer, config, run_dir: Path, progress: bool) -> None:
+    """Train (or resume) the run in ``run_dir`` to ``config.steps`` with ``trainer`` (``train.train``,
+    ``train.train_prior``, ``gcbc.train_gcbc``); nothing when it is there. Another sweep or worker training the
+    same run holds its lock: wait for it, then see what is left."""
+    with run_lock(run_dir):
+        done = _trained_step(run_dir)
+        if done < config.steps:
+            trainer(config, run_dir, resume=done >= 0, progress=progress)
+
+
 def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
             prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
     """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
@@ -93,10 +103,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         return []
     configure_threads(threads or config.threads)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
-    with run_lock(run_dir):  # another sweep training this run: wait for it, then see what is left
-        done = _trained_step(run_dir)
-        if done < config.steps:
-            train(config, run_dir, resume=done >= 0, progress=progress)
+    train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []
     store = ResultsStore(layout.store_path(settings.results_dir))
@@ -219,8 +226,5 @@ def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, 
 
     config = _prior_config(settings, seed, planner)
     run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
-    with run_lock(run_dir):  # as in run_job
-        done = _trained_step(run_dir)
-        if done < config.steps:
-            train_prior(config, run_dir, resume=done >= 0, progress=progress)
+    train_to(train_prior, config, run_dir, progress)
     return str(run_dir)

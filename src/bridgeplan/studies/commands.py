@@ -19,12 +19,14 @@ line, run by ``study run``)::
     task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; Maze2D's commands)
     # task_seed = 0                      # the same test episodes for every training seed (validation: 1000)
 
-``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single`` or ``multi``). ``study run``
-writes each under the study's results directory (results/NAME/OUT): a JSON there is done; it trains what the missing
-ones need and runs their commands (``--workers`` training seeds side by side, one torch thread each). ``study
-export`` copies them to docs/results/OUT, where the study's report reads them; ``study import`` copies the committed
-ones back. ``ogbench graph-eval`` takes no run (``runs = []``), or its low level (``runs = ["low"]``, given as
-``--low``); the runner gives it the study's dataset.
+A named run from the learned prior (``prior = "learned"``) samples it from the thesis's MLP trained first on the
+same windows, per training seed, for [training]'s ``prior_steps`` (runs/<maze>-prior-learned-<shape>-s<seed>, shared
+by the runs of one plan shape). ``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single``
+or ``multi``). ``study run`` writes each under the study's results directory (results/NAME/OUT): a JSON there is
+done; it trains what the missing ones need and runs their commands (``--workers`` training seeds side by side, one
+torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
+import`` copies the committed ones back. ``ogbench graph-eval`` takes no run (``runs = []``), or its low level
+(``runs = ["low"]``, given as ``--low``); the runner gives it the study's dataset.
 """
 
 from __future__ import annotations
@@ -65,9 +67,9 @@ def run_dir(results: Path, run: str, seed: int) -> Path:
     return Path(results) / "runs" / f"{run}-s{seed}"
 
 
-def train_config(study, run: NamedRun, seed: int, dataset: Path):
+def train_config(study, run: NamedRun, seed: int, dataset: Path, results: Path | None = None):
     """The config that trains ``run`` for training seed ``seed`` (a ``TrainConfig``, or a GCBC run's
-    ``GCBCConfig``)."""
+    ``GCBCConfig``); a run from the learned prior samples it from :func:`prior_dir` under ``results``."""
     from bridgeplan import config as cfg
     from bridgeplan.processes import make_process
 
@@ -79,8 +81,29 @@ def train_config(study, run: NamedRun, seed: int, dataset: Path):
                           **dict(run.fields))
     fields = dict(run.fields)
     process = make_process(fields.pop("process"), steps=t.diffusion_steps, **dict(fields.pop("params")))
-    return cfg.preset_config(study.dataset.maze, t.preset, **{**dict(t.overrides), **fields}, process=process,
-                             dataset=str(dataset), steps=t.steps, checkpoint_every=t.checkpoint_every, seed=seed)
+    config = cfg.preset_config(study.dataset.maze, t.preset, **{**dict(t.overrides), **fields}, process=process,
+                               dataset=str(dataset), steps=t.steps, checkpoint_every=t.checkpoint_every, seed=seed)
+    if config.prior == "learned" and results is not None:
+        config = cfg.replace(config, prior_run=str(prior_dir(results, prior_config(study, config))))
+    return config
+
+
+def prior_config(study, planner):
+    """The learned prior of ``planner`` (a named run's ``TrainConfig``): the thesis's MLP trained on the same
+    windows (maze, dataset, horizon, stride) for [training]'s ``prior_steps``, with the planner's seed; the runs of
+    one plan shape and seed share it."""
+    from bridgeplan import config as cfg
+
+    steps = study.training.prior_steps
+    return cfg.PriorTrainConfig(maze=planner.maze, dataset=planner.dataset, preset=planner.preset,
+                                horizon=planner.horizon, stride=planner.stride, steps=steps, checkpoint_every=steps,
+                                seed=planner.seed, device=planner.device, threads=planner.threads)
+
+
+def prior_dir(results: Path, prior) -> Path:
+    """Where the learned prior ``prior`` (a ``PriorTrainConfig``) is trained: beside the named runs, under its own
+    name (a grid's priors are named the same way)."""
+    return Path(results) / "runs" / prior.run_name()
 
 
 def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
@@ -113,34 +136,43 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
     return out
 
 
-def needed_runs(study, results: Path) -> list[tuple[str, int, int]]:
-    """(run directory name, steps to train, steps done so far) of every named run an evaluation needs, per seed."""
+def needed_runs(study, results: Path, needed: set[tuple[str, int]] | None = None) -> list[tuple[str, int, int]]:
+    """(run directory name, steps to train, steps done so far) of the named runs ``needed`` ((name, training seed)
+    pairs; default: every one an evaluation needs) and of the learned priors they sample from."""
     from bridgeplan.experiments.runner import _trained_step
 
-    needed = {(r, seed) for e in study.evaluations for seed in (e.seeds or study.training.seeds) for r in e.runs}
-    return [(run_dir(results, r, s).name, study.training.steps, _trained_step(run_dir(results, r, s)))
-            for r, s in sorted(needed)]
+    if needed is None:
+        needed = {(r, seed) for e in study.evaluations for seed in (e.seeds or study.training.seeds) for r in e.runs}
+    runs = {r.name: r for r in study.runs}
+    out = {}
+    for name, seed in sorted(needed):
+        directory = run_dir(results, name, seed)
+        out[directory.name] = (study.training.steps, _trained_step(directory))
+        config = train_config(study, runs[name], seed, Path("dataset"))
+        if runs[name].trainer == "planner" and config.prior == "learned":
+            prior = prior_dir(results, prior_config(study, config))
+            out[prior.name] = (study.training.prior_steps, _trained_step(prior))
+    return [(name, steps, done) for name, (steps, done) in out.items()]
 
 
 def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, progress: bool) -> int:
     """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands; the JSONs written."""
     from bridgeplan.cli import main
     from bridgeplan.device import configure_threads
-    from bridgeplan.experiments.runner import _trained_step
+    from bridgeplan.experiments.runner import train_to
     from bridgeplan.gcbc import train_gcbc
-    from bridgeplan.locks import run_lock
-    from bridgeplan.train import train
+    from bridgeplan.train import train, train_prior
 
     configure_threads(1)
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
-        config = train_config(study, runs[name], seed, dataset)
-        directory = run_dir(results, name, seed)
-        with run_lock(directory):
-            done = _trained_step(directory)
-            if done < config.steps:
-                trainer = train_gcbc if runs[name].trainer == "gcbc" else train
-                trainer(config, directory, resume=done >= 0, progress=progress)
+        config = train_config(study, runs[name], seed, dataset, results)
+        if runs[name].trainer == "gcbc":
+            train_to(train_gcbc, config, run_dir(results, name, seed), progress)
+            continue
+        if config.prior == "learned":
+            train_to(train_prior, prior_config(study, config), Path(config.prior_run), progress)
+        train_to(train, config, run_dir(results, name, seed), progress)
     written = 0
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile

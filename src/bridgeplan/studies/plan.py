@@ -313,10 +313,8 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
         results = results_dir(study, root, scale)
         jsons = tuple(j for j in jobs(scaled, results, results, not scale.committed)
                       if not j.path.exists())
-        needed = {(r, j.seed) for j in jsons for r in j.runs}
-        for run, n, done in needed_runs(scaled, results):
-            if any(run == f"{r}-s{seed}" for r, seed in needed):
-                trains.setdefault(run, (n, done))
+        for run, n, done in needed_runs(scaled, results, {(r, j.seed) for j in jsons for r in j.runs}):
+            trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
     return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
 

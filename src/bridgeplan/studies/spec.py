@@ -55,8 +55,8 @@ Example (the keys and their defaults: the dataclasses below)::
 
     [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
     process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, ogbench eval,
-    horizon = 32                         #  each writing one JSON, exported to docs/results)
-    stride = 12
+    horizon = 32                         #  each writing one JSON, exported to docs/results; prior = "learned"
+    stride = 12                          #  trains its prior first, for prior_steps)
 
     [runs.gcbc]                          # trainer = "gcbc": `ogbench gcbc-train`'s run (GCBCConfig fields)
     trainer = "gcbc"
@@ -484,9 +484,6 @@ def parse_runs(file, raw) -> tuple[NamedRun, ...]:
         fields.pop("trainer", None)
         process = _typed(file, f"{key}.process", fields["process"], str)
         fields["params"] = _process_params(file, key, process, fields.get("params"))
-        if fields.get("prior") == "learned":
-            raise StudyError(file, f"{key}.prior", "a named run cannot use the learned prior (no prior run is "
-                                                   "trained for it); use a grid or a declared method")
         runs.append(NamedRun(name, tuple(sorted((k, _frozen(v)) for k, v in fields.items()))))
     return tuple(runs)
 
