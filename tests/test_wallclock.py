@@ -52,3 +52,42 @@ def test_wallclock_report_against_a_hand_computed_table(tmp_path):
             "| better |") in report
     assert "tracked, on the same test episodes: 41.0 ± 0.6." in report  # floors 40, 41, 42 (both arms' rows)
     assert "code 0.1.0+abc1234" in report and "Dataset medium-1000000" in report
+
+
+def store_row(process, prior, seed, step, nfe, score, success, batch, seconds):
+    config = {"process": {"name": process, "steps": 16}, "prior": prior, "batch_size": batch,
+              "lr": 0.001 if batch == 32 else 0.003, "precision": "fp32" if batch == 32 else "bf16"}
+    return {"id": 1, "experiments": "nfe-curves", "run_name": f"{process}-s{seed}", "maze": "large",
+            "process": process, "prior": prior, "diffusion_steps": 16, "seed": seed, "step": step,
+            "train_seconds": seconds, "nfe": nfe, "episodes": 200, "eval_seed": seed, "split": "test",
+            "score_minari": score, "score_minari_se": 1.0, "success_rate": success, "plan_ms": 1.0,
+            "floor_minari": 38.0, "config": json.dumps(config), "code_version": "0.1.0+abc1234"}
+
+
+def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
+    import csv
+
+    from bridgeplan.studies.reports.wallclock import AFTER, BEFORE, methods_lines
+
+    before = {("ddpm", "gaussian"): [50.0, 52.0, 54.0], ("flow", "line"): [60.0, 60.0, 60.0]}
+    after = {("ddpm", "gaussian"): [61.0, 62.0, 63.0], ("flow", "line"): [59.0, 60.0, 64.0]}
+    for (store, step), scores, batch, seconds in ((BEFORE, before, 32, 570.0), (AFTER, after, 256, 600.0)):
+        rows = [store_row(p, q, seed, step, nfe, s + nfe, 0.5 + s / 200, batch, seconds)
+                for (p, q), values in scores.items() for seed, s in enumerate(values) for nfe in (1, 2)]
+        if store == AFTER[0]:  # NFE 4 in one store only
+            rows += [store_row("ddpm", "gaussian", seed, step, 4, 99.0, 1.0, batch, seconds) for seed in range(3)]
+        path = tmp_path / store / "results.csv"
+        path.parent.mkdir()
+        with open(path, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    lines = methods_lines(tmp_path)
+    text = "\n".join(lines)
+    assert "Before: batch 32, lr 0.001, fp32, step 16000" in text and "after: batch 256, lr 0.003, bf16" in text
+    # DDPM NFE 1: 51/53/55 -> 53.0 ± 1.2; after 62/63/64 -> 63.0 ± 0.6; per seed +11, +10, +9 -> +10.0 ± 0.6
+    assert "| DDPM | 1 | 9.5 / 10.0 | 53.0 ± 1.2 | 63.0 ± 0.6 | +10.0 ± 0.6 | better |" in text
+    # flow NFE 2: 62 x 3 against 61/62/66 -> +1.0 ± 1.5 (sd sqrt 7), a tie
+    assert "| flow (line) | 2 | 9.5 / 10.0 | 62.0 ± 0.0 | 63.0 ± 1.5 | +1.0 ± 1.5 | tie |" in text
+    assert "| 4 |" not in text  # NFE 4 is in one store only: not paired
+    assert sum(line.startswith("|") for line in lines) == 2 + 4  # header and rule, 2 methods x 2 NFEs

@@ -73,6 +73,8 @@ class Row:
     """RMS dynamics residual of the plans as sampled (m/s), open loop; None where not recorded."""
     floor_learned: float | None = None
     """The learned prior tracked alone on the same episodes, where the evaluation measured it."""
+    train_seconds: float | None = None
+    """Wall-clock seconds the run had trained when the snapshot was taken; None where not recorded."""
     source: str = ""
     """The file the row was read from."""
 
@@ -120,7 +122,8 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
                    code_version=r.get("code_version", ""), score_d4rl=_float(r.get("score_d4rl")),
                    network_calls=_float(r.get("network_calls_per_plan")),
                    plan_kinematics=_float(r.get("plan_kinematics_rms")),
-                   plan_dynamics=_float(r.get("plan_dynamics_rms")), source=source)
+                   plan_dynamics=_float(r.get("plan_dynamics_rms")),
+                   train_seconds=_float(r.get("train_seconds")), source=source)
     except BridgeplanError as e:
         raise BridgeplanError(str(e) if str(e).startswith(where) else f"{where}: {e}") from None
     except (KeyError, ValueError, json.JSONDecodeError) as e:
@@ -161,7 +164,8 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
                    floor_learned=float(learned["score"]["minari"]["mean"]) if learned else None,
                    network_calls=_float(d.get("network_call_equivalents_per_plan")),
                    plan_kinematics=residuals.get("kinematics_rms", {}).get("mean"),
-                   plan_dynamics=residuals.get("dynamics_rms", {}).get("mean"), source=str(path))
+                   plan_dynamics=residuals.get("dynamics_rms", {}).get("mean"),
+                   train_seconds=_float(d.get("train_seconds")), source=str(path))
     except (KeyError, ValueError, TypeError, json.JSONDecodeError) as e:
         raise BridgeplanError(f"{path}: not an evaluation JSON ({type(e).__name__}: {e})") from None
 

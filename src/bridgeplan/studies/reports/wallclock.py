@@ -10,6 +10,12 @@ arms is paired per seed (:func:`bridgeplan.analysis.stats.paired`), with its ver
 :func:`collect` turns the evaluation JSONs of a campaign into ``results.csv`` (one row per evaluation, every key,
 the dataset named by what it is); :func:`render` makes the report from the committed CSVs. Made by
 `bridgeplan study report throughput-wallclock` (studies/throughput-wallclock.toml).
+
+Its last section (:func:`methods_lines`) asks whether large keeps learning when the faster setting gets the old
+runs' wall-clock, for each method: large-v2-curves' runs at step 16000 (batch 32, fp32, ~9-10 minutes each, two
+side by side) against large-v2-batch256's at the steps the faster setting makes in that time (6400, sized from the
+DDPM rows above), the same grids, seeds and episodes. Nothing is selected: every NFE both evaluated is shown, the
+difference paired per seed at each.
 """
 
 from __future__ import annotations
@@ -21,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.analysis.keys import label, method
+from bridgeplan.analysis.load import Point, load_csvs
 from bridgeplan.analysis.stats import compare, mean_se, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.errors import BridgeplanError
@@ -30,8 +38,11 @@ from bridgeplan.files import atomic_write_text
 FOLDER = "throughput-wallclock"
 """Its folder under docs/results: one ``<maze>/results.csv`` per maze."""
 MAZES = ("medium", "large")
-READS = ()
-"""It reads no run of the grids: its runs are its own arms (see the module's docstring)."""
+METHODS = (method("ddpm", steps=16), method("bridge", "line", steps=16), method("flow", "line", steps=16))
+READS = METHODS
+"""The grids' runs its last section reads (its first sections' runs are its own arms: the module's docstring)."""
+BEFORE, AFTER = ("large-v2-curves", 16000), ("large-v2-batch256", 6400)
+"""The last section's two stores (docs/results/<store>/results.csv) and the snapshot step it reads of each."""
 FIELDS = ("maze", "arm", "batch_size", "lr", "precision", "seed", "minutes", "step", "train_seconds",
           "windows_per_s", "nfe", "split", "eval_seed", "episodes", "score_minari", "score_minari_se",
           "success_rate", "floor_line_minari", "process", "dataset", "code_version")
@@ -123,6 +134,45 @@ def maze_table(rows: list[dict]) -> list[str]:
     return lines + ["", f"The straight line alone, tracked, on the same test episodes: {fmt_mean_se(floor)}."]
 
 
+def _arm_of_store(path: Path, step: int) -> str:
+    """The training setting (:func:`arm_name`) of a store's rows at ``step``, from their configs."""
+    with open(path, newline="") as f:
+        arms = {arm_name(json.loads(r["config"])) for r in csv.DictReader(f) if int(r["step"]) == step}
+    if len(arms) != 1:
+        raise BridgeplanError(f"{path}: expected one training setting at step {step}, found {sorted(arms) or 'none'}")
+    return arms.pop()
+
+
+def methods_lines(root: Path) -> list[str]:
+    """Per method and NFE, the old setting's runs at the old step against the faster setting's at its step, on the
+    test episodes: score and success, each with its paired difference (faster minus old) and verdict."""
+    paths = [Path(root) / store / "results.csv" for store, _ in (BEFORE, AFTER)]
+    if not all(p.exists() for p in paths):
+        return []
+    (before, old_step), (after, new_step) = ((load_csvs([p]), step) for p, (_, step) in zip(paths, (BEFORE, AFTER)))
+    arms = [_arm_of_store(p, step) for p, (_, step) in zip(paths, (BEFORE, AFTER))]
+    body = []
+    for key in METHODS:
+        old_nfes = before.nfes(key, old_step)
+        for nfe in sorted(n for n in after.nfes(key, new_step) if n in old_nfes):
+            old, new = before.rows(Point(key, old_step, nfe)), after.rows(Point(key, new_step, nfe))
+            minutes = " / ".join(f"{np.mean([r.train_seconds for r in rows.values()]) / 60:.1f}" for rows in (old, new))
+            score = paired({s: r.score for s, r in new.items()}, {s: r.score for s, r in old.items()})
+            success = paired({s: r.success for s, r in new.items()}, {s: r.success for s, r in old.items()})
+            body.append([label(key), nfe, minutes, fmt_mean_se({s: r.score for s, r in old.items()}),
+                         fmt_mean_se({s: r.score for s, r in new.items()}), fmt_diff(score), compare(score),
+                         fmt_mean_se({s: r.success for s, r in old.items()}, digits=3),
+                         fmt_mean_se({s: r.success for s, r in new.items()}, digits=3), fmt_diff(success, digits=3),
+                         compare(success), len(new)])
+    return ["", "## large: every method at the old runs' wall-clock", "",
+            f"Before: {arms[0]}, step {old_step} ({BEFORE[0]}); after: {arms[1]}, step {new_step} ({AFTER[0]}). "
+            "Minutes: each run's training wall-clock at that step, mean over seeds (two runs side by side, one "
+            "thread each). Test episodes (200 per seed, task seed = training seed); every NFE both evaluated, "
+            "nothing chosen; differences after - before, paired per seed.", "",
+            *table(["method", "NFE", "minutes before / after", "score before", "score after", "difference", "verdict",
+                    "success before", "success after", "difference", "verdict", "seeds"], body)]
+
+
 def render(root: Path) -> str:
     lines = ["# Score at equal wall-clock", "",
              "Generated by `bridgeplan study report throughput-wallclock` from "
@@ -144,4 +194,4 @@ def render(root: Path) -> str:
                   f"{', '.join(versions)}.", "", *maze_table(rows)]
     if not found:
         raise BridgeplanError(f"no {FOLDER}/<maze>/results.csv under {root}")
-    return "\n".join(lines)
+    return "\n".join(lines + methods_lines(Path(root)))
