@@ -505,6 +505,8 @@ steps = 4
 checkpoint_every = 4
 prior_steps = 3
 seeds = [0]
+model = {{ dim = 8, dim_mults = [1, 2] }}  # the planners' (GCBC's own fields are its run's)
+device = "cpu"
 
 [runs.gcbc]
 trainer = "gcbc"
@@ -541,8 +543,6 @@ prior = "coarse"
 horizon = 10
 stride = 4
 subgoal_every = 3
-model = {{ dim = 8, dim_mults = [1, 2] }}
-device = "cpu"
 
 [[evaluations]]
 command = "ogbench graph-eval"
@@ -556,8 +556,6 @@ process = "flow"
 prior = "learned"
 horizon = 10
 stride = 4
-model = {{ dim = 8, dim_mults = [1, 2] }}
-device = "cpu"
 
 [[evaluations]]
 command = "ogbench eval"
