@@ -83,6 +83,20 @@ def _docs_copy(tmp_path) -> Path:
     return root
 
 
+@pytest.mark.parametrize("study, run", [("umaze-v2-hold", "umaze-ddpm-N16-hold0.5-H128-cpu-small-s0"),
+                                        ("ogbench-planners", "ddpm-s0")])
+def test_study_report_check_fails_when_a_study_no_longer_declares_how_its_rows_were_trained(tmp_path, capsys, study,
+                                                                                        run):
+    """A grid study's rows and a command study's JSONs against the study file: a preset default that moves under
+    a study that does not pin it shows as here, a field the study now sets otherwise."""
+    root = _docs_copy(tmp_path)
+    path = root / "studies" / f"{study}.toml"
+    path.write_text(path.read_text().replace("[training]\n", "[training]\nbatch_size = 64\n", 1))
+    assert main(["study", "report", study, "--check", "--root", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: studies/{study}.toml: run {run}: rows trained with batch_size 32 (the study now: 64)" in err
+
+
 def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, capsys):
     root = _docs_copy(tmp_path)
     findings = root / "docs" / "results" / "findings.md"

@@ -696,7 +696,7 @@ def _cmd_study_list(args) -> int:
 def _cmd_study_report(args) -> int:
     from bridgeplan.files import atomic_write_text
     from bridgeplan.studies import find_root, load_studies, select
-    from bridgeplan.studies.export import provenance, provenance_path
+    from bridgeplan.studies.export import provenance, provenance_path, stale_rows
     from bridgeplan.studies.reports import GENERATORS
 
     root = find_root(args.root)
@@ -728,6 +728,11 @@ def _cmd_study_report(args) -> int:
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
             print(f"wrote {output}")
+    if args.check:  # the committed rows were trained as their studies declare today
+        for s in chosen:
+            for line in stale_rows(s, root):
+                print(f"error: {line}", file=sys.stderr)
+                differ += 1
     provenances = sum(output.endswith("/study.json") for output in texts)
     reports = sum(output.startswith("docs/results/") for output in texts) - provenances
     if args.check and not differ:

@@ -46,6 +46,62 @@ def provenance(study: Study, root: Path) -> str | None:
     return json.dumps(record, indent=2) + "\n"
 
 
+NOT_DECLARED = {"dataset", "prior_run", "device", "threads", "log_every", "steps", "checkpoint_every", "minutes"}
+"""Config fields a committed row may record otherwise than its study declares: where the data and the prior lay,
+how it ran, and the snapshot's stage (a run trained in stages records each stage's steps)."""
+
+
+def differences(declared: dict, recorded: dict) -> list[str]:
+    """The fields of a row's ``recorded`` config (``config.to_dict`` form) that ``declared`` sets otherwise; of a
+    nested one (the process, the model), the fields the row records (older rows lack fields added since)."""
+    out = []
+    for name, value in sorted(recorded.items()):
+        if name in NOT_DECLARED or name not in declared:
+            continue
+        want = declared[name]
+        if isinstance(value, dict) and isinstance(want, dict):
+            want = {k: want.get(k) for k in value}
+        was, now = json.dumps(value, sort_keys=True), json.dumps(want, sort_keys=True)
+        if was != now:
+            out.append(f"{name} {was} (the study now: {now})")
+    return out
+
+
+def stale_rows(study: Study, root: Path) -> list[str]:
+    """Where the study's committed rows were trained otherwise than the study now declares (a preset's default
+    changed under a study that does not pin it, say): one line per run and field; [] when they agree. The rows of
+    its grids (docs/results/DATA/results.csv) and the JSONs of its one-run planner evaluations."""
+    from bridgeplan import config as cfg
+    from bridgeplan.experiments.runner import _train_config
+    from bridgeplan.studies.commands import jobs, train_config
+    from bridgeplan.studies.plan import sweeps
+
+    recorded: dict[str, dict] = {}  # run name -> its config as a row records it
+    declared: dict[str, dict] = {}
+    path = committed_csv(study, root)
+    if study.experiments and path.exists():
+        for sweep in sweeps(study, root):
+            for seed in sweep.settings.seeds:
+                for spec in sweep.experiment.runs():
+                    config = _train_config(sweep.settings, spec, seed, "")
+                    declared[config.run_name()] = cfg.to_dict(config)
+        with path.open(newline="") as f:
+            for r in csv.DictReader(f):
+                recorded.setdefault(r["run_name"], json.loads(r["config"]))
+    runs = {r.name: r for r in study.runs}
+    results = Path(root) / "docs" / "results"
+    for job in jobs(study, results, results, quick=False):
+        if len(job.runs) != 1 or runs[job.runs[0]].trainer != "planner" or not job.path.exists():
+            continue
+        config = json.loads(job.path.read_text()).get("config") or {}
+        name = f"{job.runs[0]}-s{job.seed}"
+        if "process" in config:  # a planner's own run (not a graph's low level, recorded under "low")
+            recorded.setdefault(name, config)
+            declared[name] = cfg.to_dict(train_config(study, runs[job.runs[0]], job.seed, Path("dataset")))
+    return [f"{study.file}: run {run}: rows trained with {d}" for run, config in sorted(recorded.items())
+            if run in declared for d in differences(declared[run], config)]
+
+
 def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
     """The study's results (``store_dir``, its committed-scale results directory) into docs/results: its store as
     ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment in its committed folder,
