@@ -298,7 +298,7 @@ def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_pa
     lines = op.block(tmp_path).splitlines()
     assert lines[0] == ("- pointmaze-large-stitch-v0, dataset graph (keep 10, radius 0.5), no network, pursuit 2 "
                         "(chosen on validation): 96.0% one graph, no training; above: GCBC 7: yes, QRL 84: yes, "
-                        "CompDiffuser 100: no")
+                        "CompDiffuser 100: no (-4.0)")
     assert lines[1].startswith("- pointmaze-large-stitch-v0, dataset graph -> flow (coarse) H16k4 (graph keep 10, "
                                "radius 0.5), NFE 1, pursuit 2, replan 12 (chosen on validation): 85.0 ± 5.0% over 2 "
                                "training seeds")

@@ -110,7 +110,8 @@ def choose(rows: list[dict], methods: list[str], controllers: list[str]) -> dict
 def goal_lines(rows: list[dict], maze: str, kind: str, methods: list[str],
                chosen: dict[str, str | None]) -> list[str]:
     """Per method, its chosen setting's test success against each published method (above at two standard errors;
-    the dataset graph, one deterministic graph: above when its success is)."""
+    the dataset graph, one deterministic graph: above when its success is); where not above, by how much the mean
+    differs (points, mean minus published)."""
     lines = []
     for m in methods:
         c = chosen[m]
@@ -120,7 +121,7 @@ def goal_lines(rows: list[dict], maze: str, kind: str, methods: list[str],
             continue
         s = mean_se(test)
         lower = s.mean if graph else s.mean - 2 * s.se  # one deterministic graph: its value
-        above = ", ".join(f"{name} {value}: {'yes' if lower > value else 'no'}"
+        above = ", ".join(f"{name} {value}: " + ("yes" if lower > value else f"no ({s.mean - value:+.1f})")
                           for name, value in PUBLISHED[kind].get(maze, {}).items())
         how = "one graph, no training" if graph else f"over {len(test)} training seeds"
         lines.append(f"- {dataset_name(maze, kind)}, {m}, {c} (chosen on validation): "
