@@ -149,8 +149,9 @@ def methods_lines(root: Path) -> list[str]:
     paths = [Path(root) / store / "results.csv" for store, _ in (BEFORE, AFTER)]
     if not all(p.exists() for p in paths):
         return []
-    (before, old_step), (after, new_step) = ((load_csvs([p]), step) for p, (_, step) in zip(paths, (BEFORE, AFTER)))
-    arms = [_arm_of_store(p, step) for p, (_, step) in zip(paths, (BEFORE, AFTER))]
+    before, after = (load_csvs([p]) for p in paths)
+    old_step, new_step = BEFORE[1], AFTER[1]
+    arms = [_arm_of_store(p, step) for p, step in zip(paths, (old_step, new_step))]
     body = []
     for key in METHODS:
         old_nfes = before.nfes(key, old_step)
