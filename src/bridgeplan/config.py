@@ -255,6 +255,15 @@ class PriorTrainConfig:
         return f"{self.maze}-prior-learned-{_horizon_tag(self.horizon, self.stride)}-s{self.seed}"
 
 
+def learned_prior_config(planner: TrainConfig, steps: int, **fields: Any) -> PriorTrainConfig:
+    """The learned prior ``planner``'s runs sample from: the thesis's MLP trained on the same windows (maze, dataset,
+    horizon, stride), on the same device and threads, for ``steps`` (one snapshot, at the end); ``fields`` set
+    the rest (the seed, the dataset where the planner's is not yet set)."""
+    shared = {"maze": planner.maze, "dataset": planner.dataset, "horizon": planner.horizon, "stride": planner.stride,
+              "seed": planner.seed, "device": planner.device, "threads": planner.threads}
+    return PriorTrainConfig(**{**shared, **fields}, steps=steps, checkpoint_every=steps)
+
+
 def _horizon_tag(horizon: int, stride: int) -> str:
     """``H128``, or ``H32k8`` for a stride (run names of stride 1 are unchanged)."""
     return f"H{horizon}" + (f"k{stride}" if stride > 1 else "")

@@ -63,9 +63,7 @@ def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) ->
 
 def _prior_config(s: SweepSettings, seed: int, planner: cfg.TrainConfig) -> cfg.PriorTrainConfig:
     """The learned prior for the planners of ``s``: trained on their windows (horizon and stride)."""
-    extra = {k: v for k, v in s.overrides.items() if k in ("device", "threads")}
-    return cfg.PriorTrainConfig(maze=s.maze, dataset=s.dataset, horizon=planner.horizon, stride=planner.stride,
-                                steps=s.prior_steps, checkpoint_every=s.prior_steps, seed=seed, **extra)
+    return cfg.learned_prior_config(planner, s.prior_steps, dataset=s.dataset, seed=seed)
 
 
 def _trained_step(run_dir: Path) -> int:

@@ -94,10 +94,7 @@ def prior_config(study, planner):
     one plan shape and seed share it."""
     from bridgeplan import config as cfg
 
-    steps = study.training.prior_steps
-    return cfg.PriorTrainConfig(maze=planner.maze, dataset=planner.dataset, preset=planner.preset,
-                                horizon=planner.horizon, stride=planner.stride, steps=steps, checkpoint_every=steps,
-                                seed=planner.seed, device=planner.device, threads=planner.threads)
+    return cfg.learned_prior_config(planner, study.training.prior_steps)
 
 
 def prior_dir(results: Path, prior) -> Path:
