@@ -156,15 +156,16 @@ def methods_lines(root: Path) -> list[str]:
     for key in METHODS:
         old_nfes = before.nfes(key, old_step)
         for nfe in sorted(n for n in after.nfes(key, new_step) if n in old_nfes):
-            old, new = before.rows(Point(key, old_step, nfe)), after.rows(Point(key, new_step, nfe))
-            minutes = " / ".join(f"{np.mean([r.train_seconds for r in rows.values()]) / 60:.1f}" for rows in (old, new))
-            score = paired({s: r.score for s, r in new.items()}, {s: r.score for s, r in old.items()})
-            success = paired({s: r.success for s, r in new.items()}, {s: r.success for s, r in old.items()})
-            body.append([label(key), nfe, minutes, fmt_mean_se({s: r.score for s, r in old.items()}),
-                         fmt_mean_se({s: r.score for s, r in new.items()}), fmt_diff(score), compare(score),
-                         fmt_mean_se({s: r.success for s, r in old.items()}, digits=3),
-                         fmt_mean_se({s: r.success for s, r in new.items()}, digits=3), fmt_diff(success, digits=3),
-                         compare(success), len(new)])
+            old, new = Point(key, old_step, nfe), Point(key, new_step, nfe)
+            minutes = " / ".join(f"{np.mean(list(r.values(p, field='train_seconds').values())) / 60:.1f}"
+                                 for r, p in ((before, old), (after, new)))
+            cells = [minutes]
+            for field, digits in (("score", 1), ("success", 3)):
+                was, now = before.values(old, field=field), after.values(new, field=field)
+                d = paired(now, was)
+                cells += [fmt_mean_se(was, digits=digits), fmt_mean_se(now, digits=digits), fmt_diff(d, digits=digits),
+                          compare(d)]
+            body.append([label(key), nfe, *cells, len(after.rows(new))])
     return ["", "## large: every method at the old runs' wall-clock", "",
             f"Before: {arms[0]}, step {old_step} ({BEFORE[0]}); after: {arms[1]}, step {new_step} ({AFTER[0]}). "
             "Minutes: each run's training wall-clock at that step, mean over seeds (two runs side by side, one "
