@@ -34,7 +34,8 @@ def test_committed_studies_parse_into_dataclasses():
     assert [(r.generator, r.output) for r in studies["findings"].reports] == [("findings", "findings.md")]
 
 
-@pytest.mark.parametrize("name", ["medium-v2-curves", "large-v2-curves", "umaze-v2-hold", "large-v2-batch256"])
+@pytest.mark.parametrize("name", ["medium-v2-curves", "large-v2-curves", "umaze-v2-hold", "large-v2-batch256",
+                                  "large-v2-batch256-fp32"])
 def test_a_campaign_study_lists_every_committed_evaluation(name):
     """With no store, the dry run lists the committed CSV's evaluations, each computed once, and every experiment
     shows exactly the evaluations the CSV says it shows: the study file encodes the campaign that made them."""
@@ -69,7 +70,7 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
 
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert ("10 reports, 15 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
+    assert ("10 reports, 16 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
             "their studies" in capsys.readouterr().out)
     # a generator's name (as the markers and the errors say it) selects the studies whose reports it makes
     assert main(["study", "report", "cddb", "--check", "--root", str(REPO)]) == 0
