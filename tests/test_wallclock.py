@@ -67,8 +67,9 @@ def store_row(process, prior, seed, step, nfe, score, success, batch, seconds):
 def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     import csv
 
-    from bridgeplan.studies.reports.wallclock import AFTER, BEFORE, methods_lines
+    from bridgeplan.studies.reports.wallclock import PAIRINGS, methods_lines
 
+    _, BEFORE, AFTER = PAIRINGS[0]
     before = {("ddpm", "gaussian"): [50.0, 52.0, 54.0], ("flow", "line"): [60.0, 60.0, 60.0]}
     after = {("ddpm", "gaussian"): [61.0, 62.0, 63.0], ("flow", "line"): [59.0, 60.0, 64.0]}
     for (store, step), scores, batch, seconds in ((BEFORE, before, 32, 570.0), (AFTER, after, 256, 600.0)):
@@ -91,3 +92,6 @@ def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     assert "| flow (line) | 2 | 9.5 / 10.0 | 62.0 ± 0.0 | 63.0 ± 1.5 | +1.0 ± 1.5 | tie |" in text
     assert "| 4 |" not in text  # NFE 4 is in one store only: not paired
     assert sum(line.startswith("|") for line in lines) == 2 + 4  # header and rule, 2 methods x 2 NFEs
+    assert lines[1] == "## large: every method at the old runs' wall-clock, batch 256, lr 0.003, bf16"
+    # the other pairings' stores are absent: their sections are left out, not empty
+    assert sum(line.startswith("## ") for line in lines) == 1
