@@ -351,7 +351,7 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     from bridgeplan import config as cfg
     from bridgeplan.studies.plan import THROUGHPUT_BENCH, TRAIN_STEPS_PER_SECOND, training_rate
 
-    config = cfg.preset_config("medium", "cpu-small")
+    config = cfg.preset_config("medium", "cpu-small", batch_size=32)
     rate, source = training_rate(tmp_path, "medium", config)
     assert rate == TRAIN_STEPS_PER_SECOND and "assumed" in source  # no bench committed
     row = {"preset": "cpu-small", "maze": "medium", "batch": 32, "grad_accum": 1, "precision": "fp32",
