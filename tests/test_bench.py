@@ -147,3 +147,13 @@ def suites_bf16() -> bool:
     from bridgeplan.train import bf16_supported
 
     return bf16_supported(torch.device("cpu"))
+
+
+def test_the_machine_names_its_cpu_and_the_extensions_that_decide_its_speed():
+    from bridgeplan.bench.harness import cpu_model
+
+    amx = "processor\t: 0\nmodel name\t: Intel Xeon\nflags\t\t: fpu avx2 avx512f amx_bf16 sse\n"
+    assert cpu_model(amx) == "Intel Xeon (avx2, avx512f, amx_bf16)"
+    assert cpu_model("model name : AMD EPYC\nflags : fpu avx2\n") == "AMD EPYC (avx2)"
+    assert cpu_model("model name : Some CPU\nflags : fpu\n") == "Some CPU"
+    assert cpu_model("Hardware : arm\n") == ""  # no model name: none said

@@ -24,13 +24,14 @@ def test_committed_studies_parse_into_dataclasses():
     medium = studies["medium-v2-curves"]
     assert isinstance(medium, Study) and medium.file == Path("studies/medium-v2-curves.toml")
     assert medium.dataset == Dataset(maze="medium", steps=1_000_000, seed=123, version=2)
+    pinned = (("batch_size", 32), ("lr", 0.001))  # cpu-small's medium default when the runs were made
     assert medium.training == Training(preset="cpu-small", steps=8000, checkpoint_every=2000, prior_steps=2000,
-                                       seeds=(0, 1, 2))
+                                       seeds=(0, 1, 2), overrides=pinned)
     assert medium.experiments[0] == ExperimentSpec(name="nfe-curves", grid="nfe-curves", splits=("test",
                                                                                                "validation"))
     assert ExperimentSpec(name="nfe-curves", grid="nfe-curves", params=(("consistent", True),)) in medium.experiments
     assert studies["large-v2-curves"].training.all_stages() == ((8000, 2000), (16000, 2000))
-    assert studies["medium-v2-hold"].training.overrides == (("hold_share", 0.5),)
+    assert studies["medium-v2-hold"].training.overrides == (pinned[0], ("hold_share", 0.5), pinned[1])
     assert [(r.generator, r.output) for r in studies["findings"].reports] == [("findings", "findings.md")]
 
 
@@ -351,7 +352,7 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     from bridgeplan import config as cfg
     from bridgeplan.studies.plan import THROUGHPUT_BENCH, TRAIN_STEPS_PER_SECOND, training_rate
 
-    config = cfg.preset_config("medium", "cpu-small")
+    config = cfg.preset_config("medium", "cpu-small", batch_size=32)
     rate, source = training_rate(tmp_path, "medium", config)
     assert rate == TRAIN_STEPS_PER_SECOND and "assumed" in source  # no bench committed
     row = {"preset": "cpu-small", "maze": "medium", "batch": 32, "grad_accum": 1, "precision": "fp32",

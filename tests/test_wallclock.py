@@ -54,9 +54,9 @@ def test_wallclock_report_against_a_hand_computed_table(tmp_path):
     assert "code 0.1.0+abc1234" in report and "Dataset medium-1000000" in report
 
 
-def store_row(process, prior, seed, step, nfe, score, success, batch, seconds):
+def store_row(process, prior, seed, step, nfe, score, success, batch, seconds, precision=None):
     config = {"process": {"name": process, "steps": 16}, "prior": prior, "batch_size": batch,
-              "lr": 0.001 if batch == 32 else 0.003, "precision": "fp32" if batch == 32 else "bf16"}
+              "lr": 0.001 if batch == 32 else 0.003, "precision": precision or ("fp32" if batch == 32 else "bf16")}
     return {"id": 1, "experiments": "nfe-curves", "run_name": f"{process}-s{seed}", "maze": "large",
             "process": process, "prior": prior, "diffusion_steps": 16, "seed": seed, "step": step,
             "train_seconds": seconds, "nfe": nfe, "episodes": 200, "eval_seed": seed, "split": "test",
@@ -67,8 +67,9 @@ def store_row(process, prior, seed, step, nfe, score, success, batch, seconds):
 def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     import csv
 
-    from bridgeplan.studies.reports.wallclock import AFTER, BEFORE, methods_lines
+    from bridgeplan.studies.reports.wallclock import PAIRINGS, methods_lines
 
+    BEFORE, AFTER = PAIRINGS[0].before, PAIRINGS[0].after
     before = {("ddpm", "gaussian"): [50.0, 52.0, 54.0], ("flow", "line"): [60.0, 60.0, 60.0]}
     after = {("ddpm", "gaussian"): [61.0, 62.0, 63.0], ("flow", "line"): [59.0, 60.0, 64.0]}
     for (store, step), scores, batch, seconds in ((BEFORE, before, 32, 570.0), (AFTER, after, 256, 600.0)):
@@ -91,3 +92,23 @@ def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     assert "| flow (line) | 2 | 9.5 / 10.0 | 62.0 ± 0.0 | 63.0 ± 1.5 | +1.0 ± 1.5 | tie |" in text
     assert "| 4 |" not in text  # NFE 4 is in one store only: not paired
     assert sum(line.startswith("|") for line in lines) == 2 + 4  # header and rule, 2 methods x 2 NFEs
+    assert lines[1] == "## large: every method at the old runs' wall-clock, batch 256, lr 0.003, bf16"
+    # the other pairings' stores are absent: their sections are left out, not empty
+    assert sum(line.startswith("## ") for line in lines) == 1
+
+    # the precision alone, at equal steps on another CPU: AFTER's runs against the fp32 store's, no minutes
+    store, step = PAIRINGS[1].after
+    assert PAIRINGS[1].before == AFTER and not PAIRINGS[1].wallclock and step == AFTER[1]
+    rows = [store_row(p, q, seed, step, 1, s + 1 + 2 * seed, 0.5, 256, 1800.0, precision="fp32")
+            for (p, q), values in after.items() for seed, s in enumerate(values)]
+    path = tmp_path / store / "results.csv"
+    path.parent.mkdir()
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    text = "\n".join(methods_lines(tmp_path))
+    assert "## large: batch 256, lr 0.003, fp32 against batch 256, lr 0.003, bf16, at equal steps" in text
+    # DDPM NFE 1: 62/63/64 -> 62/65/68 (+0, +2, +4: +2.0 ± 1.2), a tie; no minutes column
+    assert "| DDPM | 1 | 63.0 ± 0.6 | 65.0 ± 1.7 | +2.0 ± 1.2 | tie |" in text
+    assert "30.0" not in text and text.count("minutes before / after") == 1

@@ -188,8 +188,9 @@ def _common_train_flags(p) -> None:
                    help="environment steps between planned states (default: the preset's for the maze)")
     p.add_argument("--steps", type=int, default=None, help="optimizer steps")
     p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
-    p.add_argument("--batch-size", type=int, default=None)
-    p.add_argument("--lr", type=float, default=None)
+    p.add_argument("--batch-size", type=int, default=None,
+                   help="windows per gradient (default: the config's, for a planner its preset's for the maze)")
+    p.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default as --batch-size)")
     p.add_argument("--checkpoint-every", type=int, default=None)
     p.add_argument("--log-every", type=int, default=None)
     p.add_argument("--seed", type=int, default=None)

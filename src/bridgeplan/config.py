@@ -27,6 +27,12 @@ _DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256),
 # cpu-small's plan shape per maze: (horizon, stride). Medium and large span Diffuser's 256 / 384 steps
 # less a few (249 / 377) with 32 / 48 planned states: ~3x the training steps per CPU second (docs/results).
 _CPU_SMALL_SHAPE = {"umaze": (128, 1), "medium": (32, 8), "large": (48, 8), "open": (128, 1)}
+# cpu-small's batch and learning rate where they are not 32 / 1e-3. At medium's and large's short plans the small
+# network's step is bound by per-operator overhead, so batch 256 makes ~3x the windows per second
+# (docs/results/throughput/bench.md) and, with lr 1e-3 x sqrt 8 fixed beforehand, scores at least as well at equal
+# wall-clock, in fp32 and bf16 (docs/results/throughput-wallclock.md). umaze's 128 states gain only 1.4x and
+# OGBench's shapes are unmeasured on score: they keep 32 / 1e-3.
+_CPU_SMALL_BATCH = {"medium": (256, 3e-3), "large": (256, 3e-3)}
 PRESETS = ("diffuser", "cpu-small")
 
 
@@ -276,11 +282,12 @@ def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> Trai
     if preset == "diffuser":
         base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
     else:
+        batch_size, lr = _CPU_SMALL_BATCH.get(maze, (32, 1e-3))
         base = TrainConfig(
             maze=maze, preset=preset, horizon=horizon, stride=stride,
             model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),
             process=DDPM(steps=16),  # the thesis's 16 diffusion steps
-            steps=200_000, batch_size=32, grad_accum=1, lr=1e-3,
+            steps=200_000, batch_size=batch_size, grad_accum=1, lr=lr,
             # a short run needs a short EMA window (~200 steps), not Diffuser's ~2000
             ema_every=1, ema_start=200, checkpoint_every=1000, log_every=50,
         )

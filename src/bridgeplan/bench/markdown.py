@@ -14,7 +14,8 @@ def table(header: list[str], rows: list[list]) -> list[str]:
 
 def format_bench(result: dict) -> str:
     m = result["machine"]
-    where = m.get("gpu", f"{m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch threads")
+    where = m.get("gpu", f"{m.get('cpu') or m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch "
+                         "threads")
     lines = ["# bridgeplan bench", "",
              f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
              f"with N = {DIFFUSION_STEPS} for the timings; medians over {result['bench']['repeats']} repeats after "

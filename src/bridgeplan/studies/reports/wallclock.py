@@ -11,11 +11,11 @@ arms is paired per seed (:func:`bridgeplan.analysis.stats.paired`), with its ver
 the dataset named by what it is); :func:`render` makes the report from the committed CSVs. Made by
 `bridgeplan study report throughput-wallclock` (studies/throughput-wallclock.toml).
 
-Its last section (:func:`methods_lines`) asks whether large keeps learning when the faster setting gets the old
-runs' wall-clock, for each method: large-v2-curves' runs at step 16000 (batch 32, fp32, ~9-10 minutes each, two
-side by side) against large-v2-batch256's at the steps the faster setting makes in that time (6400, sized from the
-DDPM rows above), the same grids, seeds and episodes. Nothing is selected: every NFE both evaluated is shown, the
-difference paired per seed at each.
+Its last sections (:func:`methods_lines`, one per :data:`PAIRINGS`) pair two grid studies' runs per method, NFE and
+seed. Whether large keeps learning when the faster setting gets the old runs' wall-clock: large-v2-curves at step
+16000 (batch 32, fp32, ~9-10 minutes each, two side by side) against large-v2-batch256 at the steps batch 256 in
+bf16 makes in that time. What the precision alone changes: large-v2-batch256 against large-v2-batch256-fp32 at the
+same steps. Nothing is selected: every NFE both evaluated is shown, the difference paired per seed at each.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -41,8 +42,25 @@ MAZES = ("medium", "large")
 METHODS = (method("ddpm", steps=16), method("bridge", "line", steps=16), method("flow", "line", steps=16))
 READS = METHODS
 """The grids' runs its last section reads (its first sections' runs are its own arms: the module's docstring)."""
-BEFORE, AFTER = ("large-v2-curves", 16000), ("large-v2-batch256", 6400)
-"""The last section's two stores (docs/results/<store>/results.csv) and the snapshot step it reads of each."""
+
+
+@dataclass(frozen=True)
+class Pairing:
+    """One of the last sections: a store's runs at a step against another store's at its step."""
+
+    maze: str
+    before: tuple[str, int]
+    """The old store (docs/results/<store>/results.csv) and the snapshot step read of it."""
+    after: tuple[str, int]
+    wallclock: bool
+    """Whether both stores' runs trained on one machine (two side by side, one thread each), so that their minutes
+    compare; otherwise the section compares their scores at the steps given and shows no minutes."""
+
+
+PAIRINGS = (Pairing("large", ("large-v2-curves", 16000), ("large-v2-batch256", 6400), wallclock=True),
+            Pairing("large", ("large-v2-batch256", 6400), ("large-v2-batch256-fp32", 6400), wallclock=False))
+"""The last sections: the new store's steps are what its setting makes in the old runs' wall-clock (the first), the
+same steps on another CPU (the second: docs/results/throughput-avx2)."""
 FIELDS = ("maze", "arm", "batch_size", "lr", "precision", "seed", "minutes", "step", "train_seconds",
           "windows_per_s", "nfe", "split", "eval_seed", "episodes", "score_minari", "score_minari_se",
           "success_rate", "floor_line_minari", "process", "dataset", "code_version")
@@ -144,35 +162,47 @@ def _arm_of_store(path: Path, step: int) -> str:
 
 
 def methods_lines(root: Path) -> list[str]:
-    """Per method and NFE, the old setting's runs at the old step against the faster setting's at its step, on the
-    test episodes: score and success, each with its paired difference (faster minus old) and verdict."""
-    paths = [Path(root) / store / "results.csv" for store, _ in (BEFORE, AFTER)]
+    """One section per pairing of :data:`PAIRINGS` whose stores are both committed (:func:`pairing_lines`)."""
+    return [line for pairing in PAIRINGS for line in pairing_lines(Path(root), pairing)]
+
+
+def pairing_lines(root: Path, pairing: Pairing) -> list[str]:
+    """Per method and NFE, the old store's runs at its step against the new store's at its step, on the test
+    episodes: score and success, each with its paired difference (new minus old) and verdict; nothing where a
+    store is absent."""
+    before, after = pairing.before, pairing.after
+    paths = [root / store / "results.csv" for store, _ in (before, after)]
     if not all(p.exists() for p in paths):
         return []
-    before, after = (load_csvs([p]) for p in paths)
-    old_step, new_step = BEFORE[1], AFTER[1]
+    old_rows, new_rows = (load_csvs([p]) for p in paths)
+    old_step, new_step = before[1], after[1]
     arms = [_arm_of_store(p, step) for p, step in zip(paths, (old_step, new_step))]
     body = []
     for key in METHODS:
-        old_nfes = before.nfes(key, old_step)
-        for nfe in sorted(n for n in after.nfes(key, new_step) if n in old_nfes):
+        old_nfes = old_rows.nfes(key, old_step)
+        for nfe in sorted(n for n in new_rows.nfes(key, new_step) if n in old_nfes):
             old, new = Point(key, old_step, nfe), Point(key, new_step, nfe)
-            minutes = " / ".join(f"{np.mean(list(r.values(p, field='train_seconds').values())) / 60:.1f}"
-                                 for r, p in ((before, old), (after, new)))
-            cells = [minutes]
+            cells = [" / ".join(f"{np.mean(list(r.values(p, field='train_seconds').values())) / 60:.1f}"
+                                for r, p in ((old_rows, old), (new_rows, new)))] if pairing.wallclock else []
             for field, digits in (("score", 1), ("success", 3)):
-                was, now = before.values(old, field=field), after.values(new, field=field)
+                was, now = old_rows.values(old, field=field), new_rows.values(new, field=field)
                 d = paired(now, was)
                 cells += [fmt_mean_se(was, digits=digits), fmt_mean_se(now, digits=digits), fmt_diff(d, digits=digits),
                           compare(d)]
-            body.append([label(key), nfe, *cells, len(after.rows(new))])
-    return ["", "## large: every method at the old runs' wall-clock", "",
-            f"Before: {arms[0]}, step {old_step} ({BEFORE[0]}); after: {arms[1]}, step {new_step} ({AFTER[0]}). "
-            "Minutes: each run's training wall-clock at that step, mean over seeds (two runs side by side, one "
-            "thread each). Test episodes (200 per seed, task seed = training seed); every NFE both evaluated, "
-            "nothing chosen; differences after - before, paired per seed.", "",
-            *table(["method", "NFE", "minutes before / after", "score before", "score after", "difference", "verdict",
-                    "success before", "success after", "difference", "verdict", "seeds"], body)]
+            body.append([label(key), nfe, *cells, len(new_rows.rows(new))])
+    stores = f"Before: {arms[0]}, step {old_step} ({before[0]}); after: {arms[1]}, step {new_step} ({after[0]}). "
+    if pairing.wallclock:
+        title = f"## {pairing.maze}: every method at the old runs' wall-clock, {arms[1]}"
+        how = ("Minutes: each run's training wall-clock at that step, mean over seeds (two runs side by side, one "
+               "thread each). ")
+    else:
+        title = f"## {pairing.maze}: {arms[1]} against {arms[0]}, at equal steps"
+        how = "The two stores' runs trained on different CPUs: their minutes are not compared. "
+    header = ["method", "NFE", *(["minutes before / after"] if pairing.wallclock else []), "score before",
+              "score after", "difference", "verdict", "success before", "success after", "difference", "verdict",
+              "seeds"]
+    return ["", title, "", stores + how + "Test episodes (200 per seed, task seed = training seed); every NFE both "
+            "evaluated, nothing chosen; differences after - before, paired per seed.", "", *table(header, body)]
 
 
 def render(root: Path) -> str:
