@@ -64,9 +64,18 @@ def store_row(process, prior, seed, step, nfe, score, success, batch, seconds, p
             "floor_minari": 38.0, "config": json.dumps(config), "code_version": "0.1.0+abc1234"}
 
 
-def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
+def write_store(folder, rows):
+    """A store's committed rows: ``folder/results.csv``."""
     import csv
 
+    folder.mkdir()
+    with open(folder / "results.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     from bridgeplan.studies.reports.wallclock import PAIRINGS, methods_lines
 
     BEFORE, AFTER = PAIRINGS[0].before, PAIRINGS[0].after
@@ -77,12 +86,7 @@ def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
                 for (p, q), values in scores.items() for seed, s in enumerate(values) for nfe in (1, 2)]
         if store == AFTER[0]:  # NFE 4 in one store only
             rows += [store_row("ddpm", "gaussian", seed, step, 4, 99.0, 1.0, batch, seconds) for seed in range(3)]
-        path = tmp_path / store / "results.csv"
-        path.parent.mkdir()
-        with open(path, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        write_store(tmp_path / store, rows)
     lines = methods_lines(tmp_path)
     text = "\n".join(lines)
     assert "Before: batch 32, lr 0.001, fp32, step 16000" in text and "after: batch 256, lr 0.003, bf16" in text
@@ -101,12 +105,7 @@ def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
     assert PAIRINGS[1].before == AFTER and not PAIRINGS[1].wallclock and step == AFTER[1]
     rows = [store_row(p, q, seed, step, 1, s + 1 + 2 * seed, 0.5, 256, 1800.0, precision="fp32")
             for (p, q), values in after.items() for seed, s in enumerate(values)]
-    path = tmp_path / store / "results.csv"
-    path.parent.mkdir()
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_store(tmp_path / store, rows)
     text = "\n".join(methods_lines(tmp_path))
     assert "## large: batch 256, lr 0.003, fp32 against batch 256, lr 0.003, bf16, at equal steps" in text
     # DDPM NFE 1: 62/63/64 -> 62/65/68 (+0, +2, +4: +2.0 ± 1.2), a tie; no minutes column
