@@ -56,7 +56,8 @@ CPU_EXTENSIONS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16")
 
 def cpu_model(cpuinfo: str | None = None) -> str:
     """The CPU's model name and which of :data:`CPU_EXTENSIONS` it has (``AMD EPYC (avx2)``), from /proc/cpuinfo;
-    '' where there is none (not Linux). The same code runs 3x apart on two x86 CPUs: a figure needs its CPU."""
+    '' where there is none (not Linux). The same code runs at very different speeds on two x86 CPUs: a figure needs its
+    CPU."""
     if cpuinfo is None:
         try:
             cpuinfo = Path("/proc/cpuinfo").read_text()
