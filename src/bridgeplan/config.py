@@ -28,10 +28,10 @@ _DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256),
 # less a few (249 / 377) with 32 / 48 planned states: ~3x the training steps per CPU second (docs/results).
 _CPU_SMALL_SHAPE = {"umaze": (128, 1), "medium": (32, 8), "large": (48, 8), "open": (128, 1)}
 # cpu-small's batch and learning rate where they are not 32 / 1e-3. At medium's and large's short plans the small
-# network's step is bound by per-operator overhead, so batch 256 makes several times the windows per
-# second (docs/results/throughput*/bench.md) and, with lr 1e-3 x sqrt 8 fixed beforehand, scores at least as well at equal
-# wall-clock, in fp32 and bf16 (docs/results/throughput-wallclock.md). umaze's 128 states gain much less and
-# OGBench's shapes are unmeasured on score: they keep 32 / 1e-3.
+# network's step is bound by per-operator overhead, so batch 256 makes several times the windows per second
+# (docs/results/throughput*/bench.md) and, with lr 1e-3 x sqrt 8 fixed beforehand, scores at least as well at
+# equal wall-clock, in fp32 and bf16 (docs/results/throughput-wallclock.md). umaze's 128 states gain much less
+# and OGBench's shapes are unmeasured on score: they keep 32 / 1e-3.
 _CPU_SMALL_BATCH = {"medium": (256, 3e-3), "large": (256, 3e-3)}
 PRESETS = ("diffuser", "cpu-small")
 
