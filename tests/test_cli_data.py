@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 
 import pytest
 
@@ -97,6 +100,19 @@ def test_reference_commands(capsys):
     assert line == "error: --episodes must be positive, got 0"
     assert "unknown maze" in _error(capsys, ["reference", "measure", "--maze", "x"])
 
+
+
+def test_output_into_a_closed_pipe_ends_quietly():
+    """`bridgeplan reference show | head -0`: the reader gone, the command stops with no traceback (exit 141)."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-m", "bridgeplan.cli", "reference", "show"], stdout=write,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert done.returncode == 141
+    assert done.stderr == ""
 
 def test_info_on_an_old_dataset(tiny_dataset, tmp_path, capsys):
     """A dataset of the generator before data versions: info works, with one warning line on stderr."""

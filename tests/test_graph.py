@@ -129,7 +129,7 @@ def test_the_graph_as_a_high_level_spaces_its_path_by_the_low_levels_subgoals():
     without subgoals, or of another layout, is refused; the graph takes no NFE."""
     from types import SimpleNamespace
 
-    from bridgeplan.graph import GraphHierarchy
+    from bridgeplan.hierarchy import GraphHierarchy
     from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D
 
     obs, starts = two_pieces()

@@ -447,7 +447,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
                                                                         monkeypatch):
     import json
 
-    import bridgeplan.cli
+    import bridgeplan.commands
     import bridgeplan.studies.plan
 
     root = tmp_path / "repo"
@@ -472,8 +472,8 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert multi["multi_task"] and multi["execution"]["replan_every"] == 24 and multi["nfe"] == 2
     assert (root / "results" / "tiny" / "runs" / "low-s0" / "checkpoint.pt").exists()
     calls, datasets = [], []
-    real = bridgeplan.cli.main
-    monkeypatch.setattr(bridgeplan.cli, "main", lambda argv: calls.append(argv) or real(argv))
+    real = bridgeplan.commands.main
+    monkeypatch.setattr(bridgeplan.commands, "main", lambda argv: calls.append(argv) or real(argv))
     real_dataset = bridgeplan.studies.plan.ensure_dataset
     monkeypatch.setattr(bridgeplan.studies.plan, "ensure_dataset", lambda *a, **k: datasets.append(a) or
                         real_dataset(*a, **k))

@@ -27,18 +27,17 @@ Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns i
 (``ogbench_pointmaze.planning.PlanningPolicy.decisions``), ``bridgeplan ogbench graph-eval`` scores it on the
 protocol: what the data's connectivity alone allows, the floor a stitching planner must beat.
 
-:class:`GraphHierarchy` makes the graph a hierarchy's high level (``bridgeplan.hierarchy.HierarchySource``): its
-path, one state every ``J`` steps of the data (J = the low level's subgoal spacing), is the coarse plan a low
-level trained with ``--subgoal-every`` plans through, from the coarse plan itself as its prior (``--prior
+``bridgeplan.hierarchy.GraphHierarchy`` makes the graph a hierarchy's high level: its path, one state every ``J``
+steps of the data (J = the low level's subgoal spacing), is the coarse plan a low level trained with
+``--subgoal-every`` plans through, from the coarse plan itself as its prior (``--prior
 coarse``): the thesis's informative prior, here made of the data's own states (``ogbench graph-eval --low RUN``;
 on Maze2D ``hierarchy graph-eval LOW``).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -51,7 +50,6 @@ from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, Layout
 
 if TYPE_CHECKING:
     from bridgeplan.data.stream import Stream
-    from bridgeplan.planner import Planner
 
 STEP = GAIN
 """Distance OGBench's point moves in one step at full speed along an axis (0.2): its jumps' cost is length / STEP."""
@@ -291,75 +289,6 @@ class GraphSource:
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
         return np.stack([fixed_length(self.graph.path(s, g), self.length)
                          for s, g in zip(np.asarray(states, np.float64), np.asarray(goals, np.float64))])
-
-
-@dataclass
-class GraphHierarchy:
-    """The dataset graph as the high level of a hierarchy over ``low`` (a planner trained with
-    ``--subgoal-every``): coarse plans are the graph's paths, one state every ``low.subgoal_every * low.stride``
-    steps, as many as cover ``episode_steps`` (the goal repeated past the path's end); no network call."""
-
-    graph: DatasetGraph
-    low: Planner
-    episode_steps: int
-    progress_rule: ClassVar[str] = "sequential"
-    """The data's paths wind, passing near their own later states across walls: progress along them moves one
-    coarse state at a time (``hierarchy.HierarchySource.advance``), never skipping ahead to a nearer later one."""
-
-    def __post_init__(self):
-        if not self.low.subgoal_every:
-            raise BridgeplanError("the low level must plan between subgoals: train it with --subgoal-every J")
-        if self.low.layout != self.graph.layout:
-            raise BridgeplanError(f"the dataset graph holds {self.graph.layout.name} states; the low level plans "
-                                  f"in {self.low.layout.name} (a planner of another environment)")
-
-    @property
-    def spacing(self) -> int:
-        """Steps between coarse states: the low level's subgoal spacing."""
-        return self.low.subgoal_every * self.low.stride
-
-    @property
-    def coarse_length(self) -> int:
-        return self.episode_steps // self.spacing + 2
-
-    @property
-    def subgoals_per_plan(self) -> int:
-        return self.low.subgoals_per_plan
-
-    def resolve_high_nfe(self, nfe: int | None) -> int:
-        if nfe not in (None, 0):
-            raise BridgeplanError("the dataset graph calls no network: it takes no high-level NFE")
-        return 0
-
-    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
-                     generator) -> tuple[np.ndarray, float]:
-        """``[N, coarse_length, obs_dim]`` each episode's path from states ``starts`` to positions ``goals``, every
-        :attr:`spacing`-th state (its last, the goal at rest, kept), and the seconds the searches took."""
-        t0 = time.perf_counter()
-        out = np.empty((len(starts), self.coarse_length, self.graph.layout.obs_dim))
-        for k, (s, g) in enumerate(zip(np.asarray(starts, np.float64), np.asarray(goals, np.float64))):
-            path = self.graph.path(s, g)
-            coarse = path[::self.spacing]
-            if len(path) - 1 > (len(coarse) - 1) * self.spacing:
-                coarse = np.concatenate([coarse, path[-1:]])
-            out[k] = fixed_length(coarse, self.coarse_length)
-        return out, time.perf_counter() - t0
-
-    def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
-        from bridgeplan.hierarchy import next_subgoals
-
-        return next_subgoals(coarse, progress, self.subgoals_per_plan)
-
-    def high_entry(self, settings: dict, nfe: int = 0) -> dict:
-        """The high level's entry in a hierarchy's JSON (as ``hierarchy.level_dict`` a planner's): the graph's
-        ``settings``, its size and what its queries so far found."""
-        return {"run": "dataset graph", "step": 0, "method": "dataset graph", "process": "graph", "nfe": 0,
-                "horizon": self.coarse_length, "stride": self.spacing, "subgoal_every": None,
-                "graph": {**settings, **self.graph.summary()}}
-
-    def line_floor(self, tasks, execution) -> dict:
-        """None: the graph has no span for a straight line to fill."""
-        return {}
 
 
 def add_graph_flags(parser, defaults: dict) -> None:

@@ -30,6 +30,7 @@ import torch
 from bridgeplan import config as cfg
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import Tasks, batch1_latency, environment_of, prior_only, score_returns
+from bridgeplan.graph import DatasetGraph, fixed_length
 from bridgeplan.maze.controllers import check_controller
 from bridgeplan.maze.layouts import GOAL_RADIUS
 from bridgeplan.maze.rollout import check_replanning, execute_closed_loop, execute_plans
@@ -90,6 +91,73 @@ class Hierarchy:
                                                                              lookahead=execution.lookahead))}
 
 
+@dataclass
+class GraphHierarchy:
+    """The dataset graph as the high level of a hierarchy over ``low`` (a planner trained with
+    ``--subgoal-every``): coarse plans are the graph's paths, one state every ``low.subgoal_every * low.stride``
+    steps, as many as cover ``episode_steps`` (the goal repeated past the path's end); no network call."""
+
+    graph: DatasetGraph
+    low: Planner
+    episode_steps: int
+    progress_rule: ClassVar[str] = "sequential"
+    """The data's paths wind, passing near their own later states across walls: progress along them moves one
+    coarse state at a time (:meth:`HierarchySource.advance`), never skipping ahead to a nearer later one."""
+
+    def __post_init__(self):
+        if not self.low.subgoal_every:
+            raise BridgeplanError("the low level must plan between subgoals: train it with --subgoal-every J")
+        if self.low.layout != self.graph.layout:
+            raise BridgeplanError(f"the dataset graph holds {self.graph.layout.name} states; the low level plans "
+                                  f"in {self.low.layout.name} (a planner of another environment)")
+
+    @property
+    def spacing(self) -> int:
+        """Steps between coarse states: the low level's subgoal spacing."""
+        return self.low.subgoal_every * self.low.stride
+
+    @property
+    def coarse_length(self) -> int:
+        return self.episode_steps // self.spacing + 2
+
+    @property
+    def subgoals_per_plan(self) -> int:
+        return self.low.subgoals_per_plan
+
+    def resolve_high_nfe(self, nfe: int | None) -> int:
+        if nfe not in (None, 0):
+            raise BridgeplanError("the dataset graph calls no network: it takes no high-level NFE")
+        return 0
+
+    def coarse_plans(self, starts: np.ndarray, goals: np.ndarray, nfe: int,
+                     generator) -> tuple[np.ndarray, float]:
+        """``[N, coarse_length, obs_dim]`` each episode's path from states ``starts`` to positions ``goals``, every
+        :attr:`spacing`-th state (its last, the goal at rest, kept), and the seconds the searches took."""
+        t0 = time.perf_counter()
+        out = np.empty((len(starts), self.coarse_length, self.graph.layout.obs_dim))
+        for k, (s, g) in enumerate(zip(np.asarray(starts, np.float64), np.asarray(goals, np.float64))):
+            path = self.graph.path(s, g)
+            coarse = path[::self.spacing]
+            if len(path) - 1 > (len(coarse) - 1) * self.spacing:
+                coarse = np.concatenate([coarse, path[-1:]])
+            out[k] = fixed_length(coarse, self.coarse_length)
+        return out, time.perf_counter() - t0
+
+    def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
+        return next_subgoals(coarse, progress, self.subgoals_per_plan)
+
+    def high_entry(self, settings: dict, nfe: int = 0) -> dict:
+        """The high level's entry in a hierarchy's JSON (as :func:`level_dict` a planner's): the graph's
+        ``settings``, its size and what its queries so far found."""
+        return {"run": "dataset graph", "step": 0, "method": "dataset graph", "process": "graph", "nfe": 0,
+                "horizon": self.coarse_length, "stride": self.spacing, "subgoal_every": None,
+                "graph": {**settings, **self.graph.summary()}}
+
+    def line_floor(self, tasks, execution) -> dict:
+        """None: the graph has no span for a straight line to fill."""
+        return {}
+
+
 def next_subgoals(coarse: np.ndarray, progress: np.ndarray, m: int) -> np.ndarray:
     """``[N, m, obs_dim]``: the ``m`` coarse states after index ``progress [N]``, the last one repeated past the
     plan's end (the goal at rest: a coarse plan's last state is its goal)."""
@@ -122,7 +190,7 @@ class HierarchySource:
     """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
     (Or over any high level with its interface: ``low``, ``spacing``, ``subgoals_per_plan``, ``progress_rule``,
     ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``, ``high_entry``, ``line_floor``; e.g.
-    ``bridgeplan.graph.GraphHierarchy``, the dataset graph's paths.)
+    :class:`GraphHierarchy`, the dataset graph's paths.)
 
     Returns the low level's plans (densified, physical states). With ``replan_high_every`` K, an episode's coarse
     plan is made again from its current state at its first decision K or more steps after the last one (its
@@ -274,10 +342,10 @@ def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, maze, layout) -> di
 def load_graph_hierarchy(low_run: Path, settings: dict | None = None, low_snapshot: int | None = None,
                          device: str = "auto"):
     """The dataset graph over a Maze2D low level's own training data as its high level
-    (``graph.GraphHierarchy``, ``graph.for_stream``'s Maze2D settings under ``settings``); returns the hierarchy,
+    (:class:`GraphHierarchy`, ``graph.for_stream``'s Maze2D settings under ``settings``); returns the hierarchy,
     the high level's JSON entry (the graph's settings and size, the data's identity) and the low level's info."""
     from bridgeplan.data.datasets import load_stream
-    from bridgeplan.graph import MAZE2D_DEFAULTS, GraphHierarchy, for_stream
+    from bridgeplan.graph import MAZE2D_DEFAULTS, for_stream
     from bridgeplan.maze.layouts import get_maze
 
     low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
@@ -295,7 +363,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo | dict, low_info
                        nfe_high: int | None = None, nfe_low: int | None = None,
                        execution: Execution | None = None, replan_high_every: int | None = None) -> dict:
     """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` (and ``graph-eval``)
-    writes. ``hierarchy``: two planners, or the dataset graph over a low level (``graph.GraphHierarchy``, whose
+    writes. ``hierarchy``: two planners, or the dataset graph over a low level (:class:`GraphHierarchy`, whose
     ``high_info`` is its settings, :func:`load_graph_hierarchy`).
 
     ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the

@@ -1,4 +1,4 @@
-"""The ``bridgeplan ogbench`` subcommands (wired into :mod:`bridgeplan.cli` by :func:`add_ogbench_commands`)."""
+"""The ``bridgeplan ogbench`` subcommands (wired into :mod:`bridgeplan.commands` by :func:`add_ogbench_commands`)."""
 
 from __future__ import annotations
 

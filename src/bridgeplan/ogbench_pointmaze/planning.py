@@ -372,12 +372,12 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
 
     Alone, its paths are executed as plans (replanned from the current position every ``execution.replan_every``
     steps if given). With ``low_run`` (a planner trained with ``--subgoal-every``), the graph is a hierarchy's high
-    level (``graph.GraphHierarchy``): the low level plans through its path's next states every
+    level (``hierarchy.GraphHierarchy``): the low level plans through its path's next states every
     ``execution.replan_every`` steps, the path searched again every ``replan_high_every`` steps if given."""
     from bridgeplan.evaluate import environment_of
     from bridgeplan.files import code_version
-    from bridgeplan.graph import DEFAULTS, GraphHierarchy, GraphSource, for_stream
-    from bridgeplan.hierarchy import HierarchySource, check_high_replanning, level_dict
+    from bridgeplan.graph import DEFAULTS, GraphSource, for_stream
+    from bridgeplan.hierarchy import GraphHierarchy, HierarchySource, check_high_replanning, level_dict
     from bridgeplan.ogbench_pointmaze.reading import load_stream
     from bridgeplan.replan import percentiles_ms
     from bridgeplan.runs import load_planner, require_family

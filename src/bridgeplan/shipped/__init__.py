@@ -3,8 +3,8 @@
 One small checkpoint per planner in this folder (``NAME.pt``: the EMA weights in float32, the config, the
 normalizer and the training step; no optimizer state) and ``manifest.json``, which names for each: its maze and
 method, the study file that trained and evaluated it, the run, the code version that trained it, the step and the
-file's sha256. The files and the manifest are made by ``bridgeplan planners export`` (:func:`export`) from a
-study's runs, never written by hand; their scores are the study's committed rows (``docs/results/shipped/``,
+file's sha256. The files and the manifest are made by ``bridgeplan planners export`` (``bridgeplan.studies.ship``)
+from a study's runs, never written by hand; their scores are the study's committed rows (``docs/results/shipped/``,
 reported in docs/results/shipped.md by ``bridgeplan study report shipped``).
 
 A shipped planner's name goes wherever a run directory does (``bridgeplan eval medium``, ``bridgeplan render
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
@@ -106,89 +106,3 @@ def unknown_message(run: str | Path) -> str:
     shipped = names()
     return (f"no checkpoint or run directory {str(run)!r}, and no shipped planner of that name (shipped: "
             f"{', '.join(shipped) or 'none'}; see `bridgeplan planners list`)")
-
-
-# --- export ------------------------------------------------------------------------------------------------------
-
-def export(root: Path, study_name: str = STUDY, out: Path | None = None) -> list[ShippedPlanner]:
-    """Make the shipped files from ``study_name``'s used studies (each trains one run: one method, one seed) in
-    ``root/results``: per study, its run's final snapshot reduced to what inference needs, named after the maze, and
-    the manifest; into ``out`` (default ``root/src/bridgeplan/shipped``). Refuses a run short of its steps, trained
-    at uncommitted code, or whose final snapshot has no committed rows in the study's results.csv."""
-    import torch
-
-    from bridgeplan import config as cfg
-    from bridgeplan.checkpoint import load_checkpoint, save_checkpoint
-    from bridgeplan.evaluate import check_multi_task_data
-    from bridgeplan.experiments.runner import _train_config
-    from bridgeplan.files import atomic_write_text
-    from bridgeplan.layout import runs_dir, snapshot_path
-    from bridgeplan.runs import build_model
-    from bridgeplan.studies import load_studies, select
-    from bridgeplan.studies.plan import Scale, build_experiment, results_dir, sweeps
-
-    root = Path(root).resolve()
-    out = Path(out) if out else root / "src" / "bridgeplan" / "shipped"
-    studies = load_studies(root)
-    top = select(studies, [study_name], root)[0]
-    if not top.uses:
-        raise BridgeplanError(f"study {top.name} uses no studies: nothing to ship")
-    entries, files = [], {}
-    for used in top.uses:
-        study = studies[used]
-        runs = {r for i in range(len(study.experiments)) for r in build_experiment(study, i).runs()}
-        if len(runs) != 1 or len(study.training.seeds) != 1:
-            raise BridgeplanError(f"study {study.name} trains {len(runs)} methods x {len(study.training.seeds)} "
-                                  f"seeds: a shipped planner's study trains one run")
-        spec, seed = runs.pop(), study.training.seeds[0]
-        settings = sweeps(study, root)[0].settings
-        config = _train_config(settings, spec, seed, "")
-        run_dir = runs_dir(results_dir(study, root, Scale())) / config.run_name()
-        path = snapshot_path(run_dir, study.training.steps)
-        if not path.exists():
-            raise BridgeplanError(f"study {study.name}: no snapshot at step {study.training.steps} in {run_dir} "
-                                  f"(run `bridgeplan study run {study.file}` first)")
-        state = load_checkpoint(path)
-        version = state.get("code_version", "")
-        if not version or version.endswith(".dirty"):
-            raise BridgeplanError(f"{path} was trained at code {version or 'unknown'}: ship only runs trained at a "
-                                  f"committed code version")
-        rows_csv = Path("docs") / "results" / study.data_dir / "results.csv"
-        _check_rows(root / rows_csv, config.run_name(), state["step"])
-        if any(s.multi_task for e in study.experiments for s in e.series):
-            check_multi_task_data(study.dataset.maze, state["config"]["dataset"])  # raises if a cell is unvisited
-        loaded = cfg.from_dict(cfg.TrainConfig, state["config"])
-        model = build_model(loaded)
-        model.load_state_dict(state["ema"])  # the weights fit the config
-        portable = dict(state["config"], dataset=Path(state["config"]["dataset"]).name)
-        shipped = {"kind": "planner", "config": portable, "normalizer": state["normalizer"], "step": state["step"],
-                   "elapsed_seconds": state["elapsed_seconds"], "code_version": version,
-                   "ema": {k: v.detach().to(torch.float32).contiguous() for k, v in state["ema"].items()},
-                   "dataset_covers_every_cell": True, "shipped": study.dataset.maze}
-        name = study.dataset.maze
-        file = out / f"{name}.pt"
-        save_checkpoint(file, shipped)
-        files[name] = file
-        entries.append(ShippedPlanner(
-            name=name, maze=study.dataset.maze, method=loaded.label(), process=loaded.process.name,
-            prior=loaded.prior, study=str(study.file), rows=str(rows_csv), run=config.run_name(), seed=seed,
-            step=int(state["step"]), code_version=version, dataset=portable["dataset"],
-            parameters=sum(p.numel() for p in model.parameters()), file=file.name, bytes=file.stat().st_size,
-            sha256=sha256(file)))
-    atomic_write_text(out / MANIFEST, json.dumps({
-        "made_by": f"bridgeplan planners export --study {top.name}",
-        "planners": [asdict(e) for e in entries]}, indent=2) + "\n")
-    return entries
-
-
-def _check_rows(csv_path: Path, run_name: str, step: int) -> None:
-    """The committed rows of ``csv_path`` include ``run_name``'s evaluations at ``step``."""
-    import csv
-
-    if not csv_path.exists():
-        raise BridgeplanError(f"no committed rows at {csv_path}: run the study and export its store "
-                              f"(`bridgeplan study export STUDY`) first")
-    with open(csv_path) as f:
-        found = [r for r in csv.DictReader(f) if r["run_name"] == run_name and int(r["step"]) == int(step)]
-    if not found:
-        raise BridgeplanError(f"{csv_path} has no rows of {run_name} at step {step}: the file would ship unscored")

@@ -17,7 +17,8 @@ import subprocess
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import Study, StudyError, parse_study
+from bridgeplan.studies.plan import check_reports, check_study
+from bridgeplan.studies.spec import Study, StudyError, read_study
 
 __all__ = ["Study", "StudyError", "find_root", "load_studies", "parse_study", "select"]
 
@@ -37,10 +38,16 @@ def find_root(root: str | Path | None = None) -> Path:
     return root
 
 
+def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
+    """The study in ``path``, read (:func:`~bridgeplan.studies.spec.read_study`) and checked on its own: its grids,
+    preset and runs against its maze (:func:`~bridgeplan.studies.plan.check_study`)."""
+    study = read_study(path, shown)
+    check_study(study)
+    return study
+
+
 def load_studies(root: Path) -> dict[str, Study]:
     """Every study of ``root/studies``, parsed and checked against each other (``uses``, reports' methods)."""
-    from bridgeplan.studies.plan import check_reports
-
     studies = {}
     for path in sorted((Path(root) / "studies").glob("*.toml")):
         study = parse_study(path, shown=path.relative_to(root))

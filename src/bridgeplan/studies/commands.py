@@ -154,7 +154,7 @@ def needed_runs(study, results: Path, needed: set[tuple[str, int]] | None = None
 
 def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, progress: bool) -> int:
     """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands; the JSONs written."""
-    from bridgeplan.cli import main
+    from bridgeplan.commands import main
     from bridgeplan.device import configure_threads
     from bridgeplan.experiments.runner import train_to
     from bridgeplan.gcbc import train_gcbc

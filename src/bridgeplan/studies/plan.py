@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.studies.commands import jobs, needed_runs, run_commands, train_config
 from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError
 
 TRAIN_STEPS_PER_SECOND = 18.6
@@ -150,7 +151,6 @@ def check_study(study: Study) -> None:
     """Everything that can be checked without the other studies: the grids and series, the preset and the
     training fields against the maze."""
     from bridgeplan import config as cfg
-    from bridgeplan.studies.commands import train_config
 
     if study.dataset is not None:
         try:
@@ -308,8 +308,6 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
                             corrections[name, series.correction.tag() if series.correction else ""] += 1
     scaled, jsons = scale.apply(study), ()
     if study.evaluations:
-        from bridgeplan.studies.commands import jobs, needed_runs
-
         results = results_dir(study, root, scale)
         jsons = tuple(j for j in jobs(scaled, results, results, not scale.committed)
                       if not j.path.exists())
@@ -443,8 +441,6 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
         added += run_sweep([sweep.experiment], sweep.settings, backend=backend, workers=workers,
                            ray_address=ray_address, progress=progress)
     if study.evaluations:
-        from bridgeplan.studies.commands import run_commands
-
         added += run_commands(scaled, results_dir(study, root, scale), dataset,
                               not scale.committed, workers, progress)
     return added

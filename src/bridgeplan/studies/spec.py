@@ -562,7 +562,7 @@ def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...
 
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
     """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
-    from bridgeplan.cli import build_parser
+    from bridgeplan.commands import build_parser
 
     argv = command_argv(evaluation.command, ["RUN"] * len(evaluation.runs), evaluation.args,
                         "NAME" if evaluation.command in READS_THE_DATASET else None)
@@ -575,9 +575,9 @@ def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
         raise StudyError(file, f"{key}.args", message.split("error: ", 1)[-1]) from None
 
 
-def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
-    """The study in ``path`` (TOML), checked; :class:`StudyError` names the file (as ``shown``, default
-    ``path``) and the key of the first problem."""
+def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
+    """The study in ``path`` (TOML), its format checked (``bridgeplan.studies.parse_study`` checks the rest);
+    :class:`StudyError` names the file (as ``shown``, default ``path``) and the key of the first problem."""
     from bridgeplan.studies.reports import GENERATORS
 
     try:
@@ -650,7 +650,4 @@ def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
         if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
             raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
                                                                 f"OGBench's (generator = \"ogbench\")")
-    from bridgeplan.studies.plan import check_study
-
-    check_study(study)
     return study

@@ -1,0 +1,690 @@
+"""The ``bridgeplan`` subcommands that make data, train, evaluate, draw and measure: everything a study's
+evaluations run (through :func:`main`). :mod:`bridgeplan.cli` adds the commands that run studies and ship their
+planners. Each subcommand maps its flags onto a module's function; user mistakes (BridgeplanError) print one
+``error:`` line and exit 2."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+from bridgeplan.errors import BridgeplanError
+
+DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
+
+
+def positive(name: str, value: int) -> int:
+    if value <= 0:
+        raise BridgeplanError(f"{name} must be positive, got {value}")
+    return value
+
+
+def _add_data_commands(sub) -> None:
+    p = sub.add_parser("data", help="generate, inspect offline datasets")
+    data = p.add_subparsers(dest="data_command", required=True)
+    g = data.add_parser("generate", help="a noisy expert stream in the Minari format (Minari's D4RL recipe)")
+    g.add_argument("--maze", required=True, help="open, umaze, medium or large")
+    g.add_argument("--steps", type=int, default=1_000_000, help="transitions (default 1 M)")
+    g.add_argument("--seed", type=int, default=123)
+    g.add_argument("--out", default=None,
+                   help="dataset directory (default datasets/<maze>-<steps>, or under "
+                        "$BRIDGEPLAN_DATASETS when set)")
+    g.add_argument("--workers", type=int, default=1,
+                   help="parallel processes, each generating its own independently seeded stream (default 1)")
+    g.add_argument("--piece-steps", type=int, default=None, metavar="N",
+                   help="independent pieces of N steps, each from a random start, instead of one stream per worker: "
+                        "a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
+    g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
+    g.add_argument("--no-progress", action="store_true")
+    g.set_defaults(func=_cmd_data_generate)
+    i = data.add_parser("info", help="summarize a dataset (Minari directory or id, or D4RL maze2d hdf5)")
+    i.add_argument("path")
+    i.add_argument("--maze", default=None, help="the maze, if the dataset does not tell it")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=_cmd_data_info)
+
+
+def _cmd_data_generate(args) -> int:
+    from bridgeplan.data.datasets import default_dataset_path, generate_dataset, load_stream
+    from bridgeplan.data.info import format_summary, summarize
+    from bridgeplan.maze.layouts import get_maze
+
+    maze = get_maze(args.maze)
+    positive("--steps", args.steps)
+    positive("--workers", args.workers)
+    out = Path(args.out) if args.out else default_dataset_path(maze.name, args.steps, piece_steps=args.piece_steps)
+    generate_dataset(maze.name, args.steps, args.seed, out, force=args.force, progress=not args.no_progress,
+                     workers=args.workers, piece_steps=args.piece_steps)
+    print(format_summary(summarize(load_stream(out))))
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_data_info(args) -> int:
+    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.data.info import format_summary, summarize
+
+    info = summarize(load_stream(args.path, maze=args.maze))
+    print(json.dumps(info, indent=2) if args.json else format_summary(info))
+    return 0
+
+
+def _add_reference_commands(sub) -> None:
+    p = sub.add_parser("reference", help="reference returns of the normalized score")
+    ref = p.add_subparsers(dest="reference_command", required=True)
+    s = ref.add_parser("show", help="the shipped reference returns")
+    s.set_defaults(func=_cmd_reference_show)
+    m = ref.add_parser("measure", help="measure them again in this environment")
+    m.add_argument("--maze", default=None, help="one maze (default: all)")
+    m.add_argument("--episodes", type=int, default=100)
+    m.add_argument("--seed", type=int, default=123)
+    m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
+    m.set_defaults(func=_cmd_reference_measure)
+    e = ref.add_parser("expert-on-tasks", help="the expert's score on evaluation tasks themselves (what the reports "
+                                               "show beside the planners: docs/results/expert-on-eval-tasks.json)")
+    e.add_argument("--maze", action="append", default=None, help="a maze (repeatable; default umaze, medium, large)")
+    e.add_argument("--episodes", type=int, default=200)
+    e.add_argument("--seeds", default="0,1,2", help="task seeds (the test episodes of training seeds 0, 1, 2)")
+    e.add_argument("--out", required=True, help="the JSON file to write")
+    e.set_defaults(func=_cmd_reference_expert_on_tasks)
+
+
+def _cmd_reference_expert_on_tasks(args) -> int:
+    from bridgeplan.files import atomic_write_text, code_version
+    from bridgeplan.maze.reference import expert_on_tasks
+
+    positive("--episodes", args.episodes)
+    try:
+        seeds = tuple(int(v) for v in args.seeds.split(","))
+    except ValueError:
+        raise BridgeplanError(f"--seeds takes comma-separated integers, got {args.seeds!r}") from None
+    rows = expert_on_tasks(args.maze or ("umaze", "medium", "large"), args.episodes, seeds)
+    for r in rows:
+        print(f"{r['maze']:<8} {'Multi2D' if r['multi_task'] else 'single-task':<12} seed {r['seed']}: "
+              f"{r['score_minari']:.1f} (Minari), success {r['success']:.2f}")
+    atomic_write_text(Path(args.out), json.dumps({"code_version": code_version(), "episodes": args.episodes,
+                                                  "rows": rows}, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _reference_table(ref: dict) -> str:
+    lines = [f"{'maze':<8} {'episodes':>8} {'seed':>5} {'random':>8} {'expert':>8} {'stale expert':>13}"]
+    for name, r in ref.items():
+        lines.append(f"{name:<8} {r['episodes']:>8} {r['seed']:>5} {r['random']:>8.2f} {r['expert']:>8.2f} "
+                     f"{r['expert_stale']:>13.2f}")
+    return "\n".join(lines) + ("\nscore conventions: minari = random..expert, d4rl = random..stale expert "
+                               "(D4RL's reference procedure)")
+
+
+def _cmd_reference_show(args) -> int:
+    from bridgeplan.maze.reference import load_reference_returns
+
+    print(_reference_table(load_reference_returns()))
+    return 0
+
+
+def _cmd_reference_measure(args) -> int:
+    from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
+    from bridgeplan.maze.reference import measure_reference_returns
+
+    names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
+    positive("--episodes", args.episodes)
+    measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
+    print(_reference_table(measured))
+    if args.out:
+        Path(args.out).write_text(json.dumps(measured, indent=2) + "\n")
+        print(f"wrote {args.out}")
+    return 0
+
+
+def _add_train_commands(sub) -> None:
+    p = sub.add_parser("train", help="train a planner (DDPM or bridge)",
+                       description="Train a planner. Defaults come from --preset per maze; flags override them.")
+    _common_train_flags(p)
+    p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
+    p.add_argument("--process", default=None, help="ddpm, bridge or flow (default ddpm)")
+    _process_param_flag(p)
+    p.add_argument("--prior", default=None,
+                   help="bridge prior: gaussian, line, learned or coarse (a low level's: the line through its "
+                        "subgoals) (default gaussian)")
+    p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
+    p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
+    p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
+    p.add_argument("--ot-ode", action="store_true", help="bridge: noise-free marginal and sampler")
+    p.add_argument("--consistent", action="store_true",
+                   help="bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
+                        "differ at small N)")
+    p.add_argument("--dim", type=int, default=None, help="U-Net base width")
+    p.add_argument("--dim-mults", default=None, help="U-Net channel multipliers, e.g. 1,4,8")
+    p.add_argument("--grad-accum", type=int, default=None)
+    p.add_argument("--ema-decay", type=float, default=None)
+    p.add_argument("--ema-every", type=int, default=None)
+    p.add_argument("--ema-start", type=int, default=None)
+    _hold_share_flag(p)
+    p.add_argument("--subgoal-every", type=int, default=None,
+                   help="train a hierarchy's low level: every J-th planned state is a condition (a high level's "
+                        "subgoals when planning; `bridgeplan hierarchy eval`)")
+    p.add_argument("--precision", default=None,
+                   help="bf16: forward and backward under bfloat16 autocast (refused where the device lacks it)")
+    p.add_argument("--compile", action="store_true", default=None,
+                   help="train through the torch.compile'd network (compiles at the first step)")
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
+    _common_train_flags(p)
+    p.add_argument("--preset", default="diffuser",
+                   help="the planner preset the prior serves: its horizon and stride are the defaults")
+    p.set_defaults(func=_cmd_train_prior)
+
+
+def _common_train_flags(p) -> None:
+    p.add_argument("--maze", required=True)
+    p.add_argument("--dataset", required=True, help="dataset directory or legacy D4RL hdf5 file")
+    p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
+    p.add_argument("--runs-root", default="runs")
+    p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
+    p.add_argument("--horizon", type=int, default=None, help="planned states (default: the preset's for the maze)")
+    p.add_argument("--stride", type=int, default=None,
+                   help="environment steps between planned states (default: the preset's for the maze)")
+    p.add_argument("--steps", type=int, default=None, help="optimizer steps")
+    p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
+    p.add_argument("--batch-size", type=int, default=None,
+                   help="windows per gradient (default: the config's, for a planner its preset's for the maze)")
+    p.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default as --batch-size)")
+    p.add_argument("--checkpoint-every", type=int, default=None)
+    p.add_argument("--log-every", type=int, default=None)
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--device", default=None, help="auto (CUDA if present), cpu, cuda, ...")
+    _threads_flag(p)
+    p.add_argument("--no-progress", action="store_true")
+
+
+def _process_param_flag(p) -> None:
+    p.add_argument("--process-param", action="append", metavar="FIELD=VALUE",
+                   help="any field of the process's dataclass, e.g. beta_max=0.3 (repeatable)")
+
+
+def _hold_share_flag(p) -> None:
+    p.add_argument("--hold-share", type=float, default=None,
+                   help="share of training windows that arrive early and wait still at their end, so plans may "
+                        "reach the goal before the horizon's end (default 0, Diffuser's)")
+
+
+def _threads_flag(p) -> None:
+    p.add_argument("--threads", type=int, default=None,
+                   help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
+                        "processes share the cores; more only warns beyond the machine's cores)")
+
+
+def _overrides(args, names) -> dict:
+    return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+
+
+_COMMON = ("horizon", "stride", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
+           "device", "threads")
+
+
+def _cmd_train(args) -> int:
+    from bridgeplan import config as cfg
+    from bridgeplan.train import train
+
+    base = cfg.preset_config(args.maze, args.preset)
+    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
+                                       "hold_share", "precision", "compile", "subgoal_every"))
+    process = _process_params(args, args.process or base.process.name)
+    if args.process is not None:
+        process["name"] = args.process
+    model = {"dim": args.dim} if args.dim is not None else {}
+    if args.dim_mults is not None:
+        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
+    config = cfg.replace(base, dataset=_dataset_ref(args.dataset), process=process, model=model, **over)
+    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
+    train(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    print(f"run: {run_dir}")
+    return 0
+
+
+def _process_params(args, name: str) -> dict:
+    """The process fields given on the command line (checked by the process itself): ``--process-param``
+    for any field, and shortcuts for the common ones."""
+    from bridgeplan.processes import parse_process_params
+
+    params = parse_process_params(name, args.process_param or [])
+    params |= _overrides(args, ("beta_max",))
+    if args.diffusion_steps is not None:
+        params["steps"] = args.diffusion_steps
+    for flag in ("ot_ode", "consistent"):
+        if getattr(args, flag):
+            params[flag] = True
+    return params
+
+
+def _dataset_ref(dataset: str) -> str:
+    """A dataset path made absolute (so a run finds it from anywhere); a Minari id stays as it is."""
+    return str(Path(dataset).resolve()) if Path(dataset).exists() else dataset
+
+
+def _cmd_train_prior(args) -> int:
+    from bridgeplan import config as cfg
+    from bridgeplan.train import train_prior
+
+    config = cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset),
+                                  **_overrides(args, _COMMON + ("preset",)))
+    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
+    train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    print(f"run: {run_dir}")
+    return 0
+
+
+def _int_tuple(text: str, flag: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
+    if not values or min(values) <= 0:
+        raise BridgeplanError(f"{flag} takes positive integers, got {text!r}")
+    return values
+
+
+def _add_eval_commands(sub) -> None:
+    p = sub.add_parser("eval", help="evaluate a trained run over many episodes")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
+                               "(`bridgeplan planners list`)")
+    p.add_argument("--episodes", type=int, default=200)
+    p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
+    p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
+    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
+    p.add_argument("--sampler", default=None,
+                   help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
+                        "flow euler (default) or stochastic; bridge posterior (default) or mean (no noise)")
+    p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
+    _correction_flags(p)
+    p.add_argument("--compile", action="store_true",
+                   help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
+    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    _execution_flags(p)
+    _threads_flag(p)
+    p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
+    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
+    p.add_argument("--episodes", type=int, default=8)
+    p.add_argument("--nfe", type=int, default=None)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true")
+    p.add_argument("--out", default=None, help="PNG path (default RUN/render/...)")
+    p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
+    p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
+    p.add_argument("--device", default="auto")
+    _execution_flags(p)
+    _threads_flag(p)
+    p.set_defaults(func=_cmd_render)
+
+
+def _correction_flags(p) -> None:
+    g = p.add_argument_group("consistency correction of every x0 prediction (CDDB; default: none)")
+    g.add_argument("--correction", action="append", metavar="RESIDUAL=STEP",
+                   help="move each x0 prediction down the gradient of a residual, STEP (>= 0) its step size "
+                        "(repeatable, one per residual): dynamics (PointMaze's point mass), kinematics (positions "
+                        "integrate velocities) or conditions (start/goal, deep form only)")
+    g.add_argument("--correction-form", default=None, metavar="FORM",
+                   help="x0 (CDDB: the gradient in x0 space; default) or deep (CDDB-deep: the gradient w.r.t. the "
+                        "network's input, one backward pass per call)")
+
+
+def _correction(args):
+    from bridgeplan.consistency import Correction
+
+    if not args.correction:
+        if args.correction_form is not None:
+            raise BridgeplanError("--correction-form needs --correction RESIDUAL=STEP")
+        return None
+    return Correction.parse(args.correction, args.correction_form or "x0")
+
+
+def _execution_flags(p) -> None:
+    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode, as always)")
+    g.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help="plan again from the current state every K environment steps (1..episode length)")
+    g.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
+                   help="also plan again, for the episodes concerned only, when the position is more than D from "
+                        "where the plan put it (default: off)")
+    g.add_argument("--candidates", type=int, default=1, metavar="M",
+                   help="plans sampled per decision, in one batch; --select picks one (default 1)")
+    g.add_argument("--select", default="arrival",
+                   help="arrival (earliest within 0.45 of the goal; default), agreement (the candidate closest to "
+                        "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
+    g.add_argument("--prior", default=None,
+                   help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
+                        "replanning; the first plan uses the run's own prior)")
+    g.add_argument("--arrival", default=None,
+                   help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
+                        "0.45 of the goal, then hold the goal) or keep (truncate, and replans hold the goal from "
+                        "the step the previous plan arrived at); default truncate when replanning or with "
+                        "candidates, else end")
+    g = p.add_argument_group("controller (how a plan is executed)")
+    g.add_argument("--controller", default="track",
+                   help="track (Diffuser's: the planned states in time; default) or pursuit (the plan's path at the "
+                        "expert's pace: toward the first planned position --lookahead away)")
+    g.add_argument("--lookahead", type=float, default=None, metavar="R",
+                   help="pursuit: distance to the planned position driven toward (maze units; default 1.0)")
+
+
+def _check_lookahead(args) -> None:
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+
+
+def _execution(args):
+    from bridgeplan.replan import Execution
+
+    if args.prior is not None and args.prior != "warm":
+        raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
+                              f"the run's own prior), got {args.prior!r}")
+    _check_lookahead(args)
+    lookahead = {} if args.lookahead is None else {"lookahead": args.lookahead}
+    return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
+                     select=args.select, warm=args.prior == "warm", arrival=args.arrival,
+                     controller=args.controller, **lookahead)
+
+
+def _cmd_eval(args) -> int:
+    from bridgeplan.evaluate import evaluate, format_table, write_result
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.runs import run_dir_of
+
+    execution = _execution(args)
+    correction = _correction(args)
+    result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
+                      multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
+                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile,
+                      execution=execution, correction=correction).to_dict()
+    name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
+        "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
+        "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "") + (
+        f"-{correction.file_tag()}" if correction else "")
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
+    write_result(result, out)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_table(result))
+        print(f"wrote {out}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from bridgeplan.render import render_run
+
+    for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
+                           multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
+                           device=args.device, execution=_execution(args)):
+        print(f"wrote {path}")
+    return 0
+
+
+def _add_hierarchy_commands(sub) -> None:
+    from bridgeplan.graph import MAZE2D_DEFAULTS, add_graph_flags
+
+    p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
+                                         "level (bridgeplan.hierarchy)")
+    h = p.add_subparsers(dest="hierarchy_command", required=True)
+    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together",
+                     description="The high level plans once per episode; the low level plans from the current "
+                                 "state through the coarse plan's next states every --replan-every steps.")
+    e.add_argument("high", help="the high level's run directory (a long --stride)")
+    e.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
+                               "the high level's stride)")
+    e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
+    e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
+    _hierarchy_flags(e, "the high level's stride", "the high level plans again from the current state every K "
+                                                    "steps (default: once per episode)")
+    e.set_defaults(func=_cmd_hierarchy_eval)
+    g = h.add_parser("graph-eval", help="the dataset graph (the low level's own training data; no network, no map) "
+                                        "as the high level of a low-level run (--subgoal-every)",
+                     description="The coarse plan is the cheapest path through the data's own states "
+                                 "(bridgeplan.graph), one state every J x stride steps; the low level plans through "
+                                 "it every --replan-every steps.")
+    g.add_argument("low", help="the low level's run directory (trained with --subgoal-every J)")
+    add_graph_flags(g, MAZE2D_DEFAULTS)
+    _hierarchy_flags(g, "its subgoal spacing, J x stride", "search the graph again from the current state every K "
+                                                            "steps (default: once per episode)")
+    g.set_defaults(func=_cmd_hierarchy_graph_eval)
+
+
+def _hierarchy_flags(p, replan_default: str, replan_high_help: str) -> None:
+    """The flags ``hierarchy eval`` and ``hierarchy graph-eval`` share: the low level, the tasks, the execution."""
+    p.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
+    p.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
+    p.add_argument("--episodes", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
+    p.add_argument("--replan-every", type=int, default=None, metavar="K",
+                   help=f"the low level plans again every K steps (default: {replan_default})")
+    p.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
+                   help="and when the position is more than D from its plan (default: off)")
+    p.add_argument("--replan-high-every", type=int, default=None, metavar="K", help=replan_high_help)
+    p.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
+    p.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help="JSON path (default LOW/eval/hierarchy-<settings>.json)")
+    _threads_flag(p)
+
+
+def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str,
+                   nfe_high: int | None = None) -> int:
+    """Evaluate ``hierarchy`` as ``args`` say, write its JSON (``--out``, else LOW/eval/NAME-<settings>.json)."""
+    from bridgeplan.evaluate import check_multi_task_data, make_tasks, write_result
+    from bridgeplan.hierarchy import evaluate_hierarchy
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.replan import Execution
+    from bridgeplan.runs import run_dir_of
+
+    if args.multi_task:
+        check_multi_task_data(maze, dataset)
+    execution = Execution(replan_every=args.replan_every or hierarchy.spacing, tolerance=args.replan_tolerance,
+                          controller=args.controller,
+                          **({} if args.lookahead is None else {"lookahead": args.lookahead}))
+    tasks = make_tasks(maze, args.episodes, args.seed, args.multi_task)
+    result = evaluate_hierarchy(hierarchy, high_info, low, tasks, nfe_high, args.nfe_low, execution,
+                                args.replan_high_every)
+    name = (f"{name}-nfe{result['high']['nfe']}-step{low.step}-nfe{result['low']['nfe']}-ep{args.episodes}-seed"
+            f"{args.seed}" + ("-multi" if args.multi_task else "") + f"-{execution.tag()}"
+            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
+    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
+    write_result(result, out)
+    minari = result["score"]["minari"]
+    line = result.get("floor_line")
+    print(f"{tasks.maze.name}: hierarchy {minari['mean']:.1f} ± {minari['se']:.1f} (Minari), success "
+          f"{result['success_rate']['mean']:.2f}; the coarse plans alone "
+          f"{result['high_alone']['score']['minari']['mean']:.1f}"
+          + (f"; the line alone {line['score']['minari']['mean']:.1f}" if line else "")
+          + f"; {result['calls_per_episode']:.0f} network calls per episode, decision p50 "
+          f"{result['decision_ms_batch1']['p50']:.1f} ms at batch 1")
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_hierarchy_eval(args) -> int:
+    from bridgeplan.hierarchy import load_hierarchy
+
+    positive("--episodes", args.episodes)
+    _check_lookahead(args)
+    hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
+                                          args.device)
+    return _run_hierarchy(args, hierarchy, high, low, high.config.maze, high.config.dataset,
+                          f"hierarchy-{high.name}-step{high.step}", args.nfe_high)
+
+
+def _cmd_hierarchy_graph_eval(args) -> int:
+    from bridgeplan.graph import check_graph_settings, graph_settings
+    from bridgeplan.hierarchy import load_graph_hierarchy
+
+    positive("--episodes", args.episodes)
+    _check_lookahead(args)
+    settings = graph_settings(args)
+    check_graph_settings(**settings)  # before loading anything
+    hierarchy, settings, low = load_graph_hierarchy(Path(args.low), settings, args.low_snapshot, args.device)
+    return _run_hierarchy(args, hierarchy, settings, low, low.config.maze, low.config.dataset,
+                          f"hierarchy-graph-keep{args.keep}-r{args.radius:g}")
+
+
+def _add_report_command(sub) -> None:
+    p = sub.add_parser("report", help="figures and a Markdown page from the results store")
+    p.add_argument("--results", default="results")
+    p.add_argument("--out", default=None, help="output directory (default RESULTS/report)")
+    p.add_argument("--csv", default=None, help="also export every result row to this CSV file")
+    p.set_defaults(func=_cmd_report)
+
+
+def _cmd_report(args) -> int:
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.layout import store_path
+    from bridgeplan.report import write_report
+
+    store = store_path(args.results)
+    if not store.exists():
+        raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
+    path = write_report(Path(args.results), Path(args.out) if args.out else None)
+    print(f"wrote {path}")
+    if args.csv:
+        n = ResultsStore(store).export_csv(Path(args.csv))
+        print(f"wrote {args.csv} ({n} rows)")
+    return 0
+
+
+def _add_bench_command(sub) -> None:
+    p = sub.add_parser("bench", help="planning latency, overheads, torch.compile, evaluation throughput and score "
+                                     "per planning budget (JSON + Markdown)",
+                       description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and "
+                                   "diffuser networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes).")
+    p.add_argument("--out", default="bench", help="output directory (bench.json, bench.md)")
+    p.add_argument("--presets", help="comma-separated presets to time")
+    p.add_argument("--batch-sizes", help="comma-separated plans per call")
+    p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
+    p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
+    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio")
+    p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
+    p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
+    p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
+                                         "training steps): the score-per-budget table")
+    p.add_argument("--budget-steps", help="comma-separated training steps: evaluate the budget runs' EMA "
+                                          "snapshots there (default: their latest checkpoints)")
+    p.add_argument("--budgets", help="comma-separated network-call budgets K")
+    p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
+    p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
+    p.add_argument("--throughput-seconds", type=float,
+                   help="seconds of training per figure of the training-throughput table (0: skip)")
+    p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
+    _threads_flag(p)
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args) -> int:
+    from bridgeplan.bench import BenchConfig, run_bench
+
+    given = {"presets": args.presets and tuple(args.presets.split(",")),
+             "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
+             "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
+             "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
+             "throughput_seconds": args.throughput_seconds,
+             "compile": False if args.no_compile else None}
+    for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
+        text = getattr(args, name)
+        given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
+    bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
+    path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    print(path.read_text())
+    return 0
+
+
+def _add_demo_command(sub) -> None:
+    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report")
+    p.add_argument("--maze", default="umaze")
+    p.add_argument("--out", default="demo", help="output directory")
+    p.add_argument("--dataset-steps", type=int, default=200_000)
+    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run")
+    p.add_argument("--episodes", type=int, default=100)
+    _threads_flag(p)
+    p.set_defaults(func=_cmd_demo)
+
+
+def _cmd_demo(args) -> int:
+    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> report with plots."""
+    from bridgeplan.experiments.grids import Experiment, RunSpec, Series
+    from bridgeplan.experiments.runner import SweepSettings, run_sweep
+    from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.processes import DDPM, Bridge
+    from bridgeplan.report import write_report
+
+    print(_reference_table({args.maze: load_reference_returns()[args.maze]}))
+    ddpm, bridge = RunSpec(DDPM(16)), RunSpec(Bridge(16), "line")
+    demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
+                      tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
+                            for nfe in (spec.process.max_nfe, 1)))
+    settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
+                             train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
+                             episodes=args.episodes, results_dir=args.out,
+                             overrides=_overrides(args, ("threads",)))
+    added = run_sweep([demo], settings)
+    report = write_report(Path(args.out))
+    print(f"demo: {added} new results; report: {report}")
+    return 0
+
+
+def _add_ogbench_commands(sub) -> None:
+    from bridgeplan.ogbench_pointmaze.commands import add_ogbench_commands
+
+    add_ogbench_commands(sub)
+
+
+def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argparse.ArgumentParser:
+    """The parser of these commands, and of the command groups that each of ``more`` adds to the subparsers."""
+    parser = argparse.ArgumentParser(prog="bridgeplan", description=DESCRIPTION)
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in (_add_data_commands, _add_reference_commands, _add_train_commands, _add_eval_commands,
+                _add_hierarchy_commands, _add_report_command, _add_bench_command, _add_demo_command,
+                _add_ogbench_commands, *more):
+        add(sub)
+    return parser
+
+
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"warning: {message}\n"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the parsed command: a user mistake is one ``error:`` line and exit 2, an interrupt exit 130."""
+    warnings.filterwarnings("ignore", module="gymnasium_robotics")
+    warnings.formatwarning = _one_line_warning
+    try:
+        from bridgeplan.device import configure_threads
+
+        configure_threads(getattr(args, "threads", None) or 0)
+        code = args.func(args)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at exit
+        return code
+    except BridgeplanError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted (finished work and checkpoints are kept)", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader closed the pipe (`bridgeplan study list | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``bridgeplan`` restricted to these commands (what a study runs)."""
+    return run(build_parser().parse_args(argv))
