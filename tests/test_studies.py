@@ -353,7 +353,7 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     from bridgeplan.studies.plan import THROUGHPUT_BENCH, TRAIN_STEPS_PER_SECOND, training_rate
 
     config = cfg.preset_config("medium", "cpu-small", batch_size=32)
-    rate, source = training_rate(tmp_path, "medium", config)
+    rate, source = training_rate(tmp_path, "medium", config, cpu="A")
     assert rate == TRAIN_STEPS_PER_SECOND and "assumed" in source  # no bench committed
     row = {"preset": "cpu-small", "maze": "medium", "batch": 32, "grad_accum": 1, "precision": "fp32",
            "implementation": "bridgeplan", "threads": 1, "busy_cores": 1, "windows_per_s": 1120.0}
@@ -361,10 +361,19 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
               row | {"implementation": "reference", "windows_per_s": 9e9}]
     (tmp_path / THROUGHPUT_BENCH).parent.mkdir(parents=True)
     (tmp_path / THROUGHPUT_BENCH).write_text(json.dumps({"throughput": [*others, row]}))
-    rate, source = training_rate(tmp_path, "medium", config)
+    rate, source = training_rate(tmp_path, "medium", config, cpu="A")
     assert rate == 1120.0 / 32 and "a core busy" in source  # 35 steps/s: two jobs of a sweep, one thread each
-    rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256))
+    assert "made on an unrecorded CPU" in source
+    rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256), cpu="A")
     assert rate == TRAIN_STEPS_PER_SECOND  # no figure at that batch
+    slower = tmp_path / "docs" / "results" / "throughput-slower" / "bench.json"  # another CPU's bench
+    slower.parent.mkdir(parents=True)
+    slower.write_text(json.dumps({"machine": {"cpu": "B (avx2)"}, "throughput": [row | {"windows_per_s": 320.0}]}))
+    rate, source = training_rate(tmp_path, "medium", config, cpu="B (avx2)")
+    assert rate == 320.0 / 32 and source.startswith("docs/results/throughput-slower/bench.json, made on B (avx2)")
+    assert training_rate(tmp_path, "medium", config, cpu="A")[0] == 1120.0 / 32  # not this CPU's: the default
+    rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256), cpu="B (avx2)")
+    assert rate == TRAIN_STEPS_PER_SECOND  # neither bench has it
 
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),

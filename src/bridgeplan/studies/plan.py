@@ -22,7 +22,10 @@ TRAIN_STEPS_PER_SECOND = 18.6
 figure for the study's maze and preset (:func:`training_rate`): cpu-small umaze at one torch thread on a quiet
 core, docs/results/bench.md."""
 THROUGHPUT_BENCH = Path("docs/results/throughput/bench.json")
-"""The committed training-throughput bench (``bridgeplan bench``) that costs are sized from."""
+"""The committed training-throughput bench (``bridgeplan bench``) that costs are sized from, unless one of
+:data:`THROUGHPUT_BENCHES` was made on this machine's CPU."""
+THROUGHPUT_BENCHES = "docs/results/throughput*/bench.json"
+"""The committed benches, each made on one CPU (its ``machine.cpu``)."""
 EVAL_SECONDS_PER_EPISODE = 0.05
 """Assumed cost of one evaluation episode (planning in a batch with the others and simulating), CPU, cpu-small:
 a rough figure, not measured per maze (replanned episodes cost more)."""
@@ -238,21 +241,33 @@ class Missing:
         return train, (sum(self.evaluations.values()) + len(self.jsons)) * self.episodes * EVAL_SECONDS_PER_EPISODE
 
 
-def training_rate(root: Path, maze: str, config) -> tuple[float, str]:
+def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tuple[float, str]:
     """Steps per second of one run of ``config`` (its preset, batch and precision) in ``maze`` as a sweep runs it,
-    one torch thread with the other core busy (two jobs of ``--workers 2``), from the committed throughput bench;
-    ``TRAIN_STEPS_PER_SECOND`` where the bench has no such figure. Returns the rate and where it came from."""
+    one torch thread with the other core busy (two jobs of ``--workers 2``), from a committed throughput bench: the
+    one made on this machine's ``cpu`` (``bench.harness.cpu_model``; the same code trains 2-3x slower on one x86 CPU
+    than on another) where one has the figure, else :data:`THROUGHPUT_BENCH`; ``TRAIN_STEPS_PER_SECOND`` where
+    neither has it. Returns the rate and where it came from."""
     import json
 
-    path = Path(root) / THROUGHPUT_BENCH
-    try:
-        rows = json.loads(path.read_text())["throughput"]
-    except (OSError, ValueError, KeyError):
-        rows = []
-    for r in rows:
-        if (r["preset"], r["maze"], r["batch"], r["precision"], r["implementation"], r["threads"],
-                r["busy_cores"]) == (config.preset, maze, config.batch_size, config.precision, "bridgeplan", 1, 1):
-            return r["windows_per_s"] / (r["batch"] * r["grad_accum"]), f"{THROUGHPUT_BENCH}, one thread, a core busy"
+    from bridgeplan.bench.harness import cpu_model
+
+    cpu = cpu_model() if cpu is None else cpu
+    benches = []  # (made on this CPU, path, its CPU, its rows): this CPU's first
+    for path in Path(root).glob(THROUGHPUT_BENCHES):
+        try:
+            bench = json.loads(path.read_text())
+            made_on, rows = bench.get("machine", {}).get("cpu") or "", bench["throughput"]
+        except (OSError, ValueError, KeyError, AttributeError):
+            continue
+        if (bool(cpu) and made_on == cpu) or path == Path(root) / THROUGHPUT_BENCH:
+            benches.append((not (cpu and made_on == cpu), str(path), made_on, rows))
+    for _, path, made_on, rows in sorted(benches):
+        for r in rows:
+            if (r["preset"], r["maze"], r["batch"], r["precision"], r["implementation"], r["threads"],
+                    r["busy_cores"]) == (config.preset, maze, config.batch_size, config.precision, "bridgeplan", 1, 1):
+                return (r["windows_per_s"] / (r["batch"] * r["grad_accum"]),
+                        f"{Path(path).relative_to(root)}, made on {made_on or 'an unrecorded CPU'}, one thread, a "
+                        f"core busy")
     return TRAIN_STEPS_PER_SECOND, "assumed, no figure in the throughput bench"
 
 
