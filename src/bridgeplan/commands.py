@@ -399,7 +399,7 @@ def _execution(args):
 
 
 def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import evaluate, format_table, write_result
+    from bridgeplan.evaluate import evaluate, format_table, write_and_show
     from bridgeplan.layout import eval_dir
     from bridgeplan.runs import run_dir_of
 
@@ -414,12 +414,7 @@ def _cmd_eval(args) -> int:
         "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "") + (
         f"-{correction.file_tag()}" if correction else "")
     out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
-    write_result(result, out)
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print(format_table(result))
-        print(f"wrote {out}")
+    write_and_show(result, out, args.json, format_table(result))
     return 0
 
 

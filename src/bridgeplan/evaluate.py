@@ -372,6 +372,13 @@ def write_result(result: dict, path: Path) -> None:
     atomic_write_text(path, json.dumps(result, indent=2) + "\n")
 
 
+def write_and_show(result: dict, path: Path, as_json: bool, summary: str) -> None:
+    """An evaluation command's ending: ``result`` written to ``path``, then printed as JSON (``--json``), else
+    its human-readable ``summary`` and where it went."""
+    write_result(result, path)
+    print(json.dumps(result, indent=2) if as_json else f"{summary}\nwrote {path}")
+
+
 def format_table(result: dict) -> str:
     """Human-readable summary of one evaluation (:meth:`EvalResult.to_dict`)."""
     s = result["score"]

@@ -180,17 +180,12 @@ def _run_eval_dir(run: Path) -> Path:
 
 def _write(result: dict, args, out_dir: Path, prefix: str, suffix: str) -> int:
     """Write ``result`` to ``--out``, else into ``out_dir`` named by its settings; print it."""
-    from bridgeplan.evaluate import write_result
+    from bridgeplan.evaluate import write_and_show
     from bridgeplan.ogbench_pointmaze.planning import format_result
 
     tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
     out = Path(args.out) if args.out else out_dir / f"{prefix}-seed{args.seed}{tasks}-{suffix}.json"
-    write_result(result, out)
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print(format_result(result))
-        print(f"wrote {out}")
+    write_and_show(result, out, args.json, format_result(result))
     return 0
 
 
