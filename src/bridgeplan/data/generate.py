@@ -36,6 +36,7 @@ from bridgeplan.maze.expert import (
 )
 from bridgeplan.maze.layouts import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
 from bridgeplan.maze.sim import MAX_SPEED, point_maze_model
+from bridgeplan.workers import exit_with_parent
 
 CHUNK = 4096
 """Action noise is drawn (and progress reported) in chunks of this many steps."""
@@ -172,6 +173,7 @@ _COUNTER = None
 def _init_worker(counter) -> None:
     global _COUNTER
     _COUNTER = counter
+    exit_with_parent()
 
 
 def _worker(maze_name: str, steps: int, seed: np.random.SeedSequence) -> GeneratedStream:

@@ -208,8 +208,10 @@ def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: 
                    for spec, seed in jobs)
     import multiprocessing as mp
 
+    from bridgeplan.workers import exit_with_parent
+
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with mp.get_context("spawn").Pool(workers) as pool:
+    with mp.get_context("spawn").Pool(workers, initializer=exit_with_parent) as pool:
         results = pool.starmap(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads,
                                           False) for spec, seed in jobs])
         # let the workers exit on their own: the block's terminate() would kill them before they release their

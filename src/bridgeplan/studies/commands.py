@@ -193,8 +193,10 @@ def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int,
                    for seed, seed_jobs in by_seed.items())
     import multiprocessing as mp
 
+    from bridgeplan.workers import exit_with_parent
+
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with mp.get_context("spawn").Pool(min(workers, len(by_seed))) as pool:
+    with mp.get_context("spawn").Pool(min(workers, len(by_seed)), initializer=exit_with_parent) as pool:
         written = pool.starmap(run_seed, [(study, results, dataset, seed_jobs, seed, False)
                                           for seed, seed_jobs in by_seed.items()])
         pool.close()

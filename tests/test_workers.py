@@ -1,0 +1,53 @@
+"""A pool's workers end with the command that started them, even when it is killed without stopping its pool."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+PARENT = """
+import multiprocessing as mp, sys, time
+from bridgeplan.workers import exit_with_parent
+if __name__ == "__main__":
+    pool = mp.get_context("spawn").Pool(1, initializer=exit_with_parent if sys.argv[1] == "watched" else None)
+    worker = pool.apply(__import__("os").getpid)
+    pool.apply_async(time.sleep, (120,))
+    time.sleep(1.5)  # the worker inside its task (an idle one would see its task pipe close and exit anyway)
+    print(worker, flush=True)
+    time.sleep(120)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _orphan_after_parent_killed(mode: str, wait_seconds: float) -> bool:
+    """Start a parent with a one-worker pool, SIGKILL the parent, then whether its worker still lives after
+    ``wait_seconds``."""
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, mode], stdout=subprocess.PIPE, text=True)
+    worker = int(parent.stdout.readline())
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + wait_seconds
+    while _alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    alive = _alive(worker)
+    if alive:
+        os.kill(worker, signal.SIGKILL)
+    return alive
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="re-parenting of orphans as Linux does it")
+def test_a_worker_exits_when_its_parent_is_killed():
+    assert not _orphan_after_parent_killed("watched", wait_seconds=10)
+    assert _orphan_after_parent_killed("unwatched", wait_seconds=3)  # what happened before: an orphan trains on
