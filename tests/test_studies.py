@@ -12,6 +12,7 @@ import pytest
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
 from bridgeplan.studies import load_studies, parse_study
+from bridgeplan.studies.commands import jobs, work_units
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, describe_missing, missing
 from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
 from tests.test_experiments import TINY_STUDY
@@ -390,7 +391,6 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
 def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys, monkeypatch):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
     them imported, the dry run trains and evaluates nothing."""
-    from bridgeplan.studies.commands import jobs
 
     study = load_studies(REPO)[name]
     declared = {j.path for j in jobs(study, REPO / "no-such-dir", REPO / "docs" / "results", quick=False)}
@@ -476,7 +476,12 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
     assert "  hierarchy graph-eval: 1 evaluation JSONs" in out
-    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    # Units (seed, runs read): the hierarchy's (high, low), the flat eval's (high), the graph's (low); two workers
+    # share the runs, each trained once under its lock.
+    assert [(seed, [j.runs for j in unit]) for seed, unit in work_units(jobs(load_studies(root)["tiny"], root, root,
+                                                                             quick=False))] == [
+        (0, [("high", "low")] * 2), (0, [("high",)] * 2), (0, [("low",)])]
+    assert main(["study", "run", "tiny", "--no-progress", "--workers", "2", "--root", str(root)]) == 0
     assert "tiny: 5 new results" in capsys.readouterr().out
     results = root / "results" / "tiny"
     test, validation = (json.loads((results / "tiny-hierarchy" / "nfe2" / f"single-seed{s}.json").read_text())

@@ -31,7 +31,9 @@ def _add_study_commands(sub) -> None:
                      help="a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
                           "not the committed scale")
     run.add_argument("--backend", default="local", help="local or ray")
-    run.add_argument("--workers", type=int, default=None, help="local backend: parallel jobs (default: the study's)")
+    run.add_argument("--workers", type=int, default=None,
+                     help="local backend: parallel jobs, a grid's runs or an evaluation study's units (a training "
+                          "seed and the runs its evaluations read; default: the study's)")
     run.add_argument("--ray-address", default=None)
     run.add_argument("--no-progress", action="store_true")
     imp = study.add_parser("import", help="load a study's committed rows (docs/results/DATA/results.csv, any schema) "
