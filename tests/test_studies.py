@@ -12,7 +12,8 @@ import pytest
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
 from bridgeplan.studies import load_studies, parse_study
-from bridgeplan.studies.plan import QUICK_NOTE, Scale, missing
+from bridgeplan.studies.commands import jobs, work_units
+from bridgeplan.studies.plan import QUICK_NOTE, Scale, describe_missing, missing
 from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
 from tests.test_experiments import TINY_STUDY
 
@@ -59,10 +60,13 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
     root = _docs_copy(tmp_path)
     study = load_studies(root)["umaze-v2-hold"]
     assert sum(missing(study, root).evaluations.values()) == 84
+    assert ("  committed: docs/results/umaze-v2-hold/results.csv holds this study's committed rows"
+            in "\n".join(describe_missing(study, root)))
     assert main(["study", "import", "umaze-v2-hold", "--root", str(root)]) == 0
     assert "umaze-v2-hold: 84 evaluations in docs/results/umaze-v2-hold/results.csv, 84 new" in capsys.readouterr().out
     m = missing(study, root)
     assert sum(m.evaluations.values()) == 0 and m.wanted == {} and m.trains == ()  # nothing to train for
+    assert not any(line.startswith("  committed:") for line in describe_missing(study, root))
     assert main(["study", "import", "umaze-v2-hold", "--root", str(root)]) == 0
     assert ", 0 new" in capsys.readouterr().out
     assert main(["study", "import", "headline", "--root", str(root)]) == 2  # reads others' rows, has none of its own
@@ -384,10 +388,9 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
                                            *((f"ogbench-calibration-{d}", [f"ogbench-gcbc-{d}"])
                                              for d in ("large-navigate", "giant-navigate", "medium-stitch",
                                                        "large-stitch", "giant-stitch"))])
-def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys):
+def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp_path, capsys, monkeypatch):
     """The study file encodes the campaign: the JSONs its evaluations write are the committed ones, none more; with
     them imported, the dry run trains and evaluates nothing."""
-    from bridgeplan.studies.commands import jobs
 
     study = load_studies(REPO)[name]
     declared = {j.path for j in jobs(study, REPO / "no-such-dir", REPO / "docs" / "results", quick=False)}
@@ -395,10 +398,16 @@ def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp
     assert declared == committed and len(declared) >= 3
     root = _docs_copy(tmp_path)
     assert len(missing(study, root).jsons) == len(declared)  # a fresh checkout: everything to compute
+    note = f"{len(declared)} of the {len(declared)} evaluation JSONs to make are committed in docs/results"
+    assert any(note in line for line in describe_missing(study, root))  # the dry run says so, and how to reuse them
+    monkeypatch.setattr("bridgeplan.studies.plan.run_study", lambda *a, **k: 0)  # the run: its note, not its work
+    assert main(["study", "run", name, "--root", str(root)]) == 0
+    assert f"note: {name}: {note}" in capsys.readouterr().err
     assert main(["study", "import", name, "--root", str(root)]) == 0
     assert f"{name}: {len(declared)} evaluation JSONs copied into" in capsys.readouterr().out
     m = missing(study, root)
     assert m.jsons == () and m.trains == ()
+    assert not any(line.startswith("  committed:") for line in describe_missing(study, root))
 
 
 TINY_HIERARCHY = """
@@ -467,7 +476,12 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
     assert "  hierarchy graph-eval: 1 evaluation JSONs" in out
-    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    # Units (seed, runs read): the hierarchy's (high, low), the flat eval's (high), the graph's (low); two workers
+    # share the runs, each trained once under its lock.
+    assert [(seed, [j.runs for j in unit]) for seed, unit in work_units(jobs(load_studies(root)["tiny"], root, root,
+                                                                             quick=False))] == [
+        (0, [("high", "low")] * 2), (0, [("high",)] * 2), (0, [("low",)])]
+    assert main(["study", "run", "tiny", "--no-progress", "--workers", "2", "--root", str(root)]) == 0
     assert "tiny: 5 new results" in capsys.readouterr().out
     results = root / "results" / "tiny"
     test, validation = (json.loads((results / "tiny-hierarchy" / "nfe2" / f"single-seed{s}.json").read_text())
@@ -508,6 +522,10 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"', "evaluations[0].command: ogbench graph-eval reads"),
     ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
     ('command = "ogbench graph-eval"\nruns = ["high", "low"]\nout = "x.json"', "graph-eval takes 0 or 1 run"),
+    ('command = "eval"\nruns = ["high"]\nout = "x.json"\nsplits = ["test", "validation"]',
+     "evaluations[0].out: x.json is written twice (by evaluations[0] and [0]"),
+    ('command = "eval"\nruns = ["high"]\nout = "x.json"\n[[evaluations]]\ncommand = "eval"\nruns = ["low"]\n'
+     'out = "x.json"', "evaluations[1].out: x.json is written twice (by evaluations[0] and [1]"),
 ])
 def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation, message):
     root = tmp_path / "repo"

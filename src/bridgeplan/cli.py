@@ -31,7 +31,9 @@ def _add_study_commands(sub) -> None:
                      help="a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
                           "not the committed scale")
     run.add_argument("--backend", default="local", help="local or ray")
-    run.add_argument("--workers", type=int, default=None, help="local backend: parallel jobs (default: the study's)")
+    run.add_argument("--workers", type=int, default=None,
+                     help="local backend: parallel jobs, a grid's runs or an evaluation study's units (a training "
+                          "seed and the runs its evaluations read; default: the study's)")
     run.add_argument("--ray-address", default=None)
     run.add_argument("--no-progress", action="store_true")
     imp = study.add_parser("import", help="load a study's committed rows (docs/results/DATA/results.csv, any schema) "
@@ -130,7 +132,9 @@ def _cmd_study_run(args) -> int:
         QUICK_NOTE,
         Scale,
         check_reports,
+        committed_not_imported,
         describe_missing,
+        missing,
         results_dir,
         run_study,
         with_used,
@@ -152,6 +156,8 @@ def _cmd_study_run(args) -> int:
         print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0
     for s in chain:
+        if scale.committed and (note := committed_not_imported(s, root, missing(s, root, scale))):
+            print(f"note: {s.name}: {note}", file=sys.stderr)
         added = run_study(s, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
                           progress=not args.no_progress)
         if s.experiments or s.evaluations:

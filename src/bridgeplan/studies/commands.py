@@ -181,24 +181,29 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     return written
 
 
-def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int, progress: bool) -> int:
-    """Run every missing JSON's command (after training what it needs), training seeds on ``workers`` processes;
-    the JSONs written."""
-    todo = [job for job in jobs(study, results, results, quick) if not job.path.exists()]
-    by_seed: dict[int, list[Job]] = {}
+def work_units(todo: list[Job]) -> list[tuple[int, list[Job]]]:
+    """The jobs grouped by training seed and the runs they read, in order: what one worker trains and evaluates. A
+    run that two units read is trained once, under its lock (``train_to``), the other unit waiting for it."""
+    units: dict[tuple[int, tuple[str, ...]], list[Job]] = {}
     for job in todo:
-        by_seed.setdefault(job.seed, []).append(job)
-    if workers <= 1 or len(by_seed) <= 1:
-        return sum(run_seed(study, results, dataset, seed_jobs, seed, progress)
-                   for seed, seed_jobs in by_seed.items())
+        units.setdefault((job.seed, job.runs), []).append(job)
+    return [(seed, unit) for (seed, _), unit in units.items()]
+
+
+def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int, progress: bool) -> int:
+    """Run every missing JSON's command (after training what it needs), its work units (:func:`work_units`) on
+    ``workers`` processes; the JSONs written."""
+    units = work_units([job for job in jobs(study, results, results, quick) if not job.path.exists()])
+    if workers <= 1 or len(units) <= 1:
+        return sum(run_seed(study, results, dataset, unit, seed, progress) for seed, unit in units)
     import multiprocessing as mp
 
     from bridgeplan.workers import exit_with_parent
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with mp.get_context("spawn").Pool(min(workers, len(by_seed)), initializer=exit_with_parent) as pool:
-        written = pool.starmap(run_seed, [(study, results, dataset, seed_jobs, seed, False)
-                                          for seed, seed_jobs in by_seed.items()])
+    with mp.get_context("spawn").Pool(min(workers, len(units)), initializer=exit_with_parent) as pool:
+        written = pool.starmap(run_seed, [(study, results, dataset, unit, seed, False) for seed, unit in units],
+                               chunksize=1)  # one unit at a time: a worker never holds two while the other idles
         pool.close()
         pool.join()
     return sum(written)

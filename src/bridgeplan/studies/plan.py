@@ -167,6 +167,15 @@ def check_study(study: Study) -> None:
             train_config(study, run, 0, Path("dataset"))
         except (BridgeplanError, TypeError, ValueError) as e:
             raise StudyError(study.file, f"runs.{run.name}", str(e)) from None
+    written: dict[Path, int] = {}
+    for i, e in enumerate(study.evaluations):
+        for job in jobs(dataclasses.replace(study, evaluations=(e,)), Path("results"), Path("."), quick=False):
+            if job.path in written:
+                raise StudyError(study.file, f"evaluations[{i}].out",
+                                 f"{job.path} is written twice (by evaluations[{written[job.path]}] and [{i}], for "
+                                 f"two training seeds or splits): name {{seed}} or {{eval_seed}} in it, or give an "
+                                 f"evaluation of no run seeds = [0]")
+            written[job.path] = i
 
 
 def trained_methods(study: Study) -> set:
@@ -332,6 +341,25 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
 
 
+def committed_not_imported(study: Study, root: Path, m: Missing) -> str | None:
+    """What of the missing ``m`` docs/results holds already (committed, not imported into results/): a run would
+    compute it again. None when nothing."""
+    if study.evaluations:
+        results = results_dir(study, root, Scale())
+        committed = sum((Path(root) / "docs" / "results" / j.path.relative_to(results)).exists() for j in m.jsons)
+        if committed:
+            return (f"{committed} of the {len(m.jsons)} evaluation JSONs to make are committed in docs/results: "
+                    f"`bridgeplan study import {study.name}` copies them (their runs then need no training)")
+    elif study.experiments and m.evaluations:
+        from bridgeplan.studies.export import committed_csv
+
+        csv = committed_csv(study, root)
+        if csv.exists():
+            return (f"{csv.relative_to(root)} holds this study's committed rows: `bridgeplan study import "
+                    f"{study.name}` stores them (then only what they lack is computed)")
+    return None
+
+
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
     """``study run --dry-run``'s lines."""
     m = missing(study, root, scale)
@@ -355,6 +383,8 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
         by_command.setdefault(" ".join(job.argv[:1 if job.argv[0] == "eval" else 2]), []).append(job)
     for command, todo in by_command.items():
         lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}")
+    if scale.committed and (note := committed_not_imported(study, root, m)):
+        lines.append(f"  committed: {note}")
     shared = sum(len(keys) for keys in m.wanted.values()) - sum(m.evaluations.values())
     if shared:
         lines.append(f"  link {shared} evaluations to more experiments: stored already, or named by an earlier "

@@ -451,7 +451,7 @@ class CommandEvaluation:
     runs: tuple[str, ...]
     out: str
     """The JSON's path under the study's results directory and, exported, under docs/results; it may name ``{seed}``,
-    ``{eval_seed}`` and ``{tasks}``."""
+    ``{eval_seed}`` and ``{tasks}``, and must: each path is written by one training seed and split only."""
     args: tuple[tuple[str, Any], ...] = ()
     splits: tuple[str, ...] = ("test",)
     task_sets: tuple[str, ...] = ("single",)
