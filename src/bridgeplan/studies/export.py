@@ -12,13 +12,9 @@ import json
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import Study
+from bridgeplan.studies.spec import Study, committed_csv
 
 PROVENANCE = "study.json"
-
-
-def committed_csv(study: Study, root: Path) -> Path:
-    return Path(root) / "docs" / "results" / study.data_dir / "results.csv"
 
 
 def provenance_path(study: Study) -> str:

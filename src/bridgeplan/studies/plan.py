@@ -15,7 +15,7 @@ from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.studies.commands import jobs, needed_runs, run_commands, train_config
-from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError
+from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError, committed_csv
 
 TRAIN_STEPS_PER_SECOND = 18.6
 """Training rate of one run (optimizer steps per second) assumed where the committed throughput bench has no
@@ -351,8 +351,6 @@ def committed_not_imported(study: Study, root: Path, m: Missing) -> str | None:
             return (f"{committed} of the {len(m.jsons)} evaluation JSONs to make are committed in docs/results: "
                     f"`bridgeplan study import {study.name}` copies them (their runs then need no training)")
     elif study.experiments and m.evaluations:
-        from bridgeplan.studies.export import committed_csv
-
         csv = committed_csv(study, root)
         if csv.exists():
             return (f"{csv.relative_to(root)} holds this study's committed rows: `bridgeplan study import "

@@ -651,3 +651,8 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
             raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
                                                                 f"OGBench's (generator = \"ogbench\")")
     return study
+
+
+def committed_csv(study: Study, root: Path) -> Path:
+    """Where a grid study's committed rows lie: docs/results/DATA/results.csv."""
+    return Path(root) / "docs" / "results" / study.data_dir / "results.csv"
