@@ -11,7 +11,8 @@ import pytest
 from bridgeplan.cli import main
 
 TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "--repeats", "1",
-              "--overhead-repeats", "2", "--no-compile", "--throughput-seconds", "0", "--device", "cpu"]
+              "--overhead-repeats", "2", "--no-compile", "--throughput-seconds", "0", "--side-by-side-seconds", "0",
+              "--device", "cpu"]
 
 
 def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
@@ -33,7 +34,7 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (train,) = result["train_overhead"]
     assert (train["batch"], train["grad_accum"]) == (32, 1) and train["train_step_over_bare"] > 0
     assert "| cpu-small | 32 x 1 |" in markdown
-    assert result["compile"] == [] and result["throughput"] == []
+    assert result["compile"] == [] and result["throughput"] == [] and result["side_by_side"] == []
 
     budget = result["score_per_budget"]
     evals = budget["evaluations"]
@@ -73,6 +74,7 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (["--presets", "huge"], "unknown preset"),
     (["--budget-runs", "no/such/run"], "no run at no/such/run"),
     (["--budget-steps", "0"], "--budget-steps takes positive integers"),
+    (["--side-by-side-seconds", "-1"], "side-by-side-seconds must be >= 0"),
 ])
 def test_bench_bad_input(tmp_path, capsys, bad, message):
     assert main(["bench", "--out", str(tmp_path), "--no-compile", *bad]) == 2
@@ -139,6 +141,38 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
     # the reference rows ran torch's Mish, none of bridgeplan's
     assert references and all(not any(isinstance(m, Mish) for m in net.modules()) and
                               any(isinstance(m, torch.nn.Mish) for m in net.modules()) for net in references)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the second job needs a second core")
+def test_two_jobs_side_by_side(monkeypatch):
+    import torch
+
+    from bridgeplan.bench import suites
+    from bridgeplan.bench.markdown import format_side_by_side
+
+    monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("umaze",))  # one shape, one batch (cpu-small's 32)
+    rows = suites.side_by_side_training("cpu-small", 0.05, torch.device("cpu"))
+    assert [(r["maze"], r["batch"], r["other_core"]) for r in rows] == [
+        ("umaze", 32, "quiet"), ("umaze", 32, "spinning"), ("umaze", 32, "training")]
+    for r in rows:
+        assert r["windows_per_s"] == pytest.approx(32 * r["steps_per_s"])
+        assert r["beside_over_alone"] == pytest.approx(r["steps_per_s"] / rows[0]["steps_per_s"])
+    markdown = "\n".join(format_side_by_side(rows))
+    assert "## Two jobs side by side" in markdown and "| cpu-small | umaze 128 x 1 | 32 | fp32 | training |" in markdown
+
+
+def test_a_busy_process_is_waited_for_until_ready_and_one_that_dies_first_is_an_error():
+    import time
+
+    from bridgeplan.bench.harness import busy_cores
+    from bridgeplan.errors import BridgeplanError
+
+    t0 = time.perf_counter()
+    with busy_cores(1, "import time; time.sleep(1.5); print('ready', flush=True); time.sleep(60)"):
+        assert time.perf_counter() - t0 >= 1.5
+    with pytest.raises(BridgeplanError, match="ended first"):
+        with busy_cores(1, "raise SystemExit(3)"):
+            pass
 
 
 def suites_bf16() -> bool:

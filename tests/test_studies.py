@@ -378,6 +378,16 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     assert training_rate(tmp_path, "medium", config, cpu="A")[0] == 1120.0 / 32  # not this CPU's: the default
     rate, _ = training_rate(tmp_path, "medium", cfg.replace(config, batch_size=256), cpu="B (avx2)")
     assert rate == TRAIN_STEPS_PER_SECOND  # neither bench has it
+    # a bench's two-jobs figure, the other core training, before its throughput table's spinning core
+    pair = {"preset": "cpu-small", "maze": "medium", "batch": 32, "precision": "fp32", "steps_per_s": 30.5}
+    slower.write_text(json.dumps({"machine": {"cpu": "B (avx2)"}, "throughput": [row | {"windows_per_s": 320.0}],
+                                  "side_by_side": [pair | {"other_core": "quiet", "steps_per_s": 99.0},
+                                                   pair | {"maze": "large", "other_core": "training"},
+                                                   pair | {"other_core": "training"}]}))
+    rate, source = training_rate(tmp_path, "medium", config, cpu="B (avx2)")
+    assert rate == 30.5 and source.endswith("one thread, beside a second training job")
+    assert training_rate(tmp_path, "large", config, cpu="B (avx2)")[0] == 30.5
+    assert training_rate(tmp_path, "umaze", config, cpu="B (avx2)")[0] == TRAIN_STEPS_PER_SECOND
 
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),

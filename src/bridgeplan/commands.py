@@ -580,6 +580,8 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
     p.add_argument("--throughput-seconds", type=float,
                    help="seconds of training per figure of the training-throughput table (0: skip)")
+    p.add_argument("--side-by-side-seconds", type=float,
+                   help="seconds of training per figure of the two-jobs table (0: skip)")
     p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
     _threads_flag(p)
     p.set_defaults(func=_cmd_bench)
@@ -592,7 +594,7 @@ def _cmd_bench(args) -> int:
              "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
              "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
              "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
-             "throughput_seconds": args.throughput_seconds,
+             "throughput_seconds": args.throughput_seconds, "side_by_side_seconds": args.side_by_side_seconds,
              "compile": False if args.no_compile else None}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
         text = getattr(args, name)

@@ -1,5 +1,5 @@
 """Benchmarks: planning latency, overheads, threads on a busy machine, torch.compile, training throughput
-against the machine's limit, evaluation throughput and score per planning budget.
+against the machine's limit, two training jobs side by side, evaluation throughput and score per planning budget.
 
 ``harness.py`` times, ``suites.py`` measures (one function per figure), ``markdown.py`` writes the
 tables. Timings are medians over repeats after warm-up; the machine is recorded beside them. Not
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +45,9 @@ class BenchConfig:
     throughput_batch_sizes: tuple[int, ...] = (32, 256)
     """Batches of the throughput table for ``cpu-small`` (``diffuser``'s network is timed at its own 32 only:
     a batch of 256 takes seconds per step on a CPU)."""
+    side_by_side_seconds: float = 2.0
+    """Seconds of training steps per figure of the two-jobs table: each maze's step with the other core quiet,
+    spinning, or training the same step in another process (0: skip it; CPU devices with 2+ cores only)."""
     compile: bool = True
     """Also time ``torch.compile``'d forward passes against eager ones (compilation takes minutes on a CPU)."""
     eval_run: str = ""
@@ -64,6 +68,8 @@ class BenchConfig:
         for name in ("repeats", "overhead_repeats", "budget_episodes"):
             if getattr(self, name) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        if self.side_by_side_seconds < 0:
+            raise BridgeplanError(f"side-by-side-seconds must be >= 0, got {self.side_by_side_seconds}")
         if self.throughput_seconds < 0 or min(self.throughput_batch_sizes, default=1) <= 0:
             raise BridgeplanError("throughput-seconds must be >= 0 and its batch sizes positive")
         if self.busy_steps < 0:
@@ -90,7 +96,7 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
     bench.validate()
     dev = resolve_device(bench.device)
     result = {"bench": dataclasses.asdict(bench), "machine": machine(dev), "latency": [], "plan_overhead": [],
-              "train_overhead": [], "busy_core": [], "compile": [], "throughput": []}
+              "train_overhead": [], "busy_core": [], "compile": [], "throughput": [], "side_by_side": []}
     for preset in bench.presets:
         progress(f"[{preset}] planning latency")
         result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev)
@@ -105,6 +111,9 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
             progress(f"[{preset}] training throughput")
             batches = bench.throughput_batch_sizes if preset == "cpu-small" else (32,)
             result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev)
+        if bench.side_by_side_seconds and dev.type == "cpu" and (os.cpu_count() or 1) > 1:
+            progress(f"[{preset}] two training jobs side by side")
+            result["side_by_side"] += suites.side_by_side_training(preset, bench.side_by_side_seconds, dev)
         if bench.compile:
             progress(f"[{preset}] torch.compile")
             result["compile"] += suites.compile_speedup(preset, bench.batch_sizes, bench.overhead_repeats, dev)

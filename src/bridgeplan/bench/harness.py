@@ -12,6 +12,7 @@ from pathlib import Path
 
 import torch
 
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import code_version
 
 
@@ -94,14 +95,25 @@ def empty_inductor_cache():
                 os.environ["TORCHINDUCTOR_CACHE_DIR"] = previous
 
 
+SPIN = "while True: pass"
+"""Python source of a process that keeps one core busy and nothing else (a laptop's browser, say)."""
+
+
 @contextlib.contextmanager
-def busy_cores(n: int):
-    """``n`` other processes spinning on the CPU (a laptop's browser, a second job of a sweep)."""
+def busy_cores(n: int, code: str = SPIN):
+    """``n`` other processes running Python ``code`` (by default spinning); ``code`` that prints a line when it is
+    ready (a training job after its warm-up step, say) is waited for until it has."""
     import subprocess
     import sys
 
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    env = os.environ | {"OMP_NUM_THREADS": "1"}  # each keeps to its own core
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
+             for _ in range(n)]
     try:
+        if code != SPIN:
+            for p in procs:
+                if not p.stdout.readline():
+                    raise BridgeplanError(f"bench: the process meant to keep a core busy ended first: {code!r}")
         time.sleep(0.5)  # let the scheduler see them
         yield
     finally:

@@ -51,6 +51,8 @@ def format_bench(result: dict) -> str:
                         for b in result["busy_core"]])
     if result.get("throughput"):
         lines += format_throughput(result["throughput"])
+    if result.get("side_by_side"):
+        lines += format_side_by_side(result["side_by_side"])
     if result["compile"]:
         lines += ["", "## torch.compile", "", "Forward pass, eager vs `torch.compile(model)` (default mode), "
                   f"medians over {result['bench']['overhead_repeats']} interleaved rounds. The first call at each "
@@ -85,6 +87,18 @@ def format_throughput(rows: list[dict]) -> list[str]:
     return lines + table(["preset", "maze, plan shape", "batch", "precision", "implementation", "threads",
                           "busy cores", "step ms", "windows/s", "GFLOP/s", "limit GFLOP/s (matmul / conv)",
                           "fraction of limit"], body)
+
+
+def format_side_by_side(rows: list[dict]) -> list[str]:
+    """Each maze's training step alone and beside a second job: what ``--workers 2`` costs a study's runs."""
+    lines = ["", "## Two jobs side by side", "",
+             "`train.py`'s step at each maze's plan shape, one torch thread, with the other core quiet, spinning (a "
+             "Python loop) or training the same step in another process (one thread): the two jobs of a `--workers "
+             "2` study. `beside / alone`: the rate beside the other process over the quiet one.", ""]
+    body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"], r["other_core"],
+             f"{r['steps_per_s']:.1f}", f"{r['windows_per_s']:.0f}", f"{r['beside_over_alone']:.2f}"] for r in rows]
+    return lines + table(["preset", "maze, plan shape", "batch", "precision", "other core", "steps/s", "windows/s",
+                          "beside / alone"], body)
 
 
 def format_budget(s: dict) -> list[str]:

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from bridgeplan.bench.harness import (
+    SPIN,
     busy_cores,
     empty_inductor_cache,
     interleaved_ratios,
@@ -364,4 +365,48 @@ def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.dev
                                 "fraction_of_conv": flops / step_s / 1e9 / limit["conv"]})
     finally:
         torch.set_num_threads(before)
+    return rows
+
+
+def train_until_killed(maze: str, preset: str, batch: int) -> None:
+    """Repeat ``train.py``'s step at ``maze``'s plan shape on one CPU thread, forever: the second job of
+    :func:`side_by_side_training`. Prints a line once warm."""
+    torch.set_num_threads(1)
+    train_step, _ = _train_step(preset_config(maze, preset, batch_size=batch), torch.device("cpu"))
+    train_step()
+    print("ready", flush=True)
+    while True:
+        train_step()
+
+
+def side_by_side_training(preset: str, seconds: float, dev: torch.device) -> list[dict]:
+    """Training windows/s of ``train.py``'s step at each maze's plan shape, at batch 32 and the preset's own, one
+    thread, with the other core quiet, spinning (a Python loop), or training the same step in another process: how
+    two jobs of a ``--workers 2`` study share a machine, against one job alone."""
+    rows = []
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for maze in THROUGHPUT_MAZES:
+            for batch in sorted({32, preset_config(maze, preset).batch_size}):
+                rows += _side_by_side_rows(preset_config(maze, preset, batch_size=batch), seconds, dev)
+    finally:
+        torch.set_num_threads(before)
+    return rows
+
+
+def _side_by_side_rows(config: TrainConfig, seconds: float, dev: torch.device) -> list[dict]:
+    train_step, _ = _train_step(config, dev)
+    second_job = (f"from bridgeplan.bench.suites import train_until_killed; "
+                  f"train_until_killed({config.maze!r}, {config.preset!r}, {config.batch_size})")
+    rows, alone_s = [], None
+    for other, n, code in (("quiet", 0, SPIN), ("spinning", 1, SPIN), ("training", 1, second_job)):
+        with busy_cores(n, code):
+            step_s = _seconds_per_call(train_step, seconds, dev)
+        alone_s = alone_s or step_s  # the first setting is the quiet one
+        rows.append({"preset": config.preset, "maze": config.maze, "horizon": config.horizon,
+                     "stride": config.stride, "batch": config.batch_size, "precision": config.precision,
+                     "other_core": other, "steps_per_s": 1 / step_s,
+                     "windows_per_s": config.batch_size * config.grad_accum / step_s,
+                     "beside_over_alone": alone_s / step_s})
     return rows

@@ -252,31 +252,36 @@ class Missing:
 
 def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tuple[float, str]:
     """Steps per second of one run of ``config`` (its preset, batch and precision) in ``maze`` as a sweep runs it,
-    one torch thread with the other core busy (two jobs of ``--workers 2``), from a committed throughput bench: the
-    one made on this machine's ``cpu`` (``bench.harness.cpu_model``; the same code trains 2-3x slower on one x86 CPU
+    one torch thread beside a second job (two jobs of ``--workers 2``), from a committed throughput bench: the one
+    made on this machine's ``cpu`` (``bench.harness.cpu_model``; the same code trains 2-3x slower on one x86 CPU
     than on another) where one has the figure, else :data:`THROUGHPUT_BENCH`; ``TRAIN_STEPS_PER_SECOND`` where
-    neither has it. Returns the rate and where it came from."""
+    neither has it. A bench's two-jobs figure (the other core training) is preferred to its throughput table's
+    (the other core spinning). Returns the rate and where it came from."""
     import json
 
     from bridgeplan.bench.harness import cpu_model
 
     cpu = cpu_model() if cpu is None else cpu
-    benches = []  # (made on this CPU, path, its CPU, its rows): this CPU's first
+    benches = []  # (made on this CPU, path, its CPU, its figures): this CPU's first
     for path in Path(root).glob(THROUGHPUT_BENCHES):
         try:
             bench = json.loads(path.read_text())
-            made_on, rows = bench.get("machine", {}).get("cpu") or "", bench["throughput"]
+            made_on = bench.get("machine", {}).get("cpu") or ""
+            figures = (bench.get("side_by_side", []), bench["throughput"])
         except (OSError, ValueError, KeyError, AttributeError):
             continue
         if (bool(cpu) and made_on == cpu) or path == Path(root) / THROUGHPUT_BENCH:
-            benches.append((not (cpu and made_on == cpu), str(path), made_on, rows))
-    for _, path, made_on, rows in sorted(benches):
-        for r in rows:
+            benches.append((not (cpu and made_on == cpu), str(path), made_on, figures))
+    wanted = (config.preset, maze, config.batch_size, config.precision)
+    for _, path, made_on, (side_by_side, throughput) in sorted(benches):
+        where = f"{Path(path).relative_to(root)}, made on {made_on or 'an unrecorded CPU'}, one thread"
+        for r in side_by_side:
+            if (r["preset"], r["maze"], r["batch"], r["precision"], r["other_core"]) == (*wanted, "training"):
+                return r["steps_per_s"], f"{where}, beside a second training job"
+        for r in throughput:
             if (r["preset"], r["maze"], r["batch"], r["precision"], r["implementation"], r["threads"],
-                    r["busy_cores"]) == (config.preset, maze, config.batch_size, config.precision, "bridgeplan", 1, 1):
-                return (r["windows_per_s"] / (r["batch"] * r["grad_accum"]),
-                        f"{Path(path).relative_to(root)}, made on {made_on or 'an unrecorded CPU'}, one thread, a "
-                        f"core busy")
+                    r["busy_cores"]) == (*wanted, "bridgeplan", 1, 1):
+                return r["windows_per_s"] / (r["batch"] * r["grad_accum"]), f"{where}, a core busy"
     return TRAIN_STEPS_PER_SECOND, "assumed, no figure in the throughput bench"
 
 
