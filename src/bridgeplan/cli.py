@@ -132,9 +132,7 @@ def _cmd_study_run(args) -> int:
         QUICK_NOTE,
         Scale,
         check_reports,
-        committed_not_imported,
         describe_missing,
-        missing,
         results_dir,
         run_study,
         with_used,
@@ -156,10 +154,8 @@ def _cmd_study_run(args) -> int:
         print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0
     for s in chain:
-        if scale.committed and (note := committed_not_imported(s, root, missing(s, root, scale))):
-            print(f"note: {s.name}: {note}", file=sys.stderr)
         added = run_study(s, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                          progress=not args.no_progress)
+                          progress=not args.no_progress, note=lambda text: print(f"note: {text}", file=sys.stderr))
         if s.experiments or s.evaluations:
             print(f"{s.name}: {added} new results in {results_dir(s, root, scale)}"
                   + ("" if scale.committed else f" [{QUICK_NOTE}]"))

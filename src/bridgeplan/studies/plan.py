@@ -452,13 +452,17 @@ def with_used(study: Study, studies: dict[str, Study]) -> list[Study]:
 
 
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,
-              ray_address: str | None = None, progress: bool = True) -> int:
-    """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows."""
+              ray_address: str | None = None, progress: bool = True, note=None) -> int:
+    """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows.
+    ``note(text)``, when given, hears first what of it is committed but not imported
+    (:func:`committed_not_imported`)."""
     from bridgeplan.experiments.runner import run_sweep
 
     if not study.experiments and not study.evaluations:
         return 0
     m = missing(study, root, scale)
+    if note is not None and scale.committed and (text := committed_not_imported(study, root, m)):
+        note(f"{study.name}: {text}")
     if not (m.trains or m.evaluations or m.jsons or any(m.wanted.values())):
         return 0  # all stored (imported, say): no dataset to make either
     scaled = scale.apply(study)
