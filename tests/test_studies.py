@@ -392,6 +392,12 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),
                                            ("ogbench-planners", ["ogbench-medium-navigate/*"]),
+                                           # ogbench-large-navigate's folder holds two studies' runs
+                                           ("ogbench-large-navigate", ["ogbench-large-navigate/[!h]*"]),
+                                           ("ogbench-large-hierarchy", ["ogbench-large-navigate/hierarchy-*"]),
+                                           *((f"ogbench-{d}", [f"ogbench-{d}/*"])
+                                             for d in ("medium-stitch", "large-stitch", "giant-navigate",
+                                                       "giant-stitch")),
                                            ("ogbench-calibration", ["ogbench-gcbc", "ogbench-oracle"]),
                                            ("large-stitch-hierarchy", ["large-stitch-hierarchy/*",
                                                                        "large-stitch-hierarchy-flat/*"]),
