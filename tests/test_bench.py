@@ -143,6 +143,27 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
                               any(isinstance(m, torch.nn.Mish) for m in net.modules()) for net in references)
 
 
+def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
+    import torch
+
+    from bridgeplan.bench import suites
+    from bridgeplan.bench.markdown import format_throughput
+    from bridgeplan.nets.unet import TemporalUNet
+
+    monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("medium",))
+    monkeypatch.setattr(suites, "machine_limit", lambda threads, dtype, dev: {"matmul": 100.0, "conv": 50.0})
+    compiled = []
+    monkeypatch.setattr(torch, "compile", lambda model: compiled.append(model) or model)  # no compiler in the test
+    rows = suites.training_throughput("cpu-small", (8,), 0.01, torch.device("cpu"), compiled=True)
+    timed = [r for r in rows if r["implementation"] == "compiled"]
+    settings = len(sorted({1, os.cpu_count() or 1})) * (2 if (os.cpu_count() or 1) > 1 else 1)
+    assert len(timed) == settings and {(r["batch"], r["precision"]) for r in timed} == {(8, "fp32")}
+    assert len(compiled) == 1 and isinstance(compiled[0], TemporalUNet)  # one network compiled, for those rows
+    assert all(r["compile_s"] > 0 for r in timed)
+    assert all(r["compile_s"] is None for r in rows if r["implementation"] != "compiled")
+    assert f"| compiled ({timed[0]['compile_s']:.0f} s) |" in "\n".join(format_throughput(rows))
+
+
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the second job needs a second core")
 def test_two_jobs_side_by_side(monkeypatch):
     import torch

@@ -49,7 +49,8 @@ class BenchConfig:
     """Seconds of training steps per figure of the two-jobs table: each maze's step with the other core quiet,
     spinning, or training the same step in another process (0: skip it; CPU devices with 2+ cores only)."""
     compile: bool = True
-    """Also time ``torch.compile``'d forward passes against eager ones (compilation takes minutes on a CPU)."""
+    """Also time ``torch.compile``'d forward passes against eager ones, and ``train --compile``'s step in the
+    training-throughput table (compilation takes minutes on a CPU)."""
     eval_run: str = ""
     """A trained run: time 200 of its umaze episodes at NFE 1, planning included."""
     budget_runs: tuple[str, ...] = ()
@@ -110,7 +111,8 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
         if bench.throughput_seconds:
             progress(f"[{preset}] training throughput")
             batches = bench.throughput_batch_sizes if preset == "cpu-small" else (32,)
-            result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev)
+            result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev,
+                                                               compiled=bench.compile)
         if bench.side_by_side_seconds and dev.type == "cpu" and (os.cpu_count() or 1) > 1:
             progress(f"[{preset}] two training jobs side by side")
             result["side_by_side"] += suites.side_by_side_training(preset, bench.side_by_side_seconds, dev)

@@ -79,9 +79,12 @@ def format_throughput(rows: list[dict]) -> list[str]:
              "maze; GFLOP/s count the network's forward and backward passes only (torch's FLOP counter), so they "
              "are a lower bound. The limit is the same run's 1024 x 1024 matmul and a 256 -> 256-channel, kernel-5 "
              "convolution on 64 x 256 states, in the same precision and threads. `reference` is the implementation "
-             "before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter loop).", ""]
+             "before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter loop); `compiled` "
+             "is `train --compile`'s step (the network through `torch.compile`), its first step compiling for the "
+             "seconds shown (an empty inductor cache; a cached compile of the same shape takes a fraction).", ""]
     body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"],
-             r["implementation"], r["threads"], r["busy_cores"], f"{r['step_ms']:.1f}", f"{r['windows_per_s']:.0f}",
+             r["implementation"] + (f" ({r['compile_s']:.0f} s)" if r.get("compile_s") else ""), r["threads"],
+             r["busy_cores"], f"{r['step_ms']:.1f}", f"{r['windows_per_s']:.0f}",
              f"{r['gflops']:.1f}", f"{r['limit_gflops']['matmul']:.0f} / {r['limit_gflops']['conv']:.0f}",
              f"{r['fraction_of_matmul']:.2f} / {r['fraction_of_conv']:.2f}"] for r in rows]
     return lines + table(["preset", "maze, plan shape", "batch", "precision", "implementation", "threads",

@@ -324,13 +324,16 @@ def with_torch_reference(job) -> None:
                 setattr(module, name, torch.nn.Mish())
 
 
-def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.device) -> list[dict]:
+def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.device,
+                        compiled: bool = False) -> list[dict]:
     """Training windows per second and achieved GFLOP/s of ``train.py``'s own step, per maze shape, batch and
     precision, at one thread and at one per core, quiet and with another core busy; beside each, the machine's
     limit in the same precision and threads (``machine_limit``) and the fraction of it achieved.
 
     ``reference`` rows run the implementation bridgeplan had before its own Mish and the fused Adam, at batch
-    32 in float32: the speed-up of today's code over it is measured in the same run.
+    32 in float32: the speed-up of today's code over it is measured in the same run. ``compiled`` adds rows of
+    ``train --compile``'s step (``torch.compile`` of the network, in float32) at each batch, with the seconds its
+    first step took to compile from an empty inductor cache.
     """
     from bridgeplan.train import bf16_supported
 
@@ -339,15 +342,25 @@ def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.dev
     precisions = ["fp32"] + (["bf16"] if bf16_supported(dev) else [])
     dtypes = {"fp32": torch.float32, "bf16": torch.bfloat16}
     limits = {(t, p): machine_limit(t, dtypes[p], dev) for t in threads_list for p in precisions}
-    settings = [(b, p, False) for b in batch_sizes for p in precisions] + [(32, "fp32", True)]
+    settings = [(b, p, "bridgeplan") for b in batch_sizes for p in precisions] + [(32, "fp32", "reference")] + \
+        ([(b, "fp32", "compiled") for b in batch_sizes] if compiled else [])
     before = torch.get_num_threads()
     rows = []
     try:
         for maze in THROUGHPUT_MAZES:
-            for batch, precision, reference in settings:
-                config = preset_config(maze, preset, batch_size=batch, precision=precision)
+            for batch, precision, implementation in settings:
+                config = preset_config(maze, preset, batch_size=batch, precision=precision,
+                                       compile=implementation == "compiled")
                 flops = step_flops(config, dev) * config.grad_accum
-                train_step, _ = _train_step(config, dev, reference=reference)
+                compile_s = None
+                if config.compile:
+                    torch._dynamo.reset()  # a fresh compile each time, under dynamo's limit of compiles per function
+                    torch.set_num_threads(threads_list[0])
+                    with empty_inductor_cache():
+                        train_step, _ = _train_step(config, dev)
+                        compile_s = timed(train_step, dev)  # the first step compiles
+                else:
+                    train_step, _ = _train_step(config, dev, reference=implementation == "reference")
                 for busy in ((0, 1) if dev.type == "cpu" and cores > 1 else (0,)):
                     with busy_cores(busy):
                         for threads in threads_list:
@@ -357,7 +370,7 @@ def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.dev
                             rows.append({
                                 "preset": preset, "maze": maze, "horizon": config.horizon, "stride": config.stride,
                                 "batch": batch, "grad_accum": config.grad_accum, "precision": precision,
-                                "implementation": "reference" if reference else "bridgeplan",
+                                "implementation": implementation, "compile_s": compile_s,
                                 "threads": threads, "busy_cores": busy, "step_ms": 1000 * step_s,
                                 "windows_per_s": batch * config.grad_accum / step_s,
                                 "gflop_per_step": flops / 1e9, "gflops": flops / step_s / 1e9,
@@ -365,6 +378,8 @@ def training_throughput(preset: str, batch_sizes, seconds: float, dev: torch.dev
                                 "fraction_of_conv": flops / step_s / 1e9 / limit["conv"]})
     finally:
         torch.set_num_threads(before)
+        if compiled:
+            torch._dynamo.reset()
     return rows
 
 
