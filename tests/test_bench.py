@@ -164,7 +164,7 @@ def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     assert f"| compiled ({timed[0]['compile_s']:.0f} s) |" in "\n".join(format_throughput(rows))
 
 
-@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the second job needs a second core")
+@pytest.mark.skipif((os.cpu_count() or 1) < 2 or os.name != "posix", reason="a second core; POSIX signals")
 def test_two_jobs_side_by_side(monkeypatch):
     import torch
 
@@ -172,9 +172,14 @@ def test_two_jobs_side_by_side(monkeypatch):
     from bridgeplan.bench.markdown import format_side_by_side
 
     monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("umaze",))  # one shape, one batch (cpu-small's 32)
-    rows = suites.side_by_side_training("cpu-small", 0.05, torch.device("cpu"))
-    assert [(r["maze"], r["batch"], r["other_core"]) for r in rows] == [
-        ("umaze", 32, "quiet"), ("umaze", 32, "spinning"), ("umaze", 32, "training")]
+    turns = []
+    real = suites.running_only
+    monkeypatch.setattr(suites, "running_only", lambda procs, running: turns.append(len(running)) or
+                        real(procs, running))
+    rows = suites.side_by_side_training("cpu-small", 0.06, torch.device("cpu"), rounds=2)
+    assert [(r["maze"], r["batch"], r["other_core"], r["rounds"]) for r in rows] == [
+        ("umaze", 32, "quiet", 2), ("umaze", 32, "spinning", 2), ("umaze", 32, "training", 2)]
+    assert turns == [0, 1, 1] * 2  # the settings alternate: nothing else running, then one other process
     for r in rows:
         assert r["windows_per_s"] == pytest.approx(32 * r["steps_per_s"])
         assert r["beside_over_alone"] == pytest.approx(r["steps_per_s"] / rows[0]["steps_per_s"])
@@ -194,6 +199,23 @@ def test_a_busy_process_is_waited_for_until_ready_and_one_that_dies_first_is_an_
     with pytest.raises(BridgeplanError, match="ended first"):
         with busy_cores(1, "raise SystemExit(3)"):
             pass
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="reads process states from Linux's /proc")
+def test_running_only_pauses_the_other_processes():
+    from bridgeplan.bench.harness import busy_cores, running_only
+
+    def state(p) -> str:  # R running, S sleeping, T stopped
+        with open(f"/proc/{p.pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+
+    with busy_cores(2) as procs:
+        running_only(procs, procs[:1])
+        assert state(procs[0]) in "RS" and state(procs[1]) == "T"
+        running_only(procs, [])
+        assert [state(p) for p in procs] == ["T", "T"]
+        running_only(procs, procs)
+        assert all(state(p) in "RS" for p in procs)
 
 
 def suites_bf16() -> bool:

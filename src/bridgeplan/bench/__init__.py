@@ -47,7 +47,8 @@ class BenchConfig:
     a batch of 256 takes seconds per step on a CPU)."""
     side_by_side_seconds: float = 2.0
     """Seconds of training steps per figure of the two-jobs table: each maze's step with the other core quiet,
-    spinning, or training the same step in another process (0: skip it; CPU devices with 2+ cores only)."""
+    spinning, or training the same step in another process, alternating (0: skip it; CPU devices with 2+ cores,
+    POSIX only: the other processes are paused between turns)."""
     compile: bool = True
     """Also time ``torch.compile``'d forward passes against eager ones, and ``train --compile``'s step in the
     training-throughput table (compilation takes minutes on a CPU)."""
@@ -113,7 +114,7 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
             batches = bench.throughput_batch_sizes if preset == "cpu-small" else (32,)
             result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev,
                                                                compiled=bench.compile)
-        if bench.side_by_side_seconds and dev.type == "cpu" and (os.cpu_count() or 1) > 1:
+        if bench.side_by_side_seconds and dev.type == "cpu" and (os.cpu_count() or 1) > 1 and os.name == "posix":
             progress(f"[{preset}] two training jobs side by side")
             result["side_by_side"] += suites.side_by_side_training(preset, bench.side_by_side_seconds, dev)
         if bench.compile:

@@ -101,8 +101,8 @@ SPIN = "while True: pass"
 
 @contextlib.contextmanager
 def busy_cores(n: int, code: str = SPIN):
-    """``n`` other processes running Python ``code`` (by default spinning); ``code`` that prints a line when it is
-    ready (a training job after its warm-up step, say) is waited for until it has."""
+    """``n`` other processes running Python ``code`` (by default spinning), yielded; ``code`` that prints a line when
+    it is ready (a training job after its warm-up step, say) is waited for until it has."""
     import subprocess
     import sys
 
@@ -115,8 +115,17 @@ def busy_cores(n: int, code: str = SPIN):
                 if not p.stdout.readline():
                     raise BridgeplanError(f"bench: the process meant to keep a core busy ended first: {code!r}")
         time.sleep(0.5)  # let the scheduler see them
-        yield
+        yield procs
     finally:
         for p in procs:
             p.kill()
             p.wait()
+
+
+def running_only(procs, running) -> None:
+    """Let the processes in ``running`` run and hold the other ``procs`` stopped (SIGSTOP / SIGCONT: POSIX)."""
+    import signal
+
+    for p in procs:
+        p.send_signal(signal.SIGCONT if p in running else signal.SIGSTOP)
+    time.sleep(0.2)  # let the scheduler see the change

@@ -97,7 +97,8 @@ def format_side_by_side(rows: list[dict]) -> list[str]:
     lines = ["", "## Two jobs side by side", "",
              "`train.py`'s step at each maze's plan shape, one torch thread, with the other core quiet, spinning (a "
              "Python loop) or training the same step in another process (one thread): the two jobs of a `--workers "
-             "2` study. `beside / alone`: the rate beside the other process over the quiet one.", ""]
+             "2` study. The three settings alternate, medians over the rounds; `beside / alone`: the rate beside the "
+             "other process over the quiet one.", ""]
     body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"], r["other_core"],
              f"{r['steps_per_s']:.1f}", f"{r['windows_per_s']:.0f}", f"{r['beside_over_alone']:.2f}"] for r in rows]
     return lines + table(["preset", "maze, plan shape", "batch", "precision", "other core", "steps/s", "windows/s",

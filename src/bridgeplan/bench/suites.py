@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import statistics
 import time
 from pathlib import Path
 
@@ -13,11 +14,11 @@ import numpy as np
 import torch
 
 from bridgeplan.bench.harness import (
-    SPIN,
     busy_cores,
     empty_inductor_cache,
     interleaved_ratios,
     median_seconds,
+    running_only,
     timed,
 )
 from bridgeplan.config import TrainConfig, preset_config
@@ -394,34 +395,39 @@ def train_until_killed(maze: str, preset: str, batch: int) -> None:
         train_step()
 
 
-def side_by_side_training(preset: str, seconds: float, dev: torch.device) -> list[dict]:
+def side_by_side_training(preset: str, seconds: float, dev: torch.device, rounds: int = 5) -> list[dict]:
     """Training windows/s of ``train.py``'s step at each maze's plan shape, at batch 32 and the preset's own, one
     thread, with the other core quiet, spinning (a Python loop), or training the same step in another process: how
-    two jobs of a ``--workers 2`` study share a machine, against one job alone."""
+    two jobs of a ``--workers 2`` study share a machine, against one job alone. The three settings alternate over
+    ``rounds`` rounds (the other processes stopped and resumed, not restarted), each ``seconds / rounds`` long, so
+    that a slow patch of the machine does not land on one of them only; medians over the rounds."""
     rows = []
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
         for maze in THROUGHPUT_MAZES:
             for batch in sorted({32, preset_config(maze, preset).batch_size}):
-                rows += _side_by_side_rows(preset_config(maze, preset, batch_size=batch), seconds, dev)
+                rows += _side_by_side_rows(preset_config(maze, preset, batch_size=batch), seconds, rounds, dev)
     finally:
         torch.set_num_threads(before)
     return rows
 
 
-def _side_by_side_rows(config: TrainConfig, seconds: float, dev: torch.device) -> list[dict]:
+def _side_by_side_rows(config: TrainConfig, seconds: float, rounds: int, dev: torch.device) -> list[dict]:
     train_step, _ = _train_step(config, dev)
     second_job = (f"from bridgeplan.bench.suites import train_until_killed; "
                   f"train_until_killed({config.maze!r}, {config.preset!r}, {config.batch_size})")
-    rows, alone_s = [], None
-    for other, n, code in (("quiet", 0, SPIN), ("spinning", 1, SPIN), ("training", 1, second_job)):
-        with busy_cores(n, code):
-            step_s = _seconds_per_call(train_step, seconds, dev)
-        alone_s = alone_s or step_s  # the first setting is the quiet one
-        rows.append({"preset": config.preset, "maze": config.maze, "horizon": config.horizon,
-                     "stride": config.stride, "batch": config.batch_size, "precision": config.precision,
-                     "other_core": other, "steps_per_s": 1 / step_s,
-                     "windows_per_s": config.batch_size * config.grad_accum / step_s,
-                     "beside_over_alone": alone_s / step_s})
-    return rows
+    step_s: dict[str, list[float]] = {"quiet": [], "spinning": [], "training": []}
+    with busy_cores(1) as spin, busy_cores(1, second_job) as job:
+        others = spin + job
+        running = {"quiet": [], "spinning": spin, "training": job}
+        for _ in range(rounds):
+            for other, procs in running.items():
+                running_only(others, procs)
+                step_s[other].append(_seconds_per_call(train_step, seconds / rounds, dev))
+    alone_s = statistics.median(step_s["quiet"])
+    return [{"preset": config.preset, "maze": config.maze, "horizon": config.horizon, "stride": config.stride,
+             "batch": config.batch_size, "precision": config.precision, "other_core": other, "rounds": rounds,
+             "steps_per_s": 1 / statistics.median(times),
+             "windows_per_s": config.batch_size * config.grad_accum / statistics.median(times),
+             "beside_over_alone": alone_s / statistics.median(times)} for other, times in step_s.items()]
