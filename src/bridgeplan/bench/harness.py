@@ -95,14 +95,14 @@ def empty_inductor_cache():
                 os.environ["TORCHINDUCTOR_CACHE_DIR"] = previous
 
 
-SPIN = "while True: pass"
+SPIN = "print('ready', flush=True)\nwhile True: pass"
 """Python source of a process that keeps one core busy and nothing else (a laptop's browser, say)."""
 
 
 @contextlib.contextmanager
 def busy_cores(n: int, code: str = SPIN):
-    """``n`` other processes running Python ``code`` (by default spinning), yielded; ``code`` that prints a line when
-    it is ready (a training job after its warm-up step, say) is waited for until it has."""
+    """``n`` other processes running Python ``code`` (by default spinning), yielded once each has printed a line
+    to say it is ready (a training job after its warm-up step, say)."""
     import subprocess
     import sys
 
@@ -110,10 +110,9 @@ def busy_cores(n: int, code: str = SPIN):
     procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
              for _ in range(n)]
     try:
-        if code != SPIN:
-            for p in procs:
-                if not p.stdout.readline():
-                    raise BridgeplanError(f"bench: the process meant to keep a core busy ended first: {code!r}")
+        for p in procs:
+            if not p.stdout.readline():
+                raise BridgeplanError(f"bench: the process meant to keep a core busy ended first: {code!r}")
         time.sleep(0.5)  # let the scheduler see them
         yield procs
     finally:
