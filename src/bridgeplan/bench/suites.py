@@ -417,10 +417,10 @@ def _side_by_side_rows(config: TrainConfig, seconds: float, rounds: int, dev: to
     train_step, _ = _train_step(config, dev)
     second_job = (f"from bridgeplan.bench.suites import train_until_killed; "
                   f"train_until_killed({config.maze!r}, {config.preset!r}, {config.batch_size})")
-    step_s: dict[str, list[float]] = {"quiet": [], "spinning": [], "training": []}
     with busy_cores(1) as spin, busy_cores(1, second_job) as job:
         others = spin + job
         running = {"quiet": [], "spinning": spin, "training": job}
+        step_s: dict[str, list[float]] = {other: [] for other in running}
         for _ in range(rounds):
             for other, procs in running.items():
                 running_only(others, procs)
