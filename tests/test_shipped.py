@@ -170,6 +170,33 @@ def test_export_makes_the_files_and_the_manifest_from_a_study(tiny_dataset, tmp_
         assert torch.equal(a, b)  # the shipped weights are the evaluated snapshot's
     assert info.step == 2 and list(shipped.manifest()) == ["umaze"]
 
+    # --only: one planner remade, the others' files and entries kept as they are (their runs need not be here)
+    other = TINY.format(dataset=tiny_dataset).replace('maze = "umaze"', 'maze = "medium"', 1)
+    (root / "studies" / "other.toml").write_text(other)
+    (root / "studies" / "ship.toml").write_text('uses = ["other", "tiny"]\n')
+    kept = dict(entry, name="medium", maze="medium", file="medium.pt", study="studies/other.toml")
+    shutil.copy(out / "umaze.pt", out / "medium.pt")
+    (out / "manifest.json").write_text(json.dumps({"made_by": "earlier", "planners": [kept]}))
+    before = (out / "umaze.pt").read_bytes()
+    (out / "umaze.pt").unlink()
+    assert main(["planners", "export", "--study", "ship", "--root", str(root), "--out", str(out),
+                 "--only", "umaze"]) == 0
+    said = capsys.readouterr().out
+    assert "kept medium.pt (medium: as shipped" in said and "wrote umaze.pt (umaze: flow (line)" in said
+    made = json.loads((out / "manifest.json").read_text())["planners"]
+    assert [e["name"] for e in made] == ["medium", "umaze"] and made[0] == kept
+    assert (out / "umaze.pt").read_bytes() == before  # the same snapshot, remade
+    assert main(["planners", "export", "--study", "ship", "--root", str(root), "--out", str(out),
+                 "--only", "large"]) == 2
+    assert "no shipped planner named large: choose from medium, umaze" in capsys.readouterr().err
+    (out / "medium.pt").write_bytes(b"damaged")
+    manifest_text = (out / "manifest.json").read_text()
+    (out / "umaze.pt").unlink()
+    assert main(["planners", "export", "--study", "ship", "--root", str(root), "--out", str(out),
+                 "--only", "umaze"]) == 2
+    assert "medium would be kept as shipped, but" in capsys.readouterr().err
+    assert not (out / "umaze.pt").exists() and (out / "manifest.json").read_text() == manifest_text  # nothing written
+
 
 def test_the_report_looks_the_shipped_rows_up_at_the_headlines_choice(tmp_path):
     """Each line is the headline's chosen setting (read from its rows) with the shipped run's row there; a setting

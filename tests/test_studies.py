@@ -37,7 +37,7 @@ def test_committed_studies_parse_into_dataclasses():
 
 
 @pytest.mark.parametrize("name", ["medium-v2-curves", "large-v2-curves", "umaze-v2-hold", "large-v2-batch256",
-                                  "large-v2-batch256-fp32"])
+                                  "large-v2-batch256-fp32", "large-v2-batch256-controllers"])
 def test_a_campaign_study_lists_every_committed_evaluation(name):
     """With no store, the dry run lists the committed CSV's evaluations, each computed once, and every experiment
     shows exactly the evaluations the CSV says it shows: the study file encodes the campaign that made them."""
@@ -140,6 +140,20 @@ def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
     assert main(["study", "report", "headline", "--root", str(root)]) == 2
     assert "never closes" in capsys.readouterr().err
     assert readme.read_text() == text.replace(end, "")
+
+
+def test_the_headline_reads_the_stores_its_study_uses():
+    """Each maze's headline rows come from studies headline.toml declares (so `study list` and the reports'
+    dependencies say where they come from), and every store read exists: a renamed folder is not skipped quietly."""
+    from bridgeplan.studies.reports import headline
+
+    studies = load_studies(REPO)
+    used = {REPO / "docs" / "results" / studies[name].data_dir / "results.csv" for name in studies["headline"].uses}
+    for maze in headline.MAZES:
+        paths = headline.paths(REPO / "docs" / "results", maze)
+        assert all(p.exists() for p in paths) and set(paths) <= used, maze
+    assert [p.parent.name for p in headline.paths(REPO / "docs" / "results", "large")] == [
+        "large-v2-batch256-controllers"]
 
 
 def test_study_report_check_fails_when_a_report_is_missing(tmp_path, capsys):

@@ -229,6 +229,8 @@ def _add_planners_commands(sub) -> None:
                     help="the study whose used studies train the shipped planners (default: shipped)")
     ex.add_argument("--root", default=None, help="the repository root (holds studies/, docs/results/ and results/)")
     ex.add_argument("--out", default=None, help="output folder (default: ROOT/src/bridgeplan/shipped)")
+    ex.add_argument("--only", nargs="+", default=(), metavar="NAME",
+                    help="remake only these planners; the others keep their files and manifest entries")
     p.set_defaults(func=_cmd_planners_list, json=False)
     ls.set_defaults(func=_cmd_planners_list)
     ex.set_defaults(func=_cmd_planners_export)
@@ -259,7 +261,10 @@ def _cmd_planners_export(args) -> int:
     from bridgeplan.studies.ship import ship
 
     root = find_root(args.root)
-    for e in ship(root, args.study, Path(args.out) if args.out else None):
+    for e in ship(root, args.study, Path(args.out) if args.out else None, tuple(args.only)):
+        if args.only and e.name not in args.only:
+            print(f"kept {e.file} ({e.name}: as shipped, sha256 {e.sha256[:12]}...)")
+            continue
         print(f"wrote {e.file} ({e.name}: {e.method} on {e.maze}, {e.run} step {e.step}, code {e.code_version}, "
               f"{e.bytes} bytes, sha256 {e.sha256[:12]}...)")
     print(f"wrote {shipped.MANIFEST}")

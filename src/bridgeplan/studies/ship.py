@@ -17,16 +17,20 @@ from bridgeplan.experiments.runner import _train_config
 from bridgeplan.files import atomic_write_text
 from bridgeplan.layout import runs_dir, snapshot_path
 from bridgeplan.runs import build_model
-from bridgeplan.shipped import MANIFEST, STUDY, ShippedPlanner, sha256
+from bridgeplan.shipped import MANIFEST, STUDY, ShippedPlanner, manifest, sha256
 from bridgeplan.studies import load_studies, select
 from bridgeplan.studies.plan import Scale, build_experiment, results_dir, sweeps
 
 
-def ship(root: Path, study_name: str = STUDY, out: Path | None = None) -> list[ShippedPlanner]:
+def ship(root: Path, study_name: str = STUDY, out: Path | None = None,
+         only: tuple[str, ...] = ()) -> list[ShippedPlanner]:
     """Make the shipped files from ``study_name``'s used studies (each trains one run: one method, one seed) in
     ``root/results``: per study, its run's final snapshot reduced to what inference needs, named after the maze, and
     the manifest; into ``out`` (default ``root/src/bridgeplan/shipped``). Refuses a run short of its steps, trained
-    at uncommitted code, or whose final snapshot has no committed rows in the study's results.csv."""
+    at uncommitted code, or whose final snapshot has no committed rows in the study's results.csv.
+
+    ``only``: remake just these planners (by name); the others keep their files and manifest entries, which must be
+    in ``out`` and intact (so one maze is re-shipped without the other mazes' runs at hand)."""
     import torch
 
     root = Path(root).resolve()
@@ -35,9 +39,13 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None) -> list[S
     top = select(studies, [study_name], root)[0]
     if not top.uses:
         raise BridgeplanError(f"study {top.name} uses no studies: nothing to ship")
-    entries, files = [], {}
+    kept = _kept(out, [studies[u].dataset.maze for u in top.uses], only)
+    entries = []
     for used in top.uses:
         study = studies[used]
+        if study.dataset.maze in kept:
+            entries.append(kept[study.dataset.maze])
+            continue
         runs = {r for i in range(len(study.experiments)) for r in build_experiment(study, i).runs()}
         if len(runs) != 1 or len(study.training.seeds) != 1:
             raise BridgeplanError(f"study {study.name} trains {len(runs)} methods x {len(study.training.seeds)} "
@@ -70,7 +78,6 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None) -> list[S
         name = study.dataset.maze
         file = out / f"{name}.pt"
         save_checkpoint(file, shipped)
-        files[name] = file
         entries.append(ShippedPlanner(
             name=name, maze=study.dataset.maze, method=loaded.label(), process=loaded.process.name,
             prior=loaded.prior, study=str(study.file), rows=str(rows_csv), run=config.run_name(), seed=seed,
@@ -81,6 +88,27 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None) -> list[S
         "made_by": f"bridgeplan planners export --study {top.name}",
         "planners": [asdict(e) for e in entries]}, indent=2) + "\n")
     return entries
+
+
+def _kept(out: Path, names: list[str], only: tuple[str, ...]) -> dict[str, ShippedPlanner]:
+    """The manifest entries in ``out`` of the planners not in ``only`` (none when ``only`` is empty), each checked
+    against its file before anything is written."""
+    if not only:
+        return {}
+    unknown = sorted(set(only) - set(names))
+    if unknown:
+        raise BridgeplanError(f"no shipped planner named {', '.join(unknown)}: choose from {', '.join(names)}")
+    shipped = manifest(out)
+    kept = {}
+    for name in names:
+        if name in only:
+            continue
+        entry = shipped.get(name)
+        if entry is None or not (out / entry.file).exists() or sha256(out / entry.file) != entry.sha256:
+            raise BridgeplanError(f"{name} would be kept as shipped, but {out} has no intact {name} file in its "
+                                  f"manifest: export it too (leave it out of --only)")
+        kept[name] = entry
+    return kept
 
 
 def _check_rows(csv_path: Path, run_name: str, step: int) -> None:

@@ -7,10 +7,10 @@ task set and split; the test episodes are evaluation seed = training seed, the v
 study runner's). A setting is the two levels' methods and NFEs and the execution; per family (the levels' methods
 and shapes) the setting with the best mean validation score is chosen and reported on the test episodes. "Coarse
 alone" is the same coarse plans, densified and pursued open loop: the paired difference says what the low level
-adds. The flat planner is the headline's best pursued one (docs/results/<maze>-v2-*/results.csv, chosen on
-validation, its final snapshot), or in the stitching section the best of its own flat planners (trained on the same
-pieces), paired by training seed on the same test episodes. Issue 26's goal on large:
-success >= 0.98 and a Minari score >= 104.
+adds. The flat planner is the best pursued one of the maze's batch-32 stores, the levels' batch
+(docs/results/<maze>-v2-{curves,hold,consistent-priors}/results.csv, chosen on validation, its final snapshot), or
+in the stitching section the best of its own flat planners (trained on the same pieces), paired by training seed on
+the same test episodes. Issue 26's goal on large: success >= 0.98 and a Minari score >= 104.
 
 Made by `bridgeplan study report hierarchy` (studies/large-hierarchy.toml) into docs/results/hierarchy.md and
 the README's block.
@@ -30,7 +30,7 @@ from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
 from bridgeplan.studies.reports.headline import STORES, candidates, describe, expert_scores
 
 READS = ()
-"""Its rows are `bridgeplan hierarchy eval` JSONs (and the flat stores the headline reads)."""
+"""Its rows are `bridgeplan hierarchy eval` JSONs (and the maze's batch-32 flat stores)."""
 SECTIONS = {"large": ("large", "large"),
             "large-stitch": ("large", "large from 200-step pieces (stitching)")}
 """Each section's folder prefix (docs/results/<prefix>-hierarchy, <prefix>-hierarchy-flat) -> (maze, heading). The
@@ -164,7 +164,7 @@ def chosen_settings(rows: list[dict], multi_task: bool) -> dict[str, str]:
 
 def flat_best(root: Path, section: str, multi_task: bool):
     """The best pursued flat planner: (description, {seed: test score}, {seed: success}). The stitching section's:
-    of its own (-flat folder), chosen on validation; the others': the headline's, trained on the full stream."""
+    of its own (-flat folder), chosen on validation; the others': the batch-32 stores', trained on the full stream."""
     maze = SECTIONS[section][0]
     if section != maze:
         rows = [r for r in read_high_alone(root, section) if bool(r["multi_task"]) == multi_task]

@@ -32,7 +32,7 @@ READS = (method("flow", "line", steps=16), method("ddpm", steps=16))
 
 def headline_choice(root: Path, maze: str, multi_task: bool, pursued: bool) -> tuple[Results, Point | None]:
     """The headline's rows of ``maze`` and its chosen point (chosen on validation, as headline.md's)."""
-    results = load_csvs(root / f"{maze}-v2-{store}" / "results.csv" for store in headline.STORES)
+    results = headline.load(root, maze)
     return results, best(results, headline.candidates(results, multi_task, pursued))
 
 
