@@ -191,7 +191,8 @@ def test_every_committed_csv_is_read_in_todays_schema():
             assert r.split == x["split"] == ("validation" if int(x["eval_seed"]) >= 1000 else "test")
             if x["network_calls_per_plan"]:
                 assert r.network_calls == float(x["network_calls_per_plan"]) >= r.nfe
-                assert r.plan_dynamics == float(x["plan_dynamics_rms"]) > 0
+                if not r.key.execution.replan_every:  # the plans' residuals are measured open loop only
+                    assert r.plan_dynamics == float(x["plan_dynamics_rms"]) > 0
 
 
 OLD_SCHEMAS = {  # the committed CSVs' headers before the store was keyed by evaluation (one row per experiment)

@@ -211,6 +211,15 @@ def test_the_report_looks_the_shipped_rows_up_at_the_headlines_choice(tmp_path):
     for e in found:
         assert e["row"] is not None and e["row"].key == e["key"] and e["row"].nfe == e["nfe"]
         assert e["shipped"] == f"{e['row'].score:.1f} ± {e['row'].score_se:.1f} ({e['row'].success:.2f})"
+    # large's shipped run is the headline's seed-0 run (copied: equal rows); umaze's and medium's were retrained
+    assert [report.same_run(found, m) for m in NAMES] == [False, False, True]
+    assert "seeds 0-2, seed 0 is this run" in report.block(root) and "seeds 0-2, not this run" in report.block(root)
+    path = root / "shipped" / "large" / "results.csv"
+    text = path.read_text()
+    score = str(next(e for e in found if e["maze"] == "large")["row"].score)
+    path.write_text(text.replace(score, str(float(score) + 0.5), 1))  # one setting's evaluation differs
+    assert not report.same_run(report.entries(root), "large")
+    path.write_text(text)
     drop = next(e for e in found if e["maze"] == "medium" and e["pursued"] and not e["multi_task"])
     path = root / "shipped" / "medium" / "results.csv"
     with open(path) as f:
