@@ -31,9 +31,9 @@ MAZES = ("umaze", "medium", "large")
 STORES = ("curves", "hold", "consistent-priors")
 """A maze's batch-32 stores (docs/results/<maze>-v2-<store>), in order of precedence (as the findings report's)."""
 HEADLINE_STORES = {"umaze": STORES, "medium": STORES, "large": ("batch256-controllers",)}
-"""The stores each maze's rows come from. Large's are at cpu-small's batch 256 / lr 3e-3, which beat batch 32 by
-10 points at equal wall-clock there (docs/results/throughput-wallclock.md); at medium the two tied, and medium's
-batch-32 stores hold more methods (holds, consistent priors)."""
+"""The stores each maze's rows come from. Large's are at cpu-small's batch 256 / lr 3e-3, which beat batch 32 at
+equal wall-clock there (docs/results/throughput-wallclock.md); at medium the two tied, and medium's batch-32 stores
+hold more methods (holds, consistent priors)."""
 EXPERT = "expert-on-eval-tasks.json"
 READS = (method("ddpm", steps=16), method("bridge", "line", steps=16))
 """The trained methods every maze's rows have."""
