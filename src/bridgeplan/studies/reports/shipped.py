@@ -1,6 +1,6 @@
 """docs/results/shipped.md: the shipped planners (src/bridgeplan/shipped/) and their own scores.
 
-Each shipped planner is one training run (seed 0) of the headline's method on its maze, retrained at the config of
+Each shipped planner is one training run (seed 0) of the headline's method on its maze, at the config of
 the study the headline chose it from (studies/shipped-<maze>.toml), and evaluated at the headline's chosen settings
 (the best tracked and the best pursued planner, single-task and Multi2D) on the 200 test episodes of seed 0. Its
 rows: docs/results/shipped/<maze>/results.csv. Beside each, the headline's own score (mean ± standard error over 3
@@ -138,7 +138,7 @@ def files_table(found: list[dict]) -> list[str]:
 
     planners = shipped.manifest()
     rows = [[e.name, e.maze, e.method, e.step, e.seed, f"{e.parameters:,}", f"{e.bytes / 1e6:.2f} MB",
-             f"`{e.study}`", e.code_version, "yes (equal rows)" if same_run(found, e.maze) else "no (retrained)",
+             f"`{e.study}`", e.code_version, "yes (equal rows)" if same_run(found, e.maze) else "no (rows differ)",
              f"`{e.sha256[:16]}`"] for e in planners.values()]
     return table(["name", "maze", "method", "training step", "training seed", "parameters", "file",
                   "study", "trained at code", "the headline's run of that seed", "sha256 (first 16)"], rows)
@@ -159,8 +159,8 @@ def render(root: Path) -> str:
         "Each shipped planner is ONE training run (seed 0) of the headline's method on its maze, at the config of "
         "the study the headline chose it from (cpu-small, dataset version 2 of 1 M steps, the same batch, optimizer "
         "steps and hold share). Where its rows equal the headline's seed-0 rows at every setting it is that run "
-        "(the files' column says so); otherwise it was retrained and did not reproduce that run bit for bit. It is "
-        "evaluated at the headline's chosen settings (chosen on "
+        "(the files' column says so); otherwise it is another run of that config, retrained, which did not "
+        "reproduce that run bit for bit. It is evaluated at the headline's chosen settings (chosen on "
         "validation episodes from the headline's rows, read here, not copied) on the 200 test episodes of seed 0: "
         "its Minari score ± standard error over those episodes (success rate), beside the headline's mean ± "
         "standard error over 3 training seeds. `bridgeplan eval NAME` with the flags shown evaluates the same "
