@@ -567,8 +567,10 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--presets", help="comma-separated presets to time")
     p.add_argument("--batch-sizes", help="comma-separated plans per call")
     p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
+    p.add_argument("--methods", help="comma-separated methods of the latency and overhead tables, named as there "
+                                     "(default: all)")
     p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
-    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio")
+    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio (0: skip them)")
     p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
     p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
     p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
@@ -580,6 +582,7 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
     p.add_argument("--throughput-seconds", type=float,
                    help="seconds of training per figure of the training-throughput table (0: skip)")
+    p.add_argument("--throughput-batch-sizes", help="comma-separated batches of the training-throughput table")
     p.add_argument("--side-by-side-seconds", type=float,
                    help="seconds of training per figure of the two-jobs table (0: skip)")
     p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
@@ -591,12 +594,13 @@ def _cmd_bench(args) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
 
     given = {"presets": args.presets and tuple(args.presets.split(",")),
+             "methods": args.methods and tuple(args.methods.split(",")),
              "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
              "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
              "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
              "throughput_seconds": args.throughput_seconds, "side_by_side_seconds": args.side_by_side_seconds,
              "compile": False if args.no_compile else None}
-    for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
+    for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
         text = getattr(args, name)
         given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})

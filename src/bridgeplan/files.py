@@ -37,6 +37,11 @@ and the setup scripts. Their outputs (reports, CSVs, figures under docs/results)
 writes its report between two of its evaluations does not make the second one's code dirty."""
 
 
+COPIED_FROM_ENV = "BRIDGEPLAN_COPIED_FROM"
+"""Environment variable: the commit a copy of the tree without ``.git`` was made from (``scripts/gpu-check.sh``
+passes it); such a copy's code version reads ``<version>+<commit>.copy``."""
+
+
 def code_version() -> str:
     """The git commit of the code (with ``.dirty`` for uncommitted changes to :data:`CODE_PATHS`), or the
     package version."""
@@ -52,4 +57,6 @@ def code_version() -> str:
                                cwd=root, capture_output=True, text=True, timeout=5).stdout.strip()
         return f"{__version__}+{sha}{'.dirty' if dirty else ''}"
     except (OSError, subprocess.SubprocessError):
-        return __version__
+        # a copy of the tree without its git directory (a device machine's): the commit it says it was copied from
+        copied = os.environ.get(COPIED_FROM_ENV, "")
+        return f"{__version__}+{copied}.copy" if copied else __version__

@@ -82,6 +82,9 @@ GENERATORS = {g.name: g for g in [
     Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("README.md",)),
+    Generator("gpu", "bridgeplan.studies.reports.gpu", "gpu.md",
+              "the bench on a GPU beside the same figures on the CPU, and a short real run trained and evaluated there",
+              ("README.md",)),
     Generator("shipped", "bridgeplan.studies.reports.shipped", "shipped.md",
               "the shipped planners (one training run each of the headline's method): their files and their own "
               "scores at the headline's settings, beside the headline's", ("README.md",)),
