@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The GPU check: `bridgeplan bench` on a CUDA device, then a short real run (Diffuser's preset trained on medium
-# for a few minutes, evaluated on 200 episodes at NFE 1, 16 and the full 256, and timed at batch 1). About 7
+# The GPU check: a short real run (Diffuser's preset trained on medium
+# for a few minutes, evaluated on 200 episodes at NFE 1, 16 and the full 256, and timed at batch 1), then
+# `bridgeplan bench` on the CUDA device. About 7
 # minutes on one H200. Outputs (the bench's JSON and Markdown, the evaluation JSONs, a log) go to $OUT, else
 # gpu-check/; docs/results/gpu/README.md says how the committed ones were made.
 #
@@ -28,16 +29,6 @@ step machine
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv 2>/dev/null || echo "no nvidia-smi"
 python3 -c "import torch, bridgeplan.files as f; print('torch', torch.__version__, '| code', f.code_version())"
 
-step bench
-if [ -n "${SMALL:-}" ]; then  # a smoke test of the steps, not a measurement
-  sizes=(--batch-sizes 1,4 --nfes 1,2 --repeats 1 --overhead-repeats 1 --throughput-seconds 0)
-else
-  sizes=(--batch-sizes 1,64,1024 --nfes 1,16,64 --repeats 3 --overhead-repeats 10 --throughput-seconds 1.5
-         --throughput-batch-sizes 256,1024)
-fi
-bp bench --device "$device" --out "$out/bench" --presets cpu-small,diffuser --methods "DDPM [ancestral],bridge (line)" \
-  "${sizes[@]}" --busy-steps 0 --side-by-side-seconds 0 --no-compile > /dev/null || failed+=(bench)
-
 step "data (medium, 1 M steps, seed 123: the studies' dataset)"
 bp data generate --maze medium --steps "${DATA_STEPS:-1000000}" --seed 123 --out "$work/medium-1000000-v2" --no-progress \
   > /dev/null || failed+=(data)
@@ -53,6 +44,16 @@ for nfe in 1 16 256; do
 done
 bp eval "$work/run" --episodes 5 --batch-size 1 --nfe 256 --device "$device" --out "$out/eval-nfe256-batch1.json" \
   > /dev/null || failed+=(eval-batch1)
+
+step bench
+if [ -n "${SMALL:-}" ]; then  # a smoke test of the steps, not a measurement
+  sizes=(--batch-sizes 1,4 --nfes 1,2 --repeats 1 --overhead-repeats 1 --throughput-seconds 0)
+else
+  sizes=(--batch-sizes 1,64,1024 --nfes 1,16,64 --repeats 3 --overhead-repeats 10 --throughput-seconds 1.5
+         --throughput-batch-sizes 256,1024)
+fi
+bp bench --device "$device" --out "$out/bench" --presets cpu-small,diffuser --methods "DDPM [ancestral],bridge (line)" \
+  "${sizes[@]}" --busy-steps 0 --side-by-side-seconds 0 --no-compile > /dev/null || failed+=(bench)
 
 step "done${failed[*]:+; failed: ${failed[*]}}"
 [ ${#failed[@]} -eq 0 ]
