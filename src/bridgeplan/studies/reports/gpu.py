@@ -69,9 +69,13 @@ def latency_table(gpu: dict, cpus: list[dict]) -> list[str]:
         c = cpu.get(_latency_key(r))
         body.append([r["preset"], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.2f}",
                      f"{c['plan_ms']:.1f}" if c else "not timed",
-                     f"{c['plan_ms'] / r['plan_ms']:.0f}x" if c else ""])
+                     _ratio(c["plan_ms"] / r["plan_ms"]) if c else ""])
     return table(["preset", "method", "batch", "NFE", "GPU ms / plan call", "CPU ms / plan call", "GPU speed-up"],
                  body)
+
+
+def _ratio(x: float) -> str:
+    return f"{x:.0f}x" if x >= 10 else f"{x:.1f}x"
 
 
 def matmul_limits(bench: dict) -> dict[str, float]:
@@ -93,6 +97,11 @@ def throughput_table(gpu: dict, cpus: list[dict]) -> list[str]:
                   "GPU windows/s", "GPU TFLOP/s", "of the bf16 matmul", "CPU windows/s (1 thread)"], body)
 
 
+def scored(evals: dict[str, dict]) -> list[dict]:
+    """The evaluations that score the run: all its episodes planned in one batch (the batch-1 one only times a plan)."""
+    return sorted((e for e in evals.values() if e["batch_size"] == e["episodes"]), key=lambda e: e["nfe"])
+
+
 def run_lines(evals: dict[str, dict]) -> list[str]:
     """The real run's evaluations: its training (steps, minutes, windows/s in the real loop) and scores."""
     if not evals:
@@ -105,11 +114,11 @@ def run_lines(evals: dict[str, dict]) -> list[str]:
              f"{config['precision']}), trained for {first['train_seconds'] / 60:.1f} minutes on the GPU: "
              f"{first['step']:,} steps, {windows / first['train_seconds']:,.0f} windows/s in the training loop "
              f"(data `{config['dataset']}`).", ""]
-    body = [[e["nfe"], e["episodes"], e["batch_size"], f"{e['score']['minari']['mean']:.1f} ± "
-             f"{e['score']['minari']['se']:.1f}", f"{e['success_rate']['mean']:.2f}", f"{e['plan_ms_per_plan']:.1f}"]
-            for e in sorted(evals.values(), key=lambda e: (e["batch_size"], e["nfe"]))]
-    return lines + table(["NFE", "episodes", "plans per call", "score (Minari, mean ± SE over episodes)", "success",
-                          "ms per plan"], body)
+    body = [[e["nfe"], e["episodes"], f"{e['score']['minari']['mean']:.1f} ± {e['score']['minari']['se']:.1f}",
+             f"{e['success_rate']['mean']:.2f}", f"{e['plan_ms_per_plan']:.1f}",
+             f"{e['floor_line']['score']['minari']['mean']:.1f}"] for e in scored(evals)]
+    return lines + table(["NFE", "episodes (planned in one batch)", "score (Minari, mean ± SE over episodes)",
+                          "success", "ms per plan", "the straight line alone"], body)
 
 
 def diffuser_line(gpu: dict, evals: dict[str, dict]) -> str:
@@ -160,20 +169,22 @@ def render(root: Path) -> str:
 def block(root: Path) -> str:
     """The README's sentence on the device: what was measured on a GPU, and where."""
     gpu, _, evals = load(root)
-    best = {b: min((r for r in gpu["latency"] if r["batch"] == b and r["nfe"] == 1), key=lambda r: r["plan_ms"])
-            for b in (1, 1024) if any(r["batch"] == b for r in gpu["latency"])}
+    first = {b: next(r for r in gpu["latency"] if r["batch"] == b and r["nfe"] == 1)
+             for b in (1, 1024) if any(r["batch"] == b and r["nfe"] == 1 for r in gpu["latency"])}
     parts = [f"Measured on one {machine_line(gpu)} ([docs/results/gpu.md](docs/results/gpu.md)): a plan at NFE 1 takes "
-             + " and ".join(f"{r['plan_ms']:.1f} ms at batch {b}" for b, r in best.items())]
+             + " and ".join(f"{r['plan_ms']:.1f} ms at batch {b}" for b, r in first.items())
+             + f" ({next(iter(first.values()))['preset']}, {next(iter(first.values()))['method']})"]
+    line = diffuser_line(gpu, evals)
     if gpu["throughput"]:
-        fastest = max(gpu["throughput"], key=lambda r: r["windows_per_s"])
-        parts[0] += (f"; training reaches {fastest['windows_per_s']:,.0f} windows/s ({fastest['preset']}, "
-                     f"{fastest['maze']}, batch {fastest['batch']}, {fastest['precision']}; the same run's bf16 "
-                     f"matmul: {matmul_limits(gpu).get('bf16', 0) / 1000:.0f} TFLOP/s)")
-    scored = sorted(evals.values(), key=lambda e: e["nfe"])
-    batched = [e for e in scored if e["batch_size"] > 1]
-    if batched:
-        e = batched[0]
-        parts.append(f"Diffuser's preset trained {e['train_seconds'] / 60:.1f} minutes there on medium scores "
-                     + ", ".join(f"{x['score']['minari']['mean']:.1f} ± {x['score']['minari']['se']:.1f} at NFE "
-                                 f"{x['nfe']}" for x in batched) + f" ({e['episodes']} episodes)")
-    return "; ".join(parts) + "."
+        best = max(gpu["throughput"], key=lambda r: r["gflops"])
+        bf16 = matmul_limits(gpu).get("bf16")
+        parts.append(f"training reaches {best['gflops'] / 1000:.1f} TFLOP/s at best ({best['preset']}, {best['maze']}, "
+                     f"batch {best['batch']} x {best['grad_accum']}, {best['precision']}, {best['windows_per_s']:,.0f} "
+                     "windows/s)" + (f", {best['gflops'] / bf16:.0%} of the bf16 matmul rate measured in the same "
+                                     f"run ({bf16 / 1000:.0f} TFLOP/s)" if bf16 else ""))
+    runs = scored(evals)
+    if runs:
+        parts.append(f"Diffuser's preset trained {runs[0]['train_seconds'] / 60:.1f} minutes there on medium scores "
+                     + ", ".join(f"{e['score']['minari']['mean']:.1f} ± {e['score']['minari']['se']:.1f} at NFE "
+                                 f"{e['nfe']}" for e in runs) + f" ({runs[0]['episodes']} episodes)")
+    return "; ".join(parts) + "." + (f" {line}" if line else "")
