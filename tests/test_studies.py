@@ -75,7 +75,7 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
 
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert ("10 reports, 17 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
+    assert ("11 reports, 17 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
             "their studies" in capsys.readouterr().out)
     # a generator's name (as the markers and the errors say it) selects the studies whose reports it makes
     assert main(["study", "report", "cddb", "--check", "--root", str(REPO)]) == 0
