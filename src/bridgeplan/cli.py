@@ -61,7 +61,8 @@ def _cmd_study_list(args) -> int:
     from bridgeplan.studies import find_root, load_studies
     from bridgeplan.studies.reports import GENERATORS
 
-    for s in load_studies(find_root(args.root)).values():
+    studies = load_studies(find_root(args.root))
+    for s in studies.values():
         makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
                  ] if s.experiments else []
         folders = dict.fromkeys(e.out.split("/")[0] for e in s.evaluations)
@@ -70,7 +71,17 @@ def _cmd_study_list(args) -> int:
         makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
         makes += [f"docs/results/{r.output} (feeds {', '.join(GENERATORS[r.generator].feeds)})" for r in s.reports]
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
-    return 0
+    return _report_broken(studies, [])
+
+
+def _report_broken(studies, names: list[str]) -> int:
+    """A study command over every study (no ``names``) does the others' work, then says which files are broken:
+    one ``error:`` line each, exit 2; 0 when none is."""
+    if names:
+        return 0
+    for error in studies.broken.values():
+        print(f"error: {error}", file=sys.stderr)
+    return 2 if studies.broken else 0
 
 
 def _cmd_study_report(args) -> int:
@@ -119,7 +130,7 @@ def _cmd_study_report(args) -> int:
         fed = [output for output in texts if not output.startswith("docs/results/")]
         blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
         print(f"{reports} reports, {provenances} provenance files{blocks} match their studies")
-    return 2 if differ else 0
+    return max(2 if differ else 0, _report_broken(studies, args.names))
 
 
 def _read_or_empty(path: Path) -> str:
@@ -132,6 +143,7 @@ def _cmd_study_run(args) -> int:
         QUICK_NOTE,
         Scale,
         check_reports,
+        check_run,
         describe_missing,
         results_dir,
         run_study,
@@ -150,6 +162,7 @@ def _cmd_study_run(args) -> int:
     if args.workers is not None:
         positive("--workers", args.workers)
     chain = with_used(study, studies)  # the studies whose rows its reports read first: one command makes them all
+    check_run(chain, root, scale, args.backend, args.dry_run)
     if args.dry_run:
         print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0

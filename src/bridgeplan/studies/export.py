@@ -104,6 +104,7 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
     and its evaluation JSONs to their ``out`` paths; the files written."""
     from bridgeplan import layout
     from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.files import check_writable
     from bridgeplan.report import write_report
 
     store = layout.store_path(store_dir)
@@ -114,10 +115,11 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
                               f"`study import`) first")
-    out = committed_csv(study, root).parent
-    n = ResultsStore(store).export_csv(out / "results.csv")
-    if n == 0:
+    out = check_writable(committed_csv(study, root).parent, "committed results folder", folder=True)
+    results = ResultsStore(store)
+    if not results.rows():  # before the committed rows are overwritten
         raise BridgeplanError(f"{store} holds no evaluation yet")
+    results.export_csv(out / "results.csv")
     titles = {e.name + suffix: e.title for e in study.experiments if e.title for suffix in ("", "-validation")}
     report = write_report(Path(store_dir), out, titles)
     return [out / "results.csv", report, *sorted(out.glob("*.png"))]
@@ -126,16 +128,16 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
 def copy_jsons(study: Study, source: Path, target: Path) -> list[Path]:
     """The study's evaluation JSONs that exist under ``source`` copied to the same ``out`` paths under ``target``
     (each atomically); the files written. None there: an error."""
-    from bridgeplan.files import atomic_write_text
+    from bridgeplan.files import atomic_write_text, check_writable
     from bridgeplan.studies.commands import jobs
 
-    written = []
-    for job in jobs(study, source, source, quick=False):
-        if job.path.exists():
-            out = target / job.path.relative_to(source)
-            atomic_write_text(out, job.path.read_text())
-            written.append(out)
-    if not written:
+    found = [job.path for job in jobs(study, source, source, quick=False) if job.path.exists()]
+    if not found:
         raise BridgeplanError(f"no evaluation JSON of study {study.name} under {source}; run `bridgeplan study run "
                               f"{study.file}` (or `study import`) first")
-    return written
+    pairs = [(path, target / path.relative_to(source)) for path in found]
+    for folder in dict.fromkeys(out.parent for _, out in pairs):  # all of them before the first is written
+        check_writable(folder, "evaluations' folder", folder=True)
+    for path, out in pairs:
+        atomic_write_text(out, path.read_text())
+    return [out for _, out in pairs]

@@ -191,14 +191,20 @@ def trained_methods(study: Study) -> set:
 
 
 def check_reports(study: Study, studies: dict[str, Study]) -> None:
-    """Its ``uses`` name known studies, and each report's generator reads only methods that the study or the
-    studies it uses train."""
+    """Its ``uses`` name known studies that parse, with no cycle through them (itself included), and each report's
+    generator reads only methods that the study or the studies it uses train."""
     from bridgeplan.analysis.keys import label
     from bridgeplan.studies.reports import GENERATORS
 
+    broken = getattr(studies, "broken", {})
     for i, name in enumerate(study.uses):
         if name not in studies:
+            bad = [file for file in broken if Path(file).stem == name]
+            if bad:
+                raise StudyError(study.file, f"uses[{i}]", f"study {name!r} is broken ({bad[0]}: see its own error)")
             raise StudyError(study.file, f"uses[{i}]", f"unknown study {name!r} (known: {', '.join(sorted(studies))})")
+    if cycle := _cycle(study, studies):
+        raise StudyError(study.file, "uses", f"a study cannot read its own results: {' -> '.join(cycle)}")
     if not study.reports:
         return
     trained = set(trained_methods(study))
@@ -210,6 +216,21 @@ def check_reports(study: Study, studies: dict[str, Study]) -> None:
             raise StudyError(study.file, f"reports[{i}].generator",
                              f"{report.generator} reads {label(missing[0])} (N={missing[0].steps}), which neither "
                              f"{study.name} nor the studies it uses ({', '.join(study.uses) or 'none'}) train")
+
+
+def _cycle(study: Study, studies: dict[str, Study]) -> list[str]:
+    """The names along a path of ``uses`` from ``study`` back to itself ([] when there is none)."""
+    def walk(uses: tuple[str, ...], path: list[str], seen: set[str]) -> list[str]:
+        for used in uses:
+            if used == study.name:
+                return [*path, used]
+            if used not in seen and used in studies:
+                seen.add(used)
+                if found := walk(studies[used].uses, [*path, used], seen):
+                    return found
+        return []
+
+    return walk(study.uses, [study.name], set())
 
 
 # --- what is missing ---------------------------------------------------------------------------------------------
@@ -449,6 +470,24 @@ def with_used(study: Study, studies: dict[str, Study]) -> list[Study]:
 
     visit(study)
     return list(out.values())
+
+
+def check_run(chain: list[Study], root: Path, scale: Scale, backend: str = "local", dry_run: bool = False) -> None:
+    """What ``study run`` refuses before any work, for every study of ``chain`` (:func:`with_used`): an unknown
+    backend, and (unless a dry run, which writes nothing) a results folder or a dataset's folder that cannot be
+    written."""
+    from bridgeplan.experiments.runner import check_backend
+    from bridgeplan.files import check_writable
+
+    check_backend(backend)
+    if dry_run:
+        return
+    for s in chain:
+        if s.experiments or s.evaluations:
+            check_writable(results_dir(s, root, scale), "results folder", folder=True)
+            dataset = Path(root) / scale.apply(s).dataset.directory()
+            if not dataset.exists():
+                check_writable(dataset.parent, "dataset folder", folder=True)
 
 
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,

@@ -588,15 +588,24 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     from bridgeplan.studies.reports import GENERATORS
 
     try:
-        text = Path(path).read_text()
+        data = Path(path).read_bytes()
     except OSError as e:
         raise BridgeplanError(f"cannot read study {path}: {e.strerror or e}") from None
     stem = Path(path).stem
     path = Path(shown or path)
     try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise StudyError(path, "(encoding)", f"not UTF-8 text (TOML is): byte {e.start} is "
+                                             f"{data[e.start:e.start + 1]!r}") from None
+    try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise StudyError(path, "(syntax)", str(e)) from None
+    if not raw:
+        raise StudyError(path, "(file)", "empty: a study declares what it trains and evaluates ([dataset], "
+                                         "[[experiments]] or [[evaluations]]), or the studies it reads (uses) and "
+                                         "its [[reports]]")
     top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "runs",
            "evaluations", "reports"}
     _table(path, "", raw, top)
@@ -648,6 +657,9 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
                   training=training, evaluation=evaluation, methods=tuple(methods.values()),
                   experiments=experiments, runs=runs, evaluations=evaluations, reports=tuple(reports))
+    if not (experiments or evaluations or reports or uses):
+        raise StudyError(path, "(file)", "declares nothing to run or report: add [[experiments]] or [[evaluations]] "
+                                         "(with a [dataset]), or [[reports]] of the studies it uses")
     if (experiments or evaluations) and dataset is None:
         raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
     if experiments and dataset.generator != "expert":
