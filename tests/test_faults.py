@@ -151,6 +151,7 @@ def reference_run(tiny_dataset, tmp_path_factory) -> Path:
     return run
 
 
+@pytest.mark.slow
 def test_training_killed_at_any_moment_resumes_bit_identical(tiny_dataset, tmp_path, reference_run):
     run = tmp_path / "run"
     ckpt, snapshots = run / "checkpoint.pt", run / "snapshots"
@@ -249,6 +250,7 @@ def finished_sweep(tiny_dataset, tmp_path_factory) -> Path:
     return results
 
 
+@pytest.mark.slow
 def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, finished_sweep):
     args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     moments = [  # (while, condition)
@@ -279,6 +281,7 @@ def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, f
     print(f"sweep: {kills} kills survived, {lost} rows lost, {redone} redone")
 
 
+@pytest.mark.slow
 def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_dataset, tmp_path, finished_sweep):
     args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     r = cli(*args, "--workers", "2")
@@ -292,6 +295,7 @@ def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_datase
         assert {m: row[m] for m in measured} == {m: reference[key][m] for m in measured}, key
 
 
+@pytest.mark.slow
 def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
     # the same grid twice: both want to train the learned prior and the same four runs, and to
     # evaluate the same snapshots

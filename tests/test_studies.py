@@ -73,6 +73,7 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
     assert "headline has no committed rows to import" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
     assert ("10 reports, 17 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
@@ -492,6 +493,7 @@ out = "tiny-hierarchy/graph/{{tasks}}-seed{{eval_seed}}.json"
 """
 
 
+@pytest.mark.slow
 def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_dataset, tmp_path, capsys,
                                                                         monkeypatch):
     import json

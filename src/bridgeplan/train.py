@@ -293,7 +293,7 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
 
     writer = _tensorboard(run_dir)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {job.kind}",
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {run_dir.name}",
                unit="step", dynamic_ncols=True)
     model.train()
     last_saved = step
