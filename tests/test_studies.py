@@ -262,8 +262,9 @@ def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_pat
 
 
 def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_path, capsys):
-    """`study export`: the store's evaluations, a report and a figure into docs/results/NAME; `study report` then
-    writes its provenance (the study file's hash, the code versions), which `--check` holds to the study file."""
+    """`study export`: the store's evaluations, a report and a figure into docs/results/NAME, then the reports
+    regenerated, its provenance among them (the study file's hash, the code versions), which `--check` holds to the
+    study file."""
     import json
 
     root = tmp_path / "repo"
@@ -275,7 +276,8 @@ def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
     assert main(["study", "export", "tiny", "--root", str(root)]) == 0
     folder = root / "docs" / "results" / "tiny"
-    assert "wrote docs/results/tiny/results.csv" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "wrote docs/results/tiny/results.csv" in out and "wrote docs/results/tiny/study.json" in out
     rows = list(csv.DictReader((folder / "results.csv").open()))
     assert len(rows) == 4 and {r["experiments"] for r in rows} == {"tiny"}
     assert "## tiny" in (folder / "report.md").read_text() and (folder / "tiny.png").read_bytes()[:4] == b"\x89PNG"
@@ -302,8 +304,7 @@ def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_
     assert main(["study", "import", "tiny", "--experiment", "nope", "--eval-json", str(tmp_path / "nfe1.json"),
                  "--root", str(root)]) == 2
     assert "has no experiment 'nope'" in capsys.readouterr().err
-    assert main(["study", "report", "--check", "--root", str(root)]) == 2  # no provenance yet
-    assert main(["study", "report", "--root", str(root)]) == 0
+    assert main(["study", "report", "--check", "--root", str(root)]) == 0  # the export wrote the provenance
     record = json.loads((folder / "study.json").read_text())
     assert record["study"] == "studies/tiny.toml" and record["evaluations"] == 4 and record["training_seeds"] == [0]
     assert record["code_versions"] == [rows[0]["code_version"]] and record["code_versions"][0].startswith("0.1.0")

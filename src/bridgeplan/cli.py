@@ -85,14 +85,20 @@ def _report_broken(studies, names: list[str]) -> int:
 
 
 def _cmd_study_report(args) -> int:
-    from bridgeplan.files import atomic_write_text
     from bridgeplan.studies import find_root, load_studies, select
-    from bridgeplan.studies.export import provenance, provenance_path, stale_rows
-    from bridgeplan.studies.reports import GENERATORS
 
     root = find_root(args.root)
     studies = load_studies(root)
-    chosen = select(studies, args.names, root)
+    return _reports(root, studies, args.names, select(studies, args.names, root), args.check)
+
+
+def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -> int:
+    """Regenerate (or, ``check``, verify) the reports, provenance files and generated blocks of the ``chosen``
+    studies (every study when no ``names`` were given) from the committed rows; 2 when one differs."""
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.studies.export import provenance, provenance_path, stale_rows
+    from bridgeplan.studies.reports import GENERATORS
+
     results = root / "docs" / "results"
     texts = {}  # file (relative to root) -> (the studies that change it, text): nothing written unless all render
     for s in chosen:
@@ -111,7 +117,7 @@ def _cmd_study_report(args) -> int:
     for output, (names, text) in texts.items():
         name = ", ".join(names) or "its studies"
         path = root / output
-        if args.check:
+        if check:
             if not path.exists() or path.read_text() != text:
                 print(f"error: {output} differs from what {name} generates "
                       f"(run bridgeplan study report {name})", file=sys.stderr)
@@ -119,18 +125,18 @@ def _cmd_study_report(args) -> int:
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
             print(f"wrote {output}")
-    if args.check:  # the committed rows were trained as their studies declare today
+    if check:  # the committed rows were trained as their studies declare today
         for s in chosen:
             for line in stale_rows(s, root):
                 print(f"error: {line}", file=sys.stderr)
                 differ += 1
     provenances = sum(output.endswith("/study.json") for output in texts)
     reports = sum(output.startswith("docs/results/") for output in texts) - provenances
-    if args.check and not differ:
+    if check and not differ:
         fed = [output for output in texts if not output.startswith("docs/results/")]
         blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
         print(f"{reports} reports, {provenances} provenance files{blocks} match their studies")
-    return max(2 if differ else 0, _report_broken(studies, args.names))
+    return max(2 if differ else 0, _report_broken(studies, names))
 
 
 def _read_or_empty(path: Path) -> str:
@@ -218,15 +224,20 @@ def _cmd_study_import(args) -> int:
 
 def _cmd_study_export(args) -> int:
     from bridgeplan.studies import find_root, load_studies, select
-    from bridgeplan.studies.export import export
-    from bridgeplan.studies.plan import Scale, results_dir
+    from bridgeplan.studies.export import export, exportable
+    from bridgeplan.studies.plan import Scale, results_dir, with_used
 
     root = find_root(args.root)
-    study = select(load_studies(root), [args.file], root)[0]
-    for path in export(study, root, results_dir(study, root, Scale())):
-        print(f"wrote {path.relative_to(root)}")
-    print(f"then `bridgeplan study report` regenerates the reports and {study.data_dir}'s provenance from them")
-    return 0
+    studies = load_studies(root)
+    study = select(studies, [args.file], root)[0]
+    # the study and those whose rows its reports read, as `study run` made them: each checked before any is written
+    chain = exportable(with_used(study, studies), root, lambda s: results_dir(s, root, Scale()))
+    for s in chain:
+        for path in export(s, root, results_dir(s, root, Scale())):
+            print(f"wrote {path.relative_to(root)}")
+    code = _reports(root, studies, [], list(studies.values()), check=False)
+    print("then `git diff docs/results README.md` shows how these rows compare with the committed ones")
+    return code
 
 
 def _add_planners_commands(sub) -> None:
