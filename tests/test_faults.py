@@ -448,6 +448,7 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     (repo / "docs" / "results" / "umaze" / "report.md").write_text("old\n")
     (repo / "studies").mkdir()
     (repo / "studies" / "x.toml").write_text("title = 'x'\n")
+    (repo / ".gitignore").write_text("__pycache__/\n")  # as the repository's: importing the code writes them
     git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
     subprocess.run([*git, "init", "-q"], check=True)
     subprocess.run([*git, "add", "-A"], check=True)
@@ -466,4 +467,11 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
     subprocess.run([*git, "checkout", "-q", "--", "studies/x.toml"], check=True)
     (repo / "src" / "bridgeplan" / "files.py").write_text((repo / "src" / "bridgeplan" / "files.py").read_text() + "\n")
+    assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
+    subprocess.run([*git, "checkout", "-q", "--", "src/bridgeplan/files.py"], check=True)
+    (repo / "docs" / "results" / "new-campaign.md").write_text("new\n")  # an untracked output: not code
+    (repo / "src" / "bridgeplan" / "__pycache__").mkdir(exist_ok=True)
+    (repo / "src" / "bridgeplan" / "__pycache__" / "x.pyc").write_bytes(b"")  # ignored by git: not code either
+    assert version() == f"{bridgeplan.__version__}+{sha}"
+    (repo / "src" / "bridgeplan" / "new_module.py").write_text("X = 1\n")  # code not yet added: code
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"

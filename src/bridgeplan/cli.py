@@ -69,7 +69,9 @@ def _cmd_study_list(args) -> int:
         commands = dict.fromkeys(e.command for e in s.evaluations)
         makes += [f"docs/results/{f}/ ({', '.join(commands)} JSONs)" for f in folders]
         makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
-        makes += [f"docs/results/{r.output} (feeds {', '.join(GENERATORS[r.generator].feeds)})" for r in s.reports]
+        for r in s.reports:
+            feeds = GENERATORS[r.generator].feeds
+            makes.append(f"docs/results/{r.output}" + (f" (feeds {', '.join(feeds)})" if feeds else ""))
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
     return _report_broken(studies, [])
 
@@ -113,14 +115,23 @@ def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -
                 filled = generator.fill_blocks(current, results)
                 if filled is not None:
                     texts[feed] = (names + [s.name] if filled != current else names, filled)
+    benches = {}  # bench.md -> its bench.json: every study's command remakes them, as `bridgeplan bench` wrote them
+    if not names:
+        from bridgeplan.bench.markdown import committed_markdown
+
+        for path in sorted(results.rglob("bench.json")):
+            benches[str(path.with_name("bench.md").relative_to(root))] = path.relative_to(root)
+            texts[str(path.with_name("bench.md").relative_to(root))] = ([], committed_markdown(path))
     differ = 0
-    for output, (names, text) in texts.items():
-        name = ", ".join(names) or "its studies"
+    for output, (makers, text) in texts.items():
+        name = ", ".join(makers) or "its studies"
+        made_by = f"{benches[output]} (run bridgeplan study report)" if output in benches else (
+            f"{name} (run bridgeplan study report {name})")
         path = root / output
         if check:
             if not path.exists() or path.read_text() != text:
-                print(f"error: {output} differs from what {name} generates "
-                      f"(run bridgeplan study report {name})", file=sys.stderr)
+                print(f"error: {output} differs from what {made_by.replace(' (', ' generates (', 1)}",
+                      file=sys.stderr)
                 differ += 1
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
@@ -130,12 +141,14 @@ def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -
             for line in stale_rows(s, root):
                 print(f"error: {line}", file=sys.stderr)
                 differ += 1
+    fed = [output for output in texts if any(output in GENERATORS[r.generator].feeds for s in chosen
+                                             for r in s.reports)]
     provenances = sum(output.endswith("/study.json") for output in texts)
-    reports = sum(output.startswith("docs/results/") for output in texts) - provenances
+    reports = len(texts) - provenances - len(fed) - len(benches)
     if check and not differ:
-        fed = [output for output in texts if not output.startswith("docs/results/")]
-        blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
-        print(f"{reports} reports, {provenances} provenance files{blocks} match their studies")
+        blocks = f", the generated blocks in {', '.join(fed)}" if fed else ""
+        pages = f" and {len(benches)} bench pages" if benches else ""
+        print(f"{reports} reports, {provenances} provenance files{blocks}{pages} match their studies and benches")
     return max(2 if differ else 0, _report_broken(studies, names))
 
 
@@ -151,6 +164,7 @@ def _cmd_study_run(args) -> int:
         check_reports,
         check_run,
         describe_missing,
+        quick_table,
         results_dir,
         run_study,
         with_used,
@@ -178,6 +192,17 @@ def _cmd_study_run(args) -> int:
         if s.experiments or s.evaluations:
             print(f"{s.name}: {added} new results in {results_dir(s, root, scale)}"
                   + ("" if scale.committed else f" [{QUICK_NOTE}]"))
+    if scale.committed:
+        print(f"next: `bridgeplan study export {study.name}` writes these rows into docs/results and regenerates every "
+              f"report from them (then `git diff` compares them with the committed ones)")
+        return 0
+    for s in chain:
+        if lines := quick_table(s, root):
+            print(f"\n{s.name} at the quick scale, beside its committed rows [{QUICK_NOTE}]:\n" + "\n".join(lines))
+    stored = [s for s in chain if s.experiments]
+    if stored:
+        print(f"next: `bridgeplan report --results {results_dir(stored[-1], root, scale).relative_to(root)}` draws "
+              f"every snapshot's figures and tables")
     return 0
 
 

@@ -148,7 +148,7 @@ def _cmd_reference_measure(args) -> int:
 
 
 def _add_train_commands(sub) -> None:
-    p = sub.add_parser("train", help="train a planner (DDPM or bridge)",
+    p = sub.add_parser("train", help="train a planner (DDPM, the I2SB bridge or flow matching)",
                        description="Train a planner. Defaults come from --preset per maze; flags override them.")
     _common_train_flags(p)
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
@@ -646,9 +646,9 @@ def _add_demo_command(sub) -> None:
     p.set_defaults(func=_cmd_demo)
 
 
-DEMO_READING = ("Reading: 100 is the expert, 0 a random policy; DDPM starts from noise and needs its full NFE (at "
-                "NFE 1 it plans an average path, near random), the bridge starts from the straight line, so NFE 1 "
-                "already plans.")
+DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge starts from the straight line to the goal, "
+                "so a few minutes of training and one network call already plan; DDPM starts from noise: it needs "
+                "its full NFE and more training than this (at NFE 1 it scores about as a random policy).")
 
 
 def _cmd_demo(args) -> int:

@@ -72,7 +72,8 @@ writes its report between two of its evaluations does not make the second one's 
 
 
 def code_version() -> str:
-    """The git commit of the code (with ``.dirty`` for uncommitted changes to :data:`CODE_PATHS`), or the
+    """The git commit of the code (with ``.dirty`` for uncommitted changes to :data:`CODE_PATHS`, a new file not yet
+    added among them: a module the code imports is code, tracked or not; git's ignored files are not), or the
     package version."""
     from bridgeplan import __version__
 
@@ -82,7 +83,7 @@ def code_version() -> str:
                              text=True, timeout=5, check=True).stdout.strip()
         root = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=here, capture_output=True,
                               text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS],
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=normal", "--", *CODE_PATHS],
                                cwd=root, capture_output=True, text=True, timeout=5).stdout.strip()
         return f"{__version__}+{sha}{'.dirty' if dirty else ''}"
     except (OSError, subprocess.SubprocessError):

@@ -8,6 +8,9 @@ from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
 
+TASKS_HELP = ("comma-separated task ids: 1-5 OGBench's test tasks (the default), 6-10 the validation tasks (other "
+              "cells; protocol.validation_tasks)")
+
 
 def default_out_dir() -> Path:
     """``$BRIDGEPLAN_DATASETS/ogbench`` when set, else ``datasets/ogbench``."""
@@ -37,7 +40,7 @@ def add_ogbench_commands(sub) -> None:
     e.add_argument("maze", help="medium, large, giant or teleport")
     e.add_argument("--episodes", type=int, default=None, help="episodes per task (default 50, as OGBench)")
     e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
+    e.add_argument("--tasks", default=None, help=TASKS_HELP)
     e.add_argument("--json", action="store_true")
     e.add_argument("--out", default=None, help="also write the JSON to this path")
     e.add_argument("--threads", type=int, default=None, help="accepted for the study runner; the oracle uses none")
@@ -146,7 +149,7 @@ def _protocol_flags(p, replan_help: str) -> None:
                    help="pursuit: distance to the planned position stepped toward (default 2.0, half a cell)")
     p.add_argument("--replan-every", type=int, default=None, metavar="K", help=replan_help)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
+    p.add_argument("--tasks", default=None, help=TASKS_HELP)
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json; graph-eval: "
                                                "results/graph/NAME/ogbench-graph-<settings>.json)")

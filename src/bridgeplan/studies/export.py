@@ -114,7 +114,7 @@ def _pairs(study: Study, root: Path, store_dir: Path) -> list[tuple[Path, Path]]
     """What :func:`export` copies or writes: (source, target) pairs, the targets' folders writable; an error when the
     study has nothing to export."""
     from bridgeplan import layout
-    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.experiments.store import stored_keys
     from bridgeplan.files import check_writable
 
     if not study.experiments and not study.evaluations:
@@ -125,7 +125,7 @@ def _pairs(study: Study, root: Path, store_dir: Path) -> list[tuple[Path, Path]]
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
                               f"`study import`) first")
-    if not ResultsStore(store).rows():  # before the committed rows are overwritten
+    if not stored_keys(store)[0]:  # read only, before the committed rows are overwritten
         raise BridgeplanError(f"{store} holds no evaluation yet")
     check_writable(committed_csv(study, root).parent, "committed results folder", folder=True)
     return [(store, committed_csv(study, root))]

@@ -426,6 +426,55 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     return lines
 
 
+def quick_table(study: Study, root: Path) -> list[str]:
+    """After ``study run --quick``: per maze, task set and controller, the best planner of the quick rows (its last
+    snapshot; chosen on the validation episodes where the study has them, else on the test episodes) beside the
+    same planner's committed score (docs/results, the committed scale's last snapshot) and the line alone, a table
+    shaped like the headline's; [] for a study without grid rows (its evaluations are JSON files)."""
+    from bridgeplan.analysis.keys import label, tasks_label
+    from bridgeplan.analysis.load import Point, Results, load_csvs, row_from_csv
+    from bridgeplan.analysis.stats import mean_se
+    from bridgeplan.analysis.tables import fmt_mean_se, table
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.layout import store_path
+
+    store = store_path(results_dir(study, root, Scale("quick")))
+    if not study.experiments or not store.exists():
+        return []
+    quick = Results(row_from_csv({k: "" if v is None else str(v) for k, v in r.items()})  # as its CSV has them
+                    for r in ResultsStore(store).rows())
+    committed = load_csvs([committed_csv(study, root)])
+    groups: dict[tuple, list[Point]] = {}
+    for key in quick.keys():
+        last = quick.steps(key)[-1]
+        group = (next(iter(quick.rows(Point(key, last, quick.nfes(key, last)[0])).values())).maze,
+                 tasks_label(key), "pursued" if key.execution.controller == "pursuit" else "tracked")
+        groups.setdefault(group, []).extend(quick.points(key, last))
+    has_validation = any(quick.keys("validation"))
+
+    def score(results: Results, point: Point | None) -> str:
+        if point is None or not results.values(point):
+            return "-"
+        return (f"{fmt_mean_se(results.values(point), one_seed='mean')} "
+                f"({mean_se(results.values(point, field='success')).mean:.2f}), {len(results.values(point))} seeds")
+
+    def at_last(results: Results, point: Point) -> Point | None:
+        steps = [s for s in results.steps(point.key) if point.nfe in results.nfes(point.key, s)]
+        return Point(point.key, steps[-1], point.nfe) if steps else None
+
+    lines = []
+    for (maze, tasks, controller), points in groups.items():
+        split = "validation" if has_validation else "test"
+        chosen = max(points, key=lambda q: mean_se(quick.values(q, split)).mean if quick.values(q, split) else -1e9)
+        floor = fmt_mean_se(quick.values(chosen, field="floor"), one_seed="mean")
+        lines.append([maze, tasks, controller,
+                      f"{label(chosen.key)}, NFE {chosen.nfe}" + (f", {chosen.key.tag}" if chosen.key.tag else ""),
+                      score(quick, chosen), score(committed, at_last(committed, chosen)), floor])
+    chosen_on = "validation" if has_validation else "test"
+    return table(["maze", "tasks", "executed", f"best planner (quick, chosen on {chosen_on})", "quick score (success)",
+                  "committed score (success)", "line alone (quick)"], lines)
+
+
 def _hours(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.1f} min"
 
