@@ -15,6 +15,7 @@ TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "
               "--device", "cpu"]
 
 
+@pytest.mark.slow
 def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     runs = f"{tiny_runs['ddpm']},{tiny_runs['bridge']}"
     assert main(["bench", "--out", str(tmp_path), *TINY_BENCH, "--budget-runs", runs, "--budgets", "1,2,4",
@@ -106,6 +107,7 @@ def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_
     assert not (tmp_path / "bench.json").exists()
 
 
+@pytest.mark.slow
 def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     """Two DDPM runs (say two seeds) are two rows, never one best pooled over both."""
     twin = tmp_path / "ddpm-twin"
@@ -119,6 +121,7 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     assert "| DDPM (ddpm) | 3 |" in markdown and "| DDPM (ddpm-twin) | 3 |" in markdown
 
 
+@pytest.mark.slow
 def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
     import torch
 
@@ -158,6 +161,7 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
                               any(isinstance(m, torch.nn.Mish) for m in net.modules()) for net in references)
 
 
+@pytest.mark.slow
 def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     import torch
 
@@ -179,6 +183,7 @@ def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     assert f"| compiled ({timed[0]['compile_s']:.0f} s) |" in "\n".join(format_throughput(rows, 1024))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif((os.cpu_count() or 1) < 2 or os.name != "posix", reason="a second core; POSIX signals")
 def test_two_jobs_side_by_side(monkeypatch):
     import torch

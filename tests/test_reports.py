@@ -307,9 +307,10 @@ def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_pa
 def _bench(device, latency, throughput, limits=None):
     machine = {"device": device, "torch": "2", "code_version": "0.1.0+test", "processor": "x86_64", "cpu": "CPU",
                "cpu_count": 2} | ({"gpu": "GPU X"} if device == "cuda" else {})
-    rows = [{"preset": "p", "maze": "umaze", "horizon": 128, "stride": 1, "batch": b, "grad_accum": 1, "precision": prec,
-             "implementation": "bridgeplan", "step_ms": 1000 * b / w, "windows_per_s": w, "gflops": g,
-             "limit_gflops": {"matmul": (limits or {}).get(prec, 1.0), "conv": 1.0}, "threads": t, "busy_cores": busy}
+    rows = [{"preset": "p", "maze": "umaze", "horizon": 128, "stride": 1, "batch": b, "grad_accum": 1,
+             "precision": prec, "implementation": "bridgeplan", "step_ms": 1000 * b / w, "windows_per_s": w,
+             "gflops": g, "limit_gflops": {"matmul": (limits or {}).get(prec, 1.0), "conv": 1.0}, "threads": t,
+             "busy_cores": busy}
             for b, prec, w, g, t, busy in throughput]
     return {"machine": machine, "bench": {"repeats": 3, "nfes": [1]}, "throughput": rows,
             "latency": [{"preset": "p", "method": "m", "batch": b, "nfe": n, "plan_ms": ms} for b, n, ms in latency]}

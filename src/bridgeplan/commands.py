@@ -95,7 +95,7 @@ def _add_reference_commands(sub) -> None:
 
 
 def _cmd_reference_expert_on_tasks(args) -> int:
-    from bridgeplan.files import atomic_write_text, code_version
+    from bridgeplan.files import atomic_write_text, check_writable, code_version
     from bridgeplan.maze.reference import expert_on_tasks
 
     positive("--episodes", args.episodes)
@@ -103,6 +103,7 @@ def _cmd_reference_expert_on_tasks(args) -> int:
         seeds = tuple(int(v) for v in args.seeds.split(","))
     except ValueError:
         raise BridgeplanError(f"--seeds takes comma-separated integers, got {args.seeds!r}") from None
+    check_writable(args.out, "JSON file")
     rows = expert_on_tasks(args.maze or ("umaze", "medium", "large"), args.episodes, seeds)
     for r in rows:
         print(f"{r['maze']:<8} {'Multi2D' if r['multi_task'] else 'single-task':<12} seed {r['seed']}: "
@@ -130,21 +131,24 @@ def _cmd_reference_show(args) -> int:
 
 
 def _cmd_reference_measure(args) -> int:
+    from bridgeplan.files import atomic_write_text, check_writable
     from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
     from bridgeplan.maze.reference import measure_reference_returns
 
     names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
     positive("--episodes", args.episodes)
+    if args.out:
+        check_writable(args.out, "JSON file")
     measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
     print(_reference_table(measured))
     if args.out:
-        Path(args.out).write_text(json.dumps(measured, indent=2) + "\n")
+        atomic_write_text(Path(args.out), json.dumps(measured, indent=2) + "\n")
         print(f"wrote {args.out}")
     return 0
 
 
 def _add_train_commands(sub) -> None:
-    p = sub.add_parser("train", help="train a planner (DDPM or bridge)",
+    p = sub.add_parser("train", help="train a planner (DDPM, the I2SB bridge or flow matching)",
                        description="Train a planner. Defaults come from --preset per maze; flags override them.")
     _common_train_flags(p)
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
@@ -399,12 +403,13 @@ def _execution(args):
 
 
 def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import evaluate, format_table, write_and_show
+    from bridgeplan.evaluate import check_result_path, evaluate, format_table, write_and_show
     from bridgeplan.layout import eval_dir
     from bridgeplan.runs import run_dir_of
 
     execution = _execution(args)
     correction = _correction(args)
+    check_result_path(args.out, eval_dir(run_dir_of(Path(args.run))))
     result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                       multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
                       device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile,
@@ -419,11 +424,15 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_render(args) -> int:
+    from bridgeplan.files import check_writable
     from bridgeplan.render import render_run
 
+    execution = _execution(args)
+    if args.out:
+        check_writable(args.out, "picture")
     for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                            multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
-                           device=args.device, execution=_execution(args)):
+                           device=args.device, execution=execution):
         print(f"wrote {path}")
     return 0
 
@@ -476,6 +485,14 @@ def _hierarchy_flags(p, replan_default: str, replan_high_help: str) -> None:
     _threads_flag(p)
 
 
+def _check_hierarchy_out(args) -> None:
+    from bridgeplan.evaluate import check_result_path
+    from bridgeplan.layout import eval_dir
+    from bridgeplan.runs import run_dir_of
+
+    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))
+
+
 def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str,
                    nfe_high: int | None = None) -> int:
     """Evaluate ``hierarchy`` as ``args`` say, write its JSON (``--out``, else LOW/eval/NAME-<settings>.json)."""
@@ -515,6 +532,7 @@ def _cmd_hierarchy_eval(args) -> int:
 
     positive("--episodes", args.episodes)
     _check_lookahead(args)
+    _check_hierarchy_out(args)
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
     return _run_hierarchy(args, hierarchy, high, low, high.config.maze, high.config.dataset,
@@ -529,6 +547,7 @@ def _cmd_hierarchy_graph_eval(args) -> int:
     _check_lookahead(args)
     settings = graph_settings(args)
     check_graph_settings(**settings)  # before loading anything
+    _check_hierarchy_out(args)
     hierarchy, settings, low = load_graph_hierarchy(Path(args.low), settings, args.low_snapshot, args.device)
     return _run_hierarchy(args, hierarchy, settings, low, low.config.maze, low.config.dataset,
                           f"hierarchy-graph-keep{args.keep}-r{args.radius:g}")
@@ -544,12 +563,16 @@ def _add_report_command(sub) -> None:
 
 def _cmd_report(args) -> int:
     from bridgeplan.experiments.store import ResultsStore
-    from bridgeplan.layout import store_path
+    from bridgeplan.files import check_writable
+    from bridgeplan.layout import report_dir, store_path
     from bridgeplan.report import write_report
 
     store = store_path(args.results)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
+    check_writable(args.out or report_dir(args.results), "report folder", folder=True)
+    if args.csv:
+        check_writable(args.csv, "CSV file")
     path = write_report(Path(args.results), Path(args.out) if args.out else None)
     print(f"wrote {path}")
     if args.csv:
@@ -592,6 +615,7 @@ def _add_bench_command(sub) -> None:
 
 def _cmd_bench(args) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
+    from bridgeplan.files import check_writable
 
     given = {"presets": args.presets and tuple(args.presets.split(",")),
              "methods": args.methods and tuple(args.methods.split(",")),
@@ -604,42 +628,62 @@ def _cmd_bench(args) -> int:
         text = getattr(args, name)
         given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
+    check_writable(args.out, "bench folder", folder=True)
     path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(path.read_text())
     return 0
 
 
 def _add_demo_command(sub) -> None:
-    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report")
-    p.add_argument("--maze", default="umaze")
-    p.add_argument("--out", default="demo", help="output directory")
-    p.add_argument("--dataset-steps", type=int, default=200_000)
-    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run")
-    p.add_argument("--episodes", type=int, default=100)
+    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report",
+                       description="Generates a small dataset, trains a DDPM planner and a bridge from the straight "
+                                   "line for a few minutes on a CPU, scores both on the maze's test episodes at "
+                                   "their full NFE and at NFE 1, prints the scores and writes a report with "
+                                   "figures. Resumable: run again, only what is missing is done.")
+    p.add_argument("--maze", default="umaze", help="umaze (default), medium or large")
+    p.add_argument("--out", default="demo", help="output folder (default demo/, ignored by git)")
+    p.add_argument("--dataset-steps", type=int, default=200_000, help="transitions generated (default 200 000)")
+    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run (default 1500)")
+    p.add_argument("--episodes", type=int, default=100, help="test episodes per evaluation (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="the runs' training seed (default 0)")
     _threads_flag(p)
     p.set_defaults(func=_cmd_demo)
 
 
+DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge starts from the straight line to the goal, "
+                "so a few minutes of training and one network call already plan; DDPM starts from noise: it needs "
+                "its full NFE and more training than this (at NFE 1 it scores about as a random policy).")
+
+
 def _cmd_demo(args) -> int:
-    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> report with plots."""
+    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
     from bridgeplan.experiments.grids import Experiment, RunSpec, Series
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.files import check_writable
+    from bridgeplan.layout import store_path
+    from bridgeplan.maze.layouts import get_maze
     from bridgeplan.maze.reference import load_reference_returns
     from bridgeplan.processes import DDPM, Bridge
-    from bridgeplan.report import write_report
+    from bridgeplan.report import last_snapshot_table, write_report
 
-    print(_reference_table({args.maze: load_reference_returns()[args.maze]}))
+    maze = get_maze(args.maze).name
+    for flag in ("--dataset-steps", "--steps", "--episodes"):
+        positive(flag, getattr(args, flag[2:].replace("-", "_")))
+    check_writable(args.out, "demo folder", folder=True)
+    print(_reference_table({maze: load_reference_returns()[maze]}))
     ddpm, bridge = RunSpec(DDPM(16)), RunSpec(Bridge(16), "line")
     demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
                       tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
                             for nfe in (spec.process.max_nfe, 1)))
-    settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
+    settings = SweepSettings(maze=maze, dataset_steps=args.dataset_steps, preset="cpu-small",
                              train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
-                             episodes=args.episodes, results_dir=args.out,
+                             episodes=args.episodes, seeds=(args.seed,), results_dir=args.out,
                              overrides=_overrides(args, ("threads",)))
     added = run_sweep([demo], settings)
     report = write_report(Path(args.out))
-    print(f"demo: {added} new results; report: {report}")
+    print(f"\n{last_snapshot_table(ResultsStore(store_path(args.out)), demo.name)}\n{DEMO_READING}")
+    print(f"demo: {added} new results in {store_path(args.out)}; every snapshot and figure: {report}")
     return 0
 
 

@@ -25,7 +25,7 @@ import torch
 from bridgeplan import config as cfg
 from bridgeplan.consistency import Correction, sampling_tag
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_text, code_version
+from bridgeplan.files import atomic_write_text, check_writable, code_version
 from bridgeplan.maze.layouts import Maze, get_maze
 from bridgeplan.maze.reference import CONVENTIONS, normalized_score
 from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
@@ -366,6 +366,15 @@ def _per_start_cell(maze, starts_xy: np.ndarray, returns: np.ndarray) -> list[di
         mean, se = normalized_score(maze.name, rets, "minari")
         rows.append({"cell": list(cell), "episodes": len(rets), "score_minari": mean, "score_minari_se": se})
     return rows
+
+
+def check_result_path(out: str | Path | None, default_dir: Path) -> None:
+    """Before anything is evaluated: the JSON's path can be written (``out``, a file; else ``default_dir``, where the
+    result is named by its settings). :class:`BridgeplanError` otherwise."""
+    if out:
+        check_writable(out, "evaluation JSON")
+    else:
+        check_writable(default_dir, "evaluation folder", folder=True)
 
 
 def write_result(result: dict, path: Path) -> None:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import torch
 
 from bridgeplan.bench.suites import diffusion_steps, matmul_size
+from bridgeplan.errors import BridgeplanError
 
 
 def table(header: list[str], rows: list[list]) -> list[str]:
@@ -90,9 +92,10 @@ def format_throughput(rows: list[dict], matmul_n: int) -> list[str]:
              f"are a lower bound. The limit is the same run's {matmul_n} x {matmul_n} matmul and a 256 -> "
              "256-channel, kernel-5 convolution on 64 x 256 states, in the same precision and threads. `reference` is "
              "the implementation before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter "
-             "loop); `compiled` is `train --compile`'s step (the network through `torch.compile`), its first step "
-             "compiling for the seconds shown (an empty inductor cache; a cached compile of the same shape takes a "
-             "fraction).", ""]
+             "loop)"
+             + ("; `compiled` is `train --compile`'s step (the network through `torch.compile`), its first step "
+                "compiling for the seconds shown (an empty inductor cache; a cached compile of the same shape takes "
+                "a fraction)." if any(r["implementation"] == "compiled" for r in rows) else "."), ""]
     body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"],
              r["implementation"] + (f" ({r['compile_s']:.0f} s)" if r.get("compile_s") else ""), r["threads"],
              r["busy_cores"], f"{r['step_ms']:.1f}", f"{r['windows_per_s']:.0f}",
@@ -142,3 +145,14 @@ def format_budget(s: dict) -> list[str]:
         steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_run.items())
         lines += ["", f"**Unequal training budgets** (steps): {steps}; compare with care."]
     return lines
+
+
+def committed_markdown(path: Path) -> str:
+    """The Markdown that ``bridgeplan bench`` wrote beside the bench JSON at ``path``, made again from it (what
+    ``study report --check`` holds the committed ``bench.md`` to)."""
+    try:
+        return format_bench(json.loads(Path(path).read_text()))
+    except OSError as e:
+        raise BridgeplanError(f"cannot read bench {path}: {e.strerror or e}") from None
+    except (ValueError, KeyError, TypeError, IndexError) as e:
+        raise BridgeplanError(f"{path}: not a bench JSON ({type(e).__name__}: {e})") from None

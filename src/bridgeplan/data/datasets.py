@@ -30,6 +30,7 @@ from bridgeplan.data.minari_io import (
 )
 from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import check_writable
 from bridgeplan.maze.layouts import get_maze
 
 CACHE_VERSION = 2
@@ -76,6 +77,7 @@ def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Pat
         raise BridgeplanError(f"{out} already exists; pass --force to overwrite it")
     if out.exists() and not out.is_dir():
         raise BridgeplanError(f"{out} exists and is not a directory")
+    check_writable(out, "dataset folder", folder=True)
     streams = generate_streams(maze, steps, seed, workers=workers, progress=progress, piece_steps=piece_steps)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp.", dir=out.parent))

@@ -17,6 +17,8 @@ A plan is a batch of planned states ``[N, H, 4]`` (x, y, vx, vy); its actions ar
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
@@ -112,5 +114,5 @@ class Follower:
 def check_controller(kind: str, lookahead: float) -> None:
     if kind not in CONTROLLERS:
         raise BridgeplanError(f"unknown --controller {kind!r}: choose from {', '.join(CONTROLLERS)}")
-    if not lookahead > 0:
-        raise BridgeplanError(f"--lookahead must be > 0 (a distance in position), got {lookahead}")
+    if not (math.isfinite(lookahead) and lookahead > 0):
+        raise BridgeplanError(f"--lookahead must be a finite distance > 0 (in position), got {lookahead}")

@@ -8,6 +8,9 @@ from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
 
+TASKS_HELP = ("comma-separated task ids: 1-5 OGBench's test tasks (the default), 6-10 the validation tasks (other "
+              "cells; protocol.validation_tasks)")
+
 
 def default_out_dir() -> Path:
     """``$BRIDGEPLAN_DATASETS/ogbench`` when set, else ``datasets/ogbench``."""
@@ -37,7 +40,7 @@ def add_ogbench_commands(sub) -> None:
     e.add_argument("maze", help="medium, large, giant or teleport")
     e.add_argument("--episodes", type=int, default=None, help="episodes per task (default 50, as OGBench)")
     e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
+    e.add_argument("--tasks", default=None, help=TASKS_HELP)
     e.add_argument("--json", action="store_true")
     e.add_argument("--out", default=None, help="also write the JSON to this path")
     e.add_argument("--threads", type=int, default=None, help="accepted for the study runner; the oracle uses none")
@@ -72,15 +75,12 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_evaluate_oracle(args) -> int:
-    from bridgeplan.files import code_version
+    from bridgeplan.files import check_writable, code_version
     from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy, oracle_policy
 
-    tasks = None
-    if args.tasks is not None:
-        try:
-            tasks = [int(t) for t in args.tasks.split(",")]
-        except ValueError:
-            raise BridgeplanError(f"--tasks takes comma-separated integers, got {args.tasks!r}") from None
+    tasks = _task_ids(args.tasks)
+    if args.out:
+        check_writable(args.out, "JSON file")
     r = evaluate_policy(args.maze, oracle_policy(args.maze),
                         episodes_per_task=args.episodes or EVAL_EPISODES_PER_TASK, seed=args.seed,
                         task_ids=tasks, progress=not args.no_progress)
@@ -149,7 +149,7 @@ def _protocol_flags(p, replan_help: str) -> None:
                    help="pursuit: distance to the planned position stepped toward (default 2.0, half a cell)")
     p.add_argument("--replan-every", type=int, default=None, metavar="K", help=replan_help)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--tasks", default=None, help="comma-separated task ids (default 1,2,3,4,5)")
+    p.add_argument("--tasks", default=None, help=TASKS_HELP)
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="JSON path (default RUN/eval/ogbench-<settings>.json; graph-eval: "
                                                "results/graph/NAME/ogbench-graph-<settings>.json)")
@@ -168,6 +168,7 @@ def _execution(args):
         raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
     execution = PointExecution(args.controller, replan_every=args.replan_every,
                                **({} if args.lookahead is None else {"lookahead": args.lookahead}))
+    execution.validate()  # before anything is loaded
     return execution, EVAL_EPISODES_PER_TASK if args.episodes_per_task is None else args.episodes_per_task
 
 
@@ -176,6 +177,13 @@ def _run_eval_dir(run: Path) -> Path:
     from bridgeplan.runs import run_dir_of
 
     return eval_dir(run_dir_of(run))
+
+
+def _check_out(args, out_dir: Path) -> None:
+    """Before evaluating: where :func:`_write` will write can be written."""
+    from bridgeplan.evaluate import check_result_path
+
+    check_result_path(args.out, out_dir)
 
 
 def _write(result: dict, args, out_dir: Path, prefix: str, suffix: str) -> int:
@@ -193,6 +201,7 @@ def _cmd_eval(args) -> int:
     from bridgeplan.ogbench_pointmaze.planning import evaluate_run
 
     execution, episodes = _execution(args)
+    _check_out(args, _run_eval_dir(Path(args.run)))
     result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
                           seed=args.seed, task_ids=_task_ids(args.tasks), device=args.device,
                           snapshot=args.snapshot, progress=not args.no_progress,
@@ -205,6 +214,7 @@ def _cmd_hierarchy_eval(args) -> int:
     from bridgeplan.ogbench_pointmaze.planning import evaluate_hierarchy_run
 
     execution, episodes = _execution(args)
+    _check_out(args, _run_eval_dir(Path(args.low)))
     result = evaluate_hierarchy_run(Path(args.high), Path(args.low), args.nfe_high, args.nfe_low, execution,
                                     args.replan_high_every, episodes, args.seed, _task_ids(args.tasks), args.device,
                                     progress=not args.no_progress, floor=not args.no_floor)
@@ -214,23 +224,29 @@ def _cmd_hierarchy_eval(args) -> int:
 
 
 def _cmd_graph_eval(args) -> int:
-    from bridgeplan.graph import graph_settings
+    from bridgeplan.graph import check_graph_settings, graph_settings
     from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
     from bridgeplan.ogbench_pointmaze.planning import evaluate_graph
+    from bridgeplan.runs import resolve_run
 
     parse_dataset_name(args.name)
+    low = Path(args.low) if args.low else None
+    if low is not None:  # the runs named first, before the flags and files that go with them
+        resolve_run(low)
+    execution, episodes = _execution(args)
+    check_graph_settings(**graph_settings(args))
     dataset = Path(args.dataset) if args.dataset else default_out_dir() / f"{args.name}.npz"
     if not dataset.exists():
         raise BridgeplanError(f"no dataset file {dataset}: give --dataset FILE, or make it with `bridgeplan ogbench "
                               f"generate {args.name}`")
-    execution, episodes = _execution(args)
+    out_dir = _run_eval_dir(low) if low is not None else Path("results") / "graph" / args.name
+    _check_out(args, out_dir)
     result = evaluate_graph(args.name, dataset, graph_settings(args), execution, episodes, args.seed,
                             _task_ids(args.tasks),
-                            progress=not args.no_progress, low_run=Path(args.low) if args.low else None,
+                            progress=not args.no_progress, low_run=low,
                             nfe_low=args.nfe_low, replan_high_every=args.replan_high_every, device=args.device)
     prefix = f"ogbench-graph-keep{args.keep}-r{args.radius:g}-ep{episodes}"
     if args.low:
         high = "" if args.replan_high_every is None else f"-high{args.replan_high_every}"
-        return _write(result, args, _run_eval_dir(Path(args.low)), f"{prefix}-nfe{result['nfe']}",
-                      execution.tag() + high)
-    return _write(result, args, Path("results") / "graph" / args.name, prefix, execution.tag())
+        return _write(result, args, out_dir, f"{prefix}-nfe{result['nfe']}", execution.tag() + high)
+    return _write(result, args, out_dir, prefix, execution.tag())

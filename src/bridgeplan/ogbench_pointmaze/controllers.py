@@ -26,6 +26,8 @@ from a stride); their actions are ignored, as Maze2D's controllers ignore theirs
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
@@ -100,5 +102,5 @@ class PointFollower:
 def check_controller(kind: str, lookahead: float) -> None:
     if kind not in CONTROLLERS:
         raise BridgeplanError(f"unknown --controller {kind!r}: choose from {', '.join(CONTROLLERS)}")
-    if not lookahead > 0:
-        raise BridgeplanError(f"--lookahead must be > 0 (a distance in position), got {lookahead}")
+    if not (math.isfinite(lookahead) and lookahead > 0):
+        raise BridgeplanError(f"--lookahead must be a finite distance > 0 (in position), got {lookahead}")

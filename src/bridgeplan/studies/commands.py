@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import READS_THE_DATASET, NamedRun, command_argv
+from bridgeplan.studies.spec import READS_THE_DATASET, TAKES_TASKS, NamedRun, command_argv
 
 EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "hierarchy graph-eval": "--episodes",
                  "ogbench eval": "--episodes-per-task",
@@ -107,6 +107,7 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
     """Every JSON the study's evaluations write (under ``out_root``), with its command line; ``study`` at its scale
     (``plan.Scale.apply``), ``quick`` lowering the episodes."""
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
+    from bridgeplan.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS
 
     out = []
     for e in study.evaluations:
@@ -125,6 +126,9 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                         cap = QUICK_EPISODES[e.command]
                         episodes = cap if episodes is None else min(episodes, cap)
                     dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
+                    if (split == "validation" and e.command in TAKES_TASKS and "tasks" not in args
+                            and study.evaluation.ogbench_validation == "other-tasks"):
+                        args["tasks"] = ",".join(map(str, VALIDATION_TASK_IDS))  # not the test tasks, reseeded
                     argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
                                           tuple(sorted(args.items())), dataset),
                             *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),

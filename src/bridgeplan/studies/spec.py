@@ -150,11 +150,19 @@ class Training:
         return (*self.stages, (self.steps, self.checkpoint_every))
 
 
+OGBENCH_VALIDATIONS = ("other-tasks", "test-tasks-reseeded")
+
+
 @dataclass(frozen=True)
 class Evaluation:
     episodes: int = 200
     workers: int = 1
     """Parallel jobs of the local backend (cores divided among them)."""
+    ogbench_validation: str = "other-tasks"
+    """What an OGBench command's validation split evaluates: ``other-tasks``, bridgeplan's five validation tasks
+    (``protocol.validation_tasks``: other cells than the test tasks'); ``test-tasks-reseeded``, the test tasks
+    themselves with other noise (the training seed + 1000), the draw the studies made before it, which they pin so
+    that their committed rows keep reproducing."""
 
 
 @dataclass(frozen=True)
@@ -426,6 +434,8 @@ RUN_FLAGS = {"ogbench graph-eval": ("--low",)}
 """Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
 POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
+TAKES_TASKS = {"ogbench eval", "ogbench hierarchy-eval", "ogbench graph-eval", "ogbench evaluate-oracle"}
+"""OGBench commands that take ``--tasks`` (so a validation split can give them the validation tasks)."""
 READS_THE_DATASET = {"ogbench graph-eval"}
 """Commands that read the study's dataset itself: the runner gives them its name and file (``NAME --dataset
 FILE``); their study's dataset must be OGBench's."""
@@ -588,15 +598,24 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     from bridgeplan.studies.reports import GENERATORS
 
     try:
-        text = Path(path).read_text()
+        data = Path(path).read_bytes()
     except OSError as e:
         raise BridgeplanError(f"cannot read study {path}: {e.strerror or e}") from None
     stem = Path(path).stem
     path = Path(shown or path)
     try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise StudyError(path, "(encoding)", f"not UTF-8 text (TOML is): byte {e.start} is "
+                                             f"{data[e.start:e.start + 1]!r}") from None
+    try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise StudyError(path, "(syntax)", str(e)) from None
+    if not raw:
+        raise StudyError(path, "(file)", "empty: a study declares what it trains and evaluates ([dataset], "
+                                         "[[experiments]] or [[evaluations]]), or the studies it reads (uses) and "
+                                         "its [[reports]]")
     top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "runs",
            "evaluations", "reports"}
     _table(path, "", raw, top)
@@ -619,9 +638,12 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
         except BridgeplanError as e:
             raise StudyError(path, "dataset.maze", str(e)) from None
     training = _training(path, raw.get("training", {}))
+    fields = {f.name for f in dataclasses.fields(Evaluation)}
     evaluation = Evaluation(**_dataclass_fields(
-        Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), {"episodes", "workers"}), path,
-        "evaluation"))
+        Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), fields), path, "evaluation"))
+    if evaluation.ogbench_validation not in OGBENCH_VALIDATIONS:
+        raise StudyError(path, "evaluation.ogbench_validation", f"expected one of {', '.join(OGBENCH_VALIDATIONS)}, "
+                                                                f"got {evaluation.ogbench_validation!r}")
     methods = {}
     for mname, m in _table(path, "methods", raw.get("methods", {}), set(raw.get("methods", {}))).items():
         key = f"methods.{mname}"
@@ -648,12 +670,19 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
                   training=training, evaluation=evaluation, methods=tuple(methods.values()),
                   experiments=experiments, runs=runs, evaluations=evaluations, reports=tuple(reports))
+    if not (experiments or evaluations or reports or uses):
+        raise StudyError(path, "(file)", "declares nothing to run or report: add [[experiments]] or [[evaluations]] "
+                                         "(with a [dataset]), or [[reports]] of the studies it uses")
     if (experiments or evaluations) and dataset is None:
         raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
     if experiments and dataset.generator != "expert":
         raise StudyError(path, "experiments", "the thesis's grids and declared series run on Maze2D (an expert "
                                               "dataset); an OGBench study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
+        if ("validation" in e.splits and e.command.startswith("ogbench") and e.command not in TAKES_TASKS
+                and evaluation.ogbench_validation == "other-tasks"):
+            raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates OGBench's test tasks only: it "
+                                                               f"has no validation split")
         if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
             raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
                                                                 f"OGBench's (generator = \"ogbench\")")

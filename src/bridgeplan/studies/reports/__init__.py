@@ -24,7 +24,8 @@ class Generator:
     """Its default output file, relative to docs/results."""
     description: str
     feeds: tuple[str, ...]
-    """The README/docs files that cite the report's tables (relative to the repository root)."""
+    """The README/docs files that show the generator's block between its markers (relative to the repository root;
+    none for a generator without ``block``)."""
 
     def load(self):
         return importlib.import_module(self.module)
@@ -56,17 +57,13 @@ def markers(name: str) -> tuple[str, str]:
 
 GENERATORS = {g.name: g for g in [
     Generator("findings", "bridgeplan.studies.reports.findings", "findings.md",
-              "each finding per maze and task set, paired over seeds, with its verdict; the score-95 goal",
-              ("README.md", "docs/history.md")),
+              "each finding per maze and task set, paired over seeds, with its verdict; the score-95 goal", ()),
     Generator("prior-curves", "bridgeplan.studies.reports.prior_curves", "prior-curves.md",
-              "flow matching, the I2SB and the consistent bridge from each prior across training, against DDPM",
-              ("README.md", "docs/history.md")),
+              "flow matching, the I2SB and the consistent bridge from each prior across training, against DDPM", ()),
     Generator("controllers", "bridgeplan.studies.reports.controllers", "controllers.md",
-              "tracking against pursuit at each lookahead, open loop and replanned, per maze and task set",
-              ("README.md", "docs/history.md")),
+              "tracking against pursuit at each lookahead, open loop and replanned, per maze and task set", ()),
     Generator("wallclock", "bridgeplan.studies.reports.wallclock", "throughput-wallclock.md",
-              "training settings at equal minutes of training: score, success and windows/s, paired over seeds",
-              ("README.md",)),
+              "training settings at equal minutes of training: score, success and windows/s, paired over seeds", ()),
     Generator("headline", "bridgeplan.studies.reports.headline", "headline.md",
               "the best tracked and the best pursued planner per maze and task set, with the floors and the expert",
               ("README.md",)),
@@ -75,13 +72,13 @@ GENERATORS = {g.name: g for g in [
               "OGBench's published GCBC", ("docs/ogbench_pointmaze.md",)),
     Generator("ogbench-planners", "bridgeplan.studies.reports.ogbench_planners", "ogbench-planners.md",
               "OGBench pointmaze navigate: DDPM and flow by OGBench's protocol, the controller chosen on validation, "
-              "beside the line alone, the oracle and the published methods", ("README.md",)),
+              "beside the line alone, the oracle and the published methods", ("docs/results/README.md",)),
     Generator("hierarchy", "bridgeplan.studies.reports.hierarchy", "hierarchy.md",
               "hierarchical planning on large: a coarse plan refined by a low level, beside the coarse plans alone, "
-              "the best flat planner, the line and the expert", ("README.md",)),
+              "the best flat planner, the line and the expert", ("docs/results/README.md",)),
     Generator("cddb", "bridgeplan.studies.reports.cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
-              "validation", ("README.md",)),
+              "validation", ("docs/results/README.md",)),
     Generator("gpu", "bridgeplan.studies.reports.gpu", "gpu.md",
               "the bench on a GPU beside the same figures on the CPU, and a short real run trained and evaluated there",
               ("README.md",)),
