@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up .venv, lint (ruff, pinned in the test extras), check that every committed report is what its study
-# generates from the committed data (trains nothing), then run the test suite (a few minutes on 2 CPU cores).
+# generates from the committed data (trains nothing), then run the test suite: the default run leaves out the
+# end-to-end tests marked slow (pyproject's addopts); `bash scripts/test.sh -m slow` runs those instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
