@@ -11,9 +11,9 @@ import sys
 import pytest
 
 from bridgeplan.cli import main
-from bridgeplan.data.datasets import CACHE_NAME
-from bridgeplan.data.generate import DATA_VERSION
-from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
+from bridgeplan.envs.maze2d.datasets import CACHE_NAME
+from bridgeplan.envs.maze2d.generate import DATA_VERSION
+from bridgeplan.envs.maze2d.minari_io import METADATA_FILE, VERSION_KEY
 
 
 def _error(capsys, argv) -> str:

@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
+from bridgeplan.envs.maze2d.controllers import Follower
+from bridgeplan.envs.maze2d.expert import WaypointExpert
+from bridgeplan.envs.maze2d.grids import get_maze
+from bridgeplan.envs.maze2d.rollout import execute_closed_loop, execute_plans
+from bridgeplan.envs.maze2d.sim import BatchedPointMaze
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import evaluate_planner, make_tasks, score_returns
-from bridgeplan.maze.controllers import Follower
-from bridgeplan.maze.expert import WaypointExpert
-from bridgeplan.maze.layouts import get_maze
-from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
-from bridgeplan.maze.sim import BatchedPointMaze
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Plan, Planner
 from bridgeplan.priors import PRIORS, WarmPrior, make_prior

@@ -12,8 +12,8 @@ import pytest
 import torch
 
 from bridgeplan import config as cfg
-from bridgeplan.data import load_stream
 from bridgeplan.device import configure_threads
+from bridgeplan.envs.maze2d.datasets import load_stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import RunSpec, get_experiment
 from bridgeplan.experiments.runner import SweepSettings, _train_config

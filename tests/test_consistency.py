@@ -53,8 +53,8 @@ def test_point_mass_is_point_maze_v3():
     """The constants of the residual are those of the MuJoCo model the simulator steps."""
     import mujoco
 
-    from bridgeplan.maze.layouts import get_maze
-    from bridgeplan.maze.sim import MAX_SPEED, point_maze_model
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.sim import MAX_SPEED, point_maze_model
 
     model = point_maze_model(get_maze("umaze"))
     assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
@@ -69,8 +69,8 @@ def _simulate(stride: int, steps: int = 24, seed: int = 0) -> np.ndarray:
     """``[4, steps // stride + 1, 6]`` physical rows of the real simulator from the open maze's centre, random
     actions (some beyond [-1, 1], clipped by the simulator) held ``stride`` steps, starting speeds beyond the
     clip; one row every ``stride`` steps (its state, and the action applied from it)."""
-    from bridgeplan.maze.layouts import get_maze
-    from bridgeplan.maze.sim import BatchedPointMaze
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.sim import BatchedPointMaze
 
     rng = np.random.default_rng(seed)
     sim = BatchedPointMaze(get_maze("open"), 4)

@@ -203,7 +203,7 @@ def test_a_stream_that_passes_a_place_again_is_joined_to_itself_and_walked_back_
 
 
 def test_the_maze2d_graph_takes_its_familys_settings(tiny_dataset):
-    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.envs.maze2d.datasets import load_stream
     from bridgeplan.graph import MAZE2D_DEFAULTS, data_step, for_stream
     from bridgeplan.trajectory import MAZE2D
 

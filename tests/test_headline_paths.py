@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
-from bridgeplan.maze.controllers import Follower
-from bridgeplan.maze.rollout import ClosedLoopController
+from bridgeplan.envs.maze2d.controllers import Follower
+from bridgeplan.envs.maze2d.rollout import ClosedLoopController
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Planner
 from bridgeplan.priors import GaussianPrior

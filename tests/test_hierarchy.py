@@ -198,8 +198,8 @@ def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
 
 
 def test_coarse_diagnostics_measure_walls_and_arrival():
+    from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.hierarchy import coarse_diagnostics
-    from bridgeplan.maze.layouts import get_maze
 
     maze = get_maze("umaze")  # cell (2, 2) is a wall; (1, 1) and (3, 1) are free
     a, wall, b = maze.cell_to_xy(np.array([[1, 1], [2, 2], [3, 1]]))

@@ -5,14 +5,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bridgeplan.envs.maze2d.controllers import (
+    Follower,
+    planned_target,
+    pursuit_waypoints,
+    tracking_action,
+    tracking_actions,
+)
+from bridgeplan.envs.maze2d.expert import WaypointExpert, shortest_path, waypoints
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, MAZE_NAMES, get_maze
+from bridgeplan.envs.maze2d.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
+from bridgeplan.envs.maze2d.rollout import execute_plans, rollout
+from bridgeplan.envs.maze2d.sim import make_gym_env
+from bridgeplan.envs.maze2d.tasks import sample_tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import Follower, planned_target, pursuit_waypoints, tracking_action, tracking_actions
-from bridgeplan.maze.expert import WaypointExpert, shortest_path, waypoints
-from bridgeplan.maze.layouts import GOAL_RADIUS, MAZE_NAMES, get_maze
-from bridgeplan.maze.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
-from bridgeplan.maze.rollout import execute_plans, rollout
-from bridgeplan.maze.sim import make_gym_env
-from bridgeplan.maze.tasks import sample_tasks
 
 
 @pytest.mark.parametrize("name", MAZE_NAMES)
@@ -216,7 +222,7 @@ def test_expert_on_tasks_scores_the_evaluation_episodes(tmp_path):
     import json
 
     from bridgeplan.cli import main
-    from bridgeplan.maze.reference import expert_on_tasks
+    from bridgeplan.envs.maze2d.reference import expert_on_tasks
 
     rows = expert_on_tasks(["umaze"], 6, (0, 3), multi_task=(False,))
     assert [(r["maze"], r["multi_task"], r["seed"]) for r in rows] == [("umaze", False, 0), ("umaze", False, 3)]

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from bridgeplan.cli import main
+from bridgeplan.envs.ogbench_pointmaze import generate as gen
+from bridgeplan.envs.ogbench_pointmaze.generate import KEYS, generate_dataset, generate_episodes
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, make_env
+from bridgeplan.envs.ogbench_pointmaze.names import ACTION_NOISE, KINDS, MAZES, env_id, parse_dataset_name
+from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset, load_dataset
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze import generate as gen
-from bridgeplan.ogbench_pointmaze.generate import KEYS, generate_dataset, generate_episodes
-from bridgeplan.ogbench_pointmaze.maze import Oracle, bfs, geometry, make_env
-from bridgeplan.ogbench_pointmaze.names import ACTION_NOISE, KINDS, MAZES, env_id, parse_dataset_name
-from bridgeplan.ogbench_pointmaze.reading import check_dataset, load_dataset
 
 NAV_EPISODES, NAV_STEPS = 3, 400
 STITCH_EPISODES, STITCH_STEPS = 12, 201

@@ -13,18 +13,18 @@ import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.cli import main
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.controllers import (
+from bridgeplan.envs.ogbench_pointmaze.controllers import (
     GAIN,
     PointFollower,
     pursuit_action,
     step_action,
     tracking_targets,
 )
-from bridgeplan.ogbench_pointmaze.maze import make_env
-from bridgeplan.ogbench_pointmaze.planning import PlanningPolicy, PointExecution, expected_plans
-from bridgeplan.ogbench_pointmaze.plans import plan_shape
-from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+from bridgeplan.envs.ogbench_pointmaze.maze import make_env
+from bridgeplan.envs.ogbench_pointmaze.planning import PlanningPolicy, PointExecution, expected_plans
+from bridgeplan.envs.ogbench_pointmaze.plans import plan_shape
+from bridgeplan.envs.ogbench_pointmaze.protocol import evaluate_policy
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes import DDPM
 from bridgeplan.trajectory import KINEMATIC_POINT, span
 
@@ -78,7 +78,7 @@ def test_plan_shapes_cover_the_tasks():
 
 
 def test_training_reads_the_episodes(navigate, point_runs):
-    from bridgeplan.ogbench_pointmaze.reading import load_stream
+    from bridgeplan.envs.ogbench_pointmaze.reading import load_stream
 
     stream = load_stream(navigate, NAME)
     assert stream.layout is KINEMATIC_POINT and stream.segment_starts.tolist() == [0, 60, 120, 180]

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from bridgeplan.cli import main
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
-from bridgeplan.ogbench_pointmaze.protocol import (
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.envs.ogbench_pointmaze.protocol import (
     EVAL_EPISODES_PER_TASK,
     TASK_IDS,
     episode_seed,
     evaluate_policy,
     oracle_policy,
 )
+from bridgeplan.errors import BridgeplanError
 
 
 def test_protocol_constants():

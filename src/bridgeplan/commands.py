@@ -50,9 +50,9 @@ def _add_data_commands(sub) -> None:
 
 
 def _cmd_data_generate(args) -> int:
-    from bridgeplan.data.datasets import default_dataset_path, generate_dataset, load_stream
-    from bridgeplan.data.info import format_summary, summarize
-    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.envs.maze2d.datasets import default_dataset_path, generate_dataset, load_stream
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.info import format_summary, summarize
 
     maze = get_maze(args.maze)
     positive("--steps", args.steps)
@@ -66,8 +66,8 @@ def _cmd_data_generate(args) -> int:
 
 
 def _cmd_data_info(args) -> int:
-    from bridgeplan.data.datasets import load_stream
-    from bridgeplan.data.info import format_summary, summarize
+    from bridgeplan.envs.maze2d.datasets import load_stream
+    from bridgeplan.envs.maze2d.info import format_summary, summarize
 
     info = summarize(load_stream(args.path, maze=args.maze))
     print(json.dumps(info, indent=2) if args.json else format_summary(info))
@@ -95,8 +95,8 @@ def _add_reference_commands(sub) -> None:
 
 
 def _cmd_reference_expert_on_tasks(args) -> int:
+    from bridgeplan.envs.maze2d.reference import expert_on_tasks
     from bridgeplan.files import atomic_write_text, code_version
-    from bridgeplan.maze.reference import expert_on_tasks
 
     positive("--episodes", args.episodes)
     try:
@@ -123,15 +123,15 @@ def _reference_table(ref: dict) -> str:
 
 
 def _cmd_reference_show(args) -> int:
-    from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.envs.maze2d.reference import load_reference_returns
 
     print(_reference_table(load_reference_returns()))
     return 0
 
 
 def _cmd_reference_measure(args) -> int:
-    from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
-    from bridgeplan.maze.reference import measure_reference_returns
+    from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
+    from bridgeplan.envs.maze2d.reference import measure_reference_returns
 
     names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
     positive("--episodes", args.episodes)
@@ -618,9 +618,9 @@ def _add_demo_command(sub) -> None:
 
 def _cmd_demo(args) -> int:
     """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> report with plots."""
+    from bridgeplan.envs.maze2d.reference import load_reference_returns
     from bridgeplan.experiments.grids import Experiment, RunSpec, Series
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
-    from bridgeplan.maze.reference import load_reference_returns
     from bridgeplan.processes import DDPM, Bridge
     from bridgeplan.report import write_report
 
@@ -640,7 +640,7 @@ def _cmd_demo(args) -> int:
 
 
 def _add_ogbench_commands(sub) -> None:
-    from bridgeplan.ogbench_pointmaze.commands import add_ogbench_commands
+    from bridgeplan.envs.ogbench_pointmaze.commands import add_ogbench_commands
 
     add_ogbench_commands(sub)
 

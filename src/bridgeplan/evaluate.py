@@ -24,12 +24,13 @@ import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.consistency import Correction, sampling_tag
+from bridgeplan.envs import maze2d
+from bridgeplan.envs.maze2d.grids import Maze, get_maze
+from bridgeplan.envs.maze2d.reference import CONVENTIONS, normalized_score
+from bridgeplan.envs.maze2d.rollout import execute_closed_loop, execute_plans
+from bridgeplan.envs.maze2d.tasks import sample_tasks
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, code_version
-from bridgeplan.maze.layouts import Maze, get_maze
-from bridgeplan.maze.reference import CONVENTIONS, normalized_score
-from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
-from bridgeplan.maze.tasks import sample_tasks
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import Execution, PlanSource, percentiles_ms
@@ -320,7 +321,7 @@ def evaluate(run: Path, episodes: int = 200, nfe: int | None = None, seed: int =
     if episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
     planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
-    require_family(info, "maze2d")
+    require_family(info, maze2d.FAMILY)
     planner = planner.with_correction(correction)
     if multi_task:
         check_multi_task_run(info)
@@ -339,8 +340,8 @@ def check_multi_task_run(info: RunInfo) -> None:
 def check_multi_task_data(maze_name: str, dataset: str) -> None:
     """Multi2D draws starts and goals in every free cell: refuse a run whose dataset never visits some of them
     (its planner has never seen a state there); warn when the dataset is not at hand to check."""
-    from bridgeplan.data import load_stream
-    from bridgeplan.data.info import visited_cells
+    from bridgeplan.envs.maze2d.datasets import load_stream
+    from bridgeplan.envs.maze2d.info import visited_cells
 
     if not Path(dataset).exists():
         print(f"warning: the run's dataset {dataset!r} is not here: cannot check that it covers every cell "

@@ -44,8 +44,8 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from bridgeplan.envs.ogbench_pointmaze.controllers import GAIN
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.controllers import GAIN
 from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, Layout
 
 if TYPE_CHECKING:

@@ -28,12 +28,13 @@ import numpy as np
 import torch
 
 from bridgeplan import config as cfg
+from bridgeplan.envs import maze2d
+from bridgeplan.envs.maze2d.controllers import check_controller
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS
+from bridgeplan.envs.maze2d.rollout import check_replanning, execute_closed_loop, execute_plans
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import Tasks, batch1_latency, environment_of, prior_only, score_returns
 from bridgeplan.graph import DatasetGraph, fixed_length
-from bridgeplan.maze.controllers import check_controller
-from bridgeplan.maze.layouts import GOAL_RADIUS
-from bridgeplan.maze.rollout import check_replanning, execute_closed_loop, execute_plans
 from bridgeplan.planner import Planner
 from bridgeplan.replan import Execution, percentiles_ms, truncate_at_arrival
 from bridgeplan.runs import RunInfo, load_planner, require_family
@@ -312,7 +313,7 @@ def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = No
     high, high_info = load_planner(Path(high_run), snapshot=high_snapshot, device=device)
     low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
     for info in (high_info, low_info):
-        require_family(info, "maze2d")
+        require_family(info, maze2d.FAMILY)
     if high_info.config.maze != low_info.config.maze:
         raise BridgeplanError(f"the levels were trained in different mazes ({high_info.config.maze} and "
                               f"{low_info.config.maze})")
@@ -344,12 +345,12 @@ def load_graph_hierarchy(low_run: Path, settings: dict | None = None, low_snapsh
     """The dataset graph over a Maze2D low level's own training data as its high level
     (:class:`GraphHierarchy`, ``graph.for_stream``'s Maze2D settings under ``settings``); returns the hierarchy,
     the high level's JSON entry (the graph's settings and size, the data's identity) and the low level's info."""
-    from bridgeplan.data.datasets import load_stream
+    from bridgeplan.envs.maze2d.datasets import load_stream
+    from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.graph import MAZE2D_DEFAULTS, for_stream
-    from bridgeplan.maze.layouts import get_maze
 
     low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
-    require_family(low_info, "maze2d")
+    require_family(low_info, maze2d.FAMILY)
     settings = {**MAZE2D_DEFAULTS, **(settings or {})}
     stream = load_stream(low_info.config.dataset)
     t0 = time.perf_counter()

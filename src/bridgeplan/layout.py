@@ -14,11 +14,19 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 STORE_NAME = "results.sqlite"
 CHECKPOINT_NAME = "checkpoint.pt"
 CONFIG_NAME = "config.json"
+DATASETS_ENV = "BRIDGEPLAN_DATASETS"
+"""Environment variable: the default root of generated datasets (default ``datasets`` in the cwd)."""
+
+
+def datasets_root() -> Path:
+    """Where generated datasets go by default: ``$BRIDGEPLAN_DATASETS`` when set, else ``datasets``."""
+    return Path(os.environ.get(DATASETS_ENV) or "datasets")
 
 
 def store_path(results_dir: Path | str) -> Path:

@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bridgeplan.envs.maze2d.controllers import DEFAULT_LOOKAHEAD
+from bridgeplan.envs.maze2d.grids import Maze, get_maze
+from bridgeplan.envs.maze2d.rollout import ClosedLoopController
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD
-from bridgeplan.maze.layouts import Maze, get_maze
-from bridgeplan.maze.rollout import ClosedLoopController
 from bridgeplan.replan import Execution, PlanSource
 from bridgeplan.trajectory import MAZE2D
 

@@ -87,15 +87,16 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     then shows each episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
+    from bridgeplan.envs import maze2d
+    from bridgeplan.envs.maze2d.rollout import execute_plans
     from bridgeplan.evaluate import check_multi_task_run, make_tasks
     from bridgeplan.layout import render_dir
-    from bridgeplan.maze.rollout import execute_plans
     from bridgeplan.runs import load_planner, load_windows, require_family
     from bridgeplan.trajectory import window_conditions
 
     run = Path(run)
     planner, info = load_planner(run, device=device)
-    require_family(info, "maze2d")
+    require_family(info, maze2d.FAMILY)
     config = info.config
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
@@ -104,7 +105,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     tasks = make_tasks(config.maze, episodes, seed, multi_task)
     gen = tasks.generator(planner.device)
     maze = tasks.maze
-    from bridgeplan.maze.rollout import execute_closed_loop
+    from bridgeplan.envs.maze2d.rollout import execute_closed_loop
     from bridgeplan.replan import Execution, PlanSource
 
     execution = execution or Execution()
@@ -159,7 +160,7 @@ def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, ev
     """Replay executed states in MuJoCo's renderer (headless: MUJOCO_GL=egl) and save an animated GIF."""
     from PIL import Image
 
-    from bridgeplan.maze.sim import make_gym_env
+    from bridgeplan.envs.maze2d.sim import make_gym_env
     from bridgeplan.trajectory import MAZE2D
 
     env = make_gym_env(maze, render_mode="rgb_array", width=320, height=320)

@@ -47,10 +47,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from bridgeplan.envs.maze2d.controllers import DEFAULT_LOOKAHEAD, Follower, check_controller
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, Maze
+from bridgeplan.envs.maze2d.rollout import check_replanning
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower, check_controller
-from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
-from bridgeplan.maze.rollout import check_replanning
 from bridgeplan.priors import WarmPrior
 from bridgeplan.trajectory import Layout
 
@@ -69,7 +69,7 @@ class Execution:
     run's prior; needs a process with a prior and replanning. ``arrival``: ``end``, ``truncate`` or ``keep``
     (see the module); None: ``truncate`` when replanning or sampling candidates, else ``end``.
     ``controller``: ``track`` (Diffuser's) or ``pursuit`` (the plan's path at the expert's pace, toward the
-    first planned position ``lookahead`` away; :mod:`bridgeplan.maze.controllers`).
+    first planned position ``lookahead`` away; :mod:`bridgeplan.envs.maze2d.controllers`).
     """
 
     replan_every: int | None = None

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridgeplan.config import method_label
+from bridgeplan.envs.maze2d.controllers import CONTROLLERS
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import CONTROLLERS
 from bridgeplan.processes import PROCESSES, make_process
 from bridgeplan.processes.base import Process
 from bridgeplan.replan import Execution

@@ -32,9 +32,9 @@ DIFFUSION_STEPS = 16
 
 def small_windows(horizon: int, stride: int = 1):
     """Windows of a small freshly generated umaze stream, and their normalizer (as training fits it)."""
-    from bridgeplan.data.datasets import stream_from_generated
-    from bridgeplan.data.generate import generate_stream
-    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.envs.maze2d.datasets import stream_from_generated
+    from bridgeplan.envs.maze2d.generate import generate_stream
+    from bridgeplan.envs.maze2d.grids import get_maze
 
     steps = 20 * horizon * stride
     stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), steps, seed=0)])

@@ -152,11 +152,11 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
 
     if settings.dataset:
         return settings
-    from bridgeplan.data import generate_dataset
+    from bridgeplan.envs import family_of
 
     path = (layout.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
     if not path.exists():
-        generate_dataset(settings.maze, settings.dataset_steps, seed=123, out=path)
+        family_of(settings.maze).generate_dataset(settings.maze, path, seed=123, steps=settings.dataset_steps)
     return dataclasses.replace(settings, dataset=str(path))
 
 

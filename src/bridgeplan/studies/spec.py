@@ -16,7 +16,7 @@ Example (the keys and their defaults: the dataclasses below)::
     steps = 1_000_000                    # transitions `bridgeplan data generate` makes
     seed = 123
     # piece_steps = 200                  # as independent pieces of 200 steps (a stitching dataset)
-    version = 2                          # the generator's data version (bridgeplan.data.generate.DATA_VERSION)
+    version = 2                          # the generator's data version (bridgeplan.envs.maze2d.generate.DATA_VERSION)
     # generator = "ogbench"              # OGBench's recipe instead; maze = "pointmaze-medium-navigate-v0"
 
     [training]
@@ -110,25 +110,28 @@ class Dataset:
     steps: int = 1_000_000
     """Transitions of the generated dataset (`bridgeplan data generate --steps`)."""
     seed: int = 123
-    generator: str = "expert"
-    """``expert``: the noisy expert stream of `bridgeplan data generate` (Minari's D4RL recipe); ``ogbench``: OGBench's
-    recipe (`bridgeplan ogbench generate`; ``maze`` is then the dataset's name, e.g.
-    ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
+    generator: str = ""
+    """The maze's family's recipe (``Family.generator``; '' says so too): ``expert``, Maze2D's noisy expert stream
+    (`bridgeplan data generate`, Minari's D4RL recipe); ``ogbench``, OGBench's recipe (``maze`` is then the
+    dataset's name, e.g. ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
     version: int = 2
-    """The data version the expert generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
+    """The data version the generator must have, where the family's data has versions
+    (``bridgeplan.envs.maze2d.generate.DATA_VERSION``)."""
     piece_steps: int = 0
     """The expert's data as independent pieces of this many steps (`data generate --piece-steps`; 0: one stream)."""
     path: str = ""
-    """Dataset directory (or file), relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``,
-    or ``datasets/ogbench/<name>.npz`` (generated there when absent, as the campaigns did)."""
+    """Dataset directory (or file), relative to the repository root; default the family's
+    (``Family.default_dataset``: ``datasets/<maze>-<steps>-v<version>``, ``datasets/ogbench/<name>.npz``), generated
+    there when absent, as the campaigns did."""
+
+    @property
+    def family(self):
+        from bridgeplan.envs import family_of
+
+        return family_of(self.maze)
 
     def directory(self) -> str:
-        if self.path:
-            return self.path
-        if self.generator == "ogbench":
-            return f"datasets/ogbench/{self.maze}.npz"
-        pieces = f"-pieces{self.piece_steps}" if self.piece_steps else ""
-        return f"datasets/{self.maze}-{self.steps}{pieces}-v{self.version}"
+        return self.path or self.family.default_dataset(self.maze, self.steps, self.piece_steps, self.version)
 
 
 @dataclass(frozen=True)
@@ -608,16 +611,13 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     if "dataset" in raw:
         d = _table(path, "dataset", raw["dataset"], {f.name for f in dataclasses.fields(Dataset)}, ("maze",))
         dataset = Dataset(**_dataclass_fields(Dataset, d, path, "dataset"))
-        from bridgeplan.maze.layouts import get_maze
-        from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
-
-        if dataset.generator not in ("expert", "ogbench"):
-            raise StudyError(path, "dataset.generator", f"unknown generator {dataset.generator!r} (choose from expert, "
-                                                        f"ogbench)")
         try:
-            (get_maze if dataset.generator == "expert" else parse_dataset_name)(dataset.maze)
+            family = dataset.family
         except BridgeplanError as e:
             raise StudyError(path, "dataset.maze", str(e)) from None
+        if dataset.generator not in ("", family.generator):
+            raise StudyError(path, "dataset.generator", f"{dataset.maze} is a {family.title} environment: its data "
+                                                        f"is made by {family.generator!r}, not {dataset.generator!r}")
     training = _training(path, raw.get("training", {}))
     evaluation = Evaluation(**_dataclass_fields(
         Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), {"episodes", "workers"}), path,
@@ -650,9 +650,9 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
                   experiments=experiments, runs=runs, evaluations=evaluations, reports=tuple(reports))
     if (experiments or evaluations) and dataset is None:
         raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
-    if experiments and dataset.generator != "expert":
-        raise StudyError(path, "experiments", "the thesis's grids and declared series run on Maze2D (an expert "
-                                              "dataset); an OGBench study declares [runs.NAME] and [[evaluations]]")
+    if experiments and not dataset.family.sweeps:
+        raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
+                                              f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
         if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
             raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "

@@ -16,7 +16,7 @@ from typing import Iterator
 
 import numpy as np
 
-from bridgeplan.ogbench_pointmaze.names import env_id
+from bridgeplan.envs.ogbench_pointmaze.names import env_id
 
 
 def make_env(maze: str, **kwargs):

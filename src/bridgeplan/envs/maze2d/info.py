@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from bridgeplan.data.stream import Stream
-from bridgeplan.maze.layouts import get_maze
+from bridgeplan.envs.maze2d.grids import get_maze
 
 
 def visited_cells(stream: Stream) -> np.ndarray:

@@ -3,9 +3,9 @@
 Continuing task: a goal is drawn (a random free cell plus U(-0.25, 0.25) noise); when the point
 mass comes within 0.45 of it, a new goal is drawn the same way (again if it lies within 0.45 of the
 point mass), a new episode starts there and the simulator goes on. The waypoint controller of
-:mod:`bridgeplan.maze.expert` replans from the current cell at every goal change, with waypoint
+:mod:`bridgeplan.envs.maze2d.expert` replans from the current cell at every goal change, with waypoint
 jitter -U(0, 0.2) (all waypoints but the first and the last) and N(0, 0.5^2) action noise added to
-the clipped PD output, clipped again (:func:`bridgeplan.maze.expert.noisy_action`).
+the clipped PD output, clipped again (:func:`bridgeplan.envs.maze2d.expert.noisy_action`).
 
 The per-step loop runs on a single ``MjData`` with plain Python floats (no per-step arrays):
 about 70 k steps/s on one core. ``workers > 1`` generates independently seeded streams in parallel
@@ -24,8 +24,7 @@ from typing import Iterator
 import mujoco
 import numpy as np
 
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import (
+from bridgeplan.envs.maze2d.expert import (
     ACTION_NOISE,
     D_GAIN,
     P_GAIN,
@@ -34,8 +33,9 @@ from bridgeplan.maze.expert import (
     noisy_action,
     waypoints,
 )
-from bridgeplan.maze.layouts import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
-from bridgeplan.maze.sim import MAX_SPEED, point_maze_model
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
+from bridgeplan.envs.maze2d.sim import MAX_SPEED, point_maze_model
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.workers import exit_with_parent
 
 CHUNK = 4096

@@ -1,4 +1,4 @@
-"""Batched episodes: a policy, or a batch of plans through a controller (:mod:`~bridgeplan.maze.controllers`),
+"""Batched episodes: a policy, or a batch of plans through a controller (:mod:`~bridgeplan.envs.maze2d.controllers`),
 in lockstep.
 
 Evaluation is a continuing task: the goal stays for the whole episode and every step within 0.45
@@ -16,10 +16,10 @@ from typing import Callable
 
 import numpy as np
 
+from bridgeplan.envs.maze2d.controllers import Follower
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, Maze
+from bridgeplan.envs.maze2d.sim import BatchedPointMaze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import Follower
-from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
-from bridgeplan.maze.sim import BatchedPointMaze
 from bridgeplan.trajectory import MAZE2D
 
 Policy = Callable[[int, np.ndarray], np.ndarray]
@@ -64,7 +64,7 @@ def rollout(maze: Maze, policy: Policy, starts_xy, goals_xy, steps: int | None =
 def execute_plans(maze: Maze, starts_xy, goals_xy, plans, steps: int | None = None,
                   follower: Follower | None = None) -> RolloutResult:
     """Execute planned states ``plans [N, H, 4]`` open loop for ``steps`` (default: the maze's episode length)
-    with ``follower`` (:mod:`bridgeplan.maze.controllers`; default Diffuser's tracking controller)."""
+    with ``follower`` (:mod:`bridgeplan.envs.maze2d.controllers`; default Diffuser's tracking controller)."""
     plans = np.asarray(plans, dtype=np.float64)
     if plans.ndim != 3 or plans.shape[2] != MAZE2D.obs_dim or len(plans) != len(np.asarray(starts_xy)):
         raise BridgeplanError(f"plans must have shape [N, H, {MAZE2D.obs_dim}] with N = {len(np.asarray(starts_xy))} "

@@ -27,8 +27,8 @@ planner learned; the stitch datasets are built to test exactly that).
 
 from __future__ import annotations
 
+from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
 from bridgeplan.trajectory import span
 
 STRIDE = 8

@@ -15,8 +15,8 @@ from functools import lru_cache
 import mujoco
 import numpy as np
 
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, Maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
 
 MAX_SPEED = 5.0
 """PointEnv clips each velocity component to [-5, 5] before every step."""

@@ -5,7 +5,7 @@ walls stop it), the action clipped to [-1, 1] per component. So the action that 
 a target ``w`` in one step is ``(w - p) / GAIN``, clipped where one step cannot get there
 (:func:`step_action`). Plans are ``[N, S, 2]`` positions, one per environment step (``Plan.states``, densified
 from a stride); their actions are ignored, as Maze2D's controllers ignore theirs. Two controllers
-(:data:`CONTROLLERS`), Maze2D's two (:mod:`bridgeplan.maze.controllers`) for this body:
+(:data:`CONTROLLERS`), Maze2D's two (:mod:`bridgeplan.envs.maze2d.controllers`) for this body:
 
 - ``track`` (Diffuser's): at step ``t`` of a plan, the target is the plan's next state ``plan[t + 1]``, and after
   the plan's end its last position (the goal). The plan's timing is executed as well as its path: a plan that

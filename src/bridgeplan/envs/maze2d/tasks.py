@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from bridgeplan.envs.maze2d.grids import POSITION_NOISE, Maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import POSITION_NOISE, Maze
 
 
 def sample_tasks(maze: Maze, n: int, seed: int, multi_task: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -1,9 +1,9 @@
 """A trained planner as a policy on OGBench's evaluation protocol (``bridgeplan ogbench eval``).
 
 :class:`PlanningPolicy` is the batched ``act(observations, goals)`` that
-:func:`~bridgeplan.ogbench_pointmaze.protocol.evaluate_policy` calls once per step: at an episode's first step it
+:func:`~bridgeplan.envs.ogbench_pointmaze.protocol.evaluate_policy` calls once per step: at an episode's first step it
 plans from the observed position to the goal (all the batch's episodes in one network batch), then executes
-the plan with a controller (:mod:`bridgeplan.ogbench_pointmaze.controllers`); with ``replan_every`` K it plans
+the plan with a controller (:mod:`bridgeplan.envs.ogbench_pointmaze.controllers`); with ``replan_every`` K it plans
 again from the current position every K steps, so an episode of T steps gets ``ceil(T / K)`` plans. Plans come
 from one torch generator seeded with the evaluation seed, so unlike the protocol's episodes a plan depends on
 the batch it was sampled in (the same run, settings and seed give the same result).
@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bridgeplan.envs.ogbench_pointmaze.controllers import DEFAULT_LOOKAHEAD, PointFollower, check_controller
+from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.controllers import DEFAULT_LOOKAHEAD, PointFollower, check_controller
-from bridgeplan.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
 from bridgeplan.planner import Planner
 from bridgeplan.trajectory import KINEMATIC_POINT, Layout, span
 
@@ -203,7 +203,7 @@ def batch1_latency(planner: Planner, nfe: int, start: np.ndarray, goal: np.ndarr
 def _protocol(policy: PlanningPolicy, maze: str, episodes_per_task: int, seed: int, task_ids, progress: bool):
     """Run the protocol with ``policy``; returns the result and the first episode's start and goal (what the
     batch-1 latency plans)."""
-    from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+    from bridgeplan.envs.ogbench_pointmaze.protocol import evaluate_policy
 
     first: list[np.ndarray] = []
 
@@ -223,7 +223,7 @@ def _floor_line(planner: Planner, nfe: int, execution: PointExecution, maze: str
     """The same episodes planned by the straight line start -> goal at ``planner``'s shape, no network, executed
     alike. Why: the kinematic point slides along walls, so stepping toward the goal through them already solves
     some tasks; what the planner adds is over that."""
-    from bridgeplan.ogbench_pointmaze.protocol import evaluate_policy
+    from bridgeplan.envs.ogbench_pointmaze.protocol import evaluate_policy
     from bridgeplan.priors import make_prior
 
     line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
@@ -263,6 +263,7 @@ def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | 
     """Load an OGBench pointmaze run and score it on its maze's protocol; returns the result as
     ``bridgeplan ogbench eval`` writes it (every setting, success per task and overall, cost and latency, the
     run's portable config and the code version). ``floor``: also the straight line alone (:func:`_floor_line`)."""
+    from bridgeplan.envs.ogbench_pointmaze import FAMILY
     from bridgeplan.evaluate import environment_of
     from bridgeplan.runs import load_planner, require_family
 
@@ -270,7 +271,7 @@ def evaluate_run(run: Path, nfe: int | None = None, execution: PointExecution | 
     execution.validate()
     _check_episodes(episodes_per_task)
     planner, info = load_planner(run, snapshot=snapshot, device=device)
-    require_family(info, "ogbench")
+    require_family(info, FAMILY)
     nfe = planner.process.max_nfe if nfe is None else nfe
     spec = parse_dataset_name(info.config.maze)
     policy = PlanningPolicy(planner, nfe, execution, torch.Generator(device=planner.device).manual_seed(seed))
@@ -310,6 +311,7 @@ def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None =
     every ``replan_high_every``) on the maze's protocol; returns what ``bridgeplan ogbench hierarchy-eval`` writes:
     as ``ogbench eval``'s JSON, with ``method`` naming both levels, ``nfe`` the low level's, and each level's
     settings under ``high`` and ``low``. ``floor``: the straight line alone at the high level's shape."""
+    from bridgeplan.envs.ogbench_pointmaze import FAMILY
     from bridgeplan.evaluate import environment_of
     from bridgeplan.hierarchy import Hierarchy, HierarchySource, check_high_replanning, level_dict
     from bridgeplan.replan import percentiles_ms
@@ -325,7 +327,7 @@ def evaluate_hierarchy_run(high_run: Path, low_run: Path, nfe_high: int | None =
     high, high_info = load_planner(high_run, device=device)
     low, low_info = load_planner(low_run, device=device)
     for info in (high_info, low_info):
-        require_family(info, "ogbench")
+        require_family(info, FAMILY)
     if high_info.config.maze != low_info.config.maze:
         raise BridgeplanError(f"the levels were trained on different datasets ({high_info.config.maze} and "
                               f"{low_info.config.maze})")
@@ -374,11 +376,12 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
     steps if given). With ``low_run`` (a planner trained with ``--subgoal-every``), the graph is a hierarchy's high
     level (``hierarchy.GraphHierarchy``): the low level plans through its path's next states every
     ``execution.replan_every`` steps, the path searched again every ``replan_high_every`` steps if given."""
+    from bridgeplan.envs.ogbench_pointmaze import FAMILY
+    from bridgeplan.envs.ogbench_pointmaze.reading import load_stream
     from bridgeplan.evaluate import environment_of
     from bridgeplan.files import code_version
     from bridgeplan.graph import DEFAULTS, GraphSource, for_stream
     from bridgeplan.hierarchy import GraphHierarchy, HierarchySource, check_high_replanning, level_dict
-    from bridgeplan.ogbench_pointmaze.reading import load_stream
     from bridgeplan.replan import percentiles_ms
     from bridgeplan.runs import load_planner, require_family
 
@@ -393,7 +396,7 @@ def evaluate_graph(name: str, dataset: Path, graph_settings: dict | None = None,
                                   "spacing is the natural K)")
         check_high_replanning(replan_high_every, EVAL_EPISODE_STEPS)
         low, low_info = load_planner(low_run, device=device)
-        require_family(low_info, "ogbench")
+        require_family(low_info, FAMILY)
         if parse_dataset_name(low_info.config.maze).maze != spec.maze:
             raise BridgeplanError(f"the low level was trained on {low_info.config.maze}, another maze than {name}")
     elif nfe_low is not None or replan_high_every is not None:

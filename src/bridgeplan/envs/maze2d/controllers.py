@@ -9,7 +9,7 @@ A plan is a batch of planned states ``[N, H, 4]`` (x, y, vx, vy); its actions ar
   planned position with zero velocity. The plan's timing is executed as well as its path.
 - ``pursuit``: the plan's path at the expert's pace. It drives toward the first planned position at least
   ``lookahead`` away from the point mass, among those not yet passed, with the expert's PD law
-  ``clip(10 (w - p) - v, -1, 1)`` (:func:`bridgeplan.maze.expert.pd_action`); the plan's last position (the
+  ``clip(10 (w - p) - v, -1, 1)`` (:func:`bridgeplan.envs.maze2d.expert.pd_action`); the plan's last position (the
   goal) once every other is passed. Why: the dataset's expert is slowed by its action noise, so a plan that
   imitates it arrives late however well it is tracked; its path (which way round the walls) is what the model
   knows and the expert lacks nothing of. The lookahead trades speed for corner cutting.
@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from bridgeplan.envs.maze2d.expert import pd_action
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import pd_action
 from bridgeplan.trajectory import MAZE2D
 
 # Maze2D's controllers read Maze2D states (x, y, vx, vy): the point mass's position and velocity

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from bridgeplan.data.stream import Stream
+from bridgeplan.envs.maze2d.grids import MAZE_NAMES, Maze, get_maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import MAZE_NAMES, Maze, get_maze
+from bridgeplan.trajectory import MAZE2D
 
 TIMESTEP = 0.01
 CONTINUITY_TOLERANCE = 1e-4
@@ -109,4 +110,4 @@ def read_d4rl(path: Path, maze_name: str | None = None) -> Stream:
     starts = np.concatenate([[0], np.flatnonzero(continuity_breaks(states)) + 1]).astype(np.int64)
     reached = int(flags.sum()) if flags is not None else 0
     return Stream(maze.name, states, actions, starts, episodes=reached + 1, goals_reached=reached,
-                  source=str(path))
+                  source=str(path), layout=MAZE2D)

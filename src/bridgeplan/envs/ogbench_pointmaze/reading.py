@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_pointmaze.maze import geometry
+from bridgeplan.envs.ogbench_pointmaze.names import MAZES, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.maze import geometry
-from bridgeplan.ogbench_pointmaze.names import MAZES, check_maze, parse_dataset_name
+from bridgeplan.trajectory import KINEMATIC_POINT
 
 REQUIRED = ("observations", "actions", "terminals")
 
@@ -126,4 +127,4 @@ def load_stream(path: str | Path, name: str):
     ends = np.flatnonzero(data["valids"] == 0)  # each episode's last row (check_dataset: the file's last is one)
     starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
     return Stream(name, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
-                  episodes=len(ends), source=str(path))
+                  episodes=len(ends), source=str(path), layout=KINEMATIC_POINT)

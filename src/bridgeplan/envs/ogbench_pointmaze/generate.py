@@ -10,7 +10,7 @@ many steps and ``terminals`` is true at its last one only. Rows are the state *b
 ``observations`` (= ``qpos``, the xy position), ``qpos`` and ``qvel`` (``info['prev_qpos' / 'prev_qvel']``).
 
 Random draws come, as in OGBench, from NumPy's global legacy RNG, in the script's order, here seeded
-(:func:`~bridgeplan.ogbench_pointmaze.maze.legacy_rng`); the env's own ``np_random`` and action space are seeded
+(:func:`~bridgeplan.envs.ogbench_pointmaze.maze.legacy_rng`); the env's own ``np_random`` and action space are seeded
 with the same seed. The training and validation episodes are one run, split after the training episodes.
 """
 
@@ -23,10 +23,10 @@ from typing import Callable
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, legacy_rng, make_env
+from bridgeplan.envs.ogbench_pointmaze.names import ACTION_NOISE, KINDS, DatasetName, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes
-from bridgeplan.ogbench_pointmaze.maze import Oracle, bfs, geometry, legacy_rng, make_env
-from bridgeplan.ogbench_pointmaze.names import ACTION_NOISE, KINDS, DatasetName, check_maze, parse_dataset_name
 
 STITCH_CELLS = 4
 """BFS distance (in cells) from a stitch episode's start cell to its goal cell."""

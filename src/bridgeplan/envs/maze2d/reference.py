@@ -22,11 +22,11 @@ from importlib import resources
 
 import numpy as np
 
+from bridgeplan.envs.maze2d.expert import WaypointExpert
+from bridgeplan.envs.maze2d.grids import get_maze
+from bridgeplan.envs.maze2d.rollout import rollout
+from bridgeplan.envs.maze2d.tasks import sample_tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import WaypointExpert
-from bridgeplan.maze.layouts import get_maze
-from bridgeplan.maze.rollout import rollout
-from bridgeplan.maze.tasks import sample_tasks
 
 CONVENTIONS = ("minari", "d4rl")
 REFERENCE_EPISODES = 100
@@ -61,7 +61,7 @@ def measure_reference_returns(maze_name: str, episodes: int = REFERENCE_EPISODES
 def load_reference_returns() -> dict:
     """The shipped reference returns:
     ``{maze: {"random", "expert", "expert_stale", "episodes", "seed", ...}}``."""
-    return json.loads(resources.files("bridgeplan.maze").joinpath(REFERENCE_FILE).read_text())
+    return json.loads(resources.files("bridgeplan.envs.maze2d").joinpath(REFERENCE_FILE).read_text())
 
 
 def reference_bounds(maze_name: str, convention: str) -> tuple[float, float]:

@@ -4,7 +4,7 @@
 official Minari ``D4RL/pointmaze/*`` datasets (by directory or id) and legacy D4RL ``maze2d-*.hdf5``
 files, and goes through a flat ``.npz`` cache next to the source (states, actions, segment starts,
 maze, source, data version), valid while the source file keeps its size and modification time. A
-dataset of ours made by an older generator (:data:`~bridgeplan.data.generate.DATA_VERSION`) loads with
+dataset of ours made by an older generator (:data:`~bridgeplan.envs.maze2d.generate.DATA_VERSION`) loads with
 a one-line warning on stderr.
 """
 
@@ -19,24 +19,24 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.data.d4rl_io import read_d4rl
-from bridgeplan.data.generate import DATA_VERSION, generate_streams
-from bridgeplan.data.minari_io import (
+from bridgeplan.data.stream import Stream
+from bridgeplan.envs.maze2d.d4rl_io import read_d4rl
+from bridgeplan.envs.maze2d.generate import DATA_VERSION, generate_streams
+from bridgeplan.envs.maze2d.grids import get_maze
+from bridgeplan.envs.maze2d.minari_io import (
     DATA_FILE,
     read_minari,
     replace_directory,
     resolve_minari_path,
     write_minari_into,
 )
-from bridgeplan.data.stream import Stream
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import get_maze
+from bridgeplan.layout import datasets_root
+from bridgeplan.trajectory import MAZE2D
 
 CACHE_VERSION = 2
 """2: the cache records the data version (a version-1 cache is rebuilt from its source)."""
 CACHE_NAME = "bridgeplan-cache.npz"
-DATASETS_ENV = "BRIDGEPLAN_DATASETS"
-"""Environment variable: the default root of generated datasets (default ``datasets`` in the cwd)."""
 
 
 def default_dataset_path(maze_name: str, steps: int, root: str | Path | None = None,
@@ -44,7 +44,7 @@ def default_dataset_path(maze_name: str, steps: int, root: str | Path | None = N
     """``<root>/<maze>-<steps>`` (``-pieces<N>`` for pieces of N steps); root: the argument, else
     ``$BRIDGEPLAN_DATASETS``, else ``datasets``."""
     pieces = f"-pieces{piece_steps}" if piece_steps else ""
-    return Path(root or os.environ.get(DATASETS_ENV) or "datasets") / f"{maze_name}-{steps}{pieces}"
+    return Path(root or datasets_root()) / f"{maze_name}-{steps}{pieces}"
 
 
 def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
@@ -53,7 +53,8 @@ def stream_from_generated(maze_name: str, streams, source: str = "") -> Stream:
     return Stream(maze_name, np.concatenate([s.observations[:-1] for s in streams]),
                   np.concatenate([s.actions for s in streams]), starts,
                   episodes=sum(len(s.episode_starts) for s in streams),
-                  goals_reached=sum(s.goals_reached for s in streams), source=source, data_version=DATA_VERSION)
+                  goals_reached=sum(s.goals_reached for s in streams), source=source, data_version=DATA_VERSION,
+                  layout=MAZE2D)
 
 
 def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Path | None = None,
@@ -137,7 +138,8 @@ def read_cache(source: Path, cache: Path) -> Stream | None:
                 return None
             version = int(z["data_version"])
             return Stream(str(z["maze"]), z["states"], z["actions"], z["segment_starts"], int(z["episodes"]),
-                          int(z["goals_reached"]), str(z["source"]), None if version < 0 else version)
+                          int(z["goals_reached"]), str(z["source"]), None if version < 0 else version,
+                          layout=MAZE2D)
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # truncated, bad CRC, foreign
         return None  # a broken cache is rebuilt
 

@@ -4,7 +4,7 @@ As ``impls/main.py`` and ``impls/utils/evaluation.py`` do it: for task ``i`` (1.
 with ``options=dict(task_id=i)`` (start and goal: the task's cells plus the env's +-1 position noise), the
 policy gets the observation and ``info['goal']`` (the goal's observation, its xy), its action is clipped to
 [-1, 1], and the episode ends when the env terminates at the goal (within 1.0) or is truncated after
-:data:`~bridgeplan.ogbench_pointmaze.names.EVAL_EPISODE_STEPS` steps. An episode succeeds when its last step's
+:data:`~bridgeplan.envs.ogbench_pointmaze.names.EVAL_EPISODE_STEPS` steps. An episode succeeds when its last step's
 ``info['success']`` is 1; a task's success rate is the mean over its episodes and the overall rate the mean over
 the tasks. Episodes per task: :data:`EVAL_EPISODES_PER_TASK`.
 
@@ -23,9 +23,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.envs.ogbench_pointmaze.names import check_maze, env_id
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
-from bridgeplan.ogbench_pointmaze.names import check_maze, env_id
 
 EVAL_EPISODES_PER_TASK = 50
 """Every pointmaze line of OGBench's ``impls/hyperparameters.sh`` passes ``--eval_episodes=50`` (``main.py``'s

@@ -2,7 +2,7 @@
 
 Noise-free it is the reference expert of the normalized score; with waypoint jitter and action noise
 (:data:`WAYPOINT_JITTER`, :data:`ACTION_NOISE`) it follows Minari's ``D4RL/pointmaze`` data recipe
-(``bridgeplan.data.generate`` runs the same law in a scalar loop for speed).
+(``bridgeplan.envs.maze2d.generate`` runs the same law in a scalar loop for speed).
 
 Control law: ``a = clip(10 (w - p) - 1 * v, -1, 1)`` with ``w`` the current waypoint: the centres of
 the cells along the shortest path after the current cell, the last one replaced by the goal position
@@ -19,8 +19,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from bridgeplan.envs.maze2d.grids import Maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import Maze
 
 P_GAIN = 10.0
 D_GAIN = -1.0

@@ -23,17 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.data.generate import DATA_VERSION, GeneratedStream
 from bridgeplan.data.stream import Stream, join_episodes
+from bridgeplan.envs.maze2d.generate import DATA_VERSION, GeneratedStream
+from bridgeplan.envs.maze2d.grids import MAZE_NAMES, Maze, get_maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import MAZE_NAMES, Maze, get_maze
 from bridgeplan.trajectory import MAZE2D
 
 DATA_FILE = Path("data") / "main_data.hdf5"
 METADATA_FILE = Path("data") / "metadata.json"
 AUTHOR = "bridgeplan"
 VERSION_KEY = "bridgeplan_data_version"
-"""Metadata key of the generator's :data:`~bridgeplan.data.generate.DATA_VERSION`."""
+"""Metadata key of the generator's :data:`~bridgeplan.envs.maze2d.generate.DATA_VERSION`."""
 
 
 def dataset_id_for(maze: Maze) -> str:
@@ -61,10 +61,10 @@ def write_minari_into(directory: Path, streams: list[GeneratedStream], maze: Maz
                       dataset_id: str | None = None) -> Path:
     """Write ``streams`` as a Minari dataset under the (existing, empty) ``directory``; returns the
     dataset directory inside it (``directory/<namespace>/<name>``). Not atomic: see
-    ``bridgeplan.data.datasets.generate_dataset``."""
+    ``bridgeplan.envs.maze2d.datasets.generate_dataset``."""
     import minari
 
-    from bridgeplan.maze.sim import make_gym_env
+    from bridgeplan.envs.maze2d.sim import make_gym_env
 
     dataset_id = dataset_id or dataset_id_for(maze)
     total = sum(len(s) for s in streams)
@@ -173,7 +173,7 @@ def read_minari(path: Path, maze_name: str | None = None) -> Stream:
     if len(states) == 0:
         raise BridgeplanError(f"{path} holds no transitions")
     return Stream(maze, states, acts, starts, episodes=len(observations), goals_reached=reached,
-                  source=str(path), data_version=data_version_from_metadata(meta))
+                  source=str(path), data_version=data_version_from_metadata(meta), layout=MAZE2D)
 
 
 def resolve_minari_path(path_or_id: str) -> Path | None:

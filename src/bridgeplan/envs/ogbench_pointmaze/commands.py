@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
@@ -11,9 +10,9 @@ from bridgeplan.errors import BridgeplanError
 
 def default_out_dir() -> Path:
     """``$BRIDGEPLAN_DATASETS/ogbench`` when set, else ``datasets/ogbench``."""
-    from bridgeplan.data.datasets import DATASETS_ENV
+    from bridgeplan.layout import datasets_root
 
-    return Path(os.environ.get(DATASETS_ENV) or "datasets") / "ogbench"
+    return datasets_root() / "ogbench"
 
 
 def add_ogbench_commands(sub) -> None:
@@ -50,8 +49,8 @@ def add_ogbench_commands(sub) -> None:
 
 
 def _cmd_generate(args) -> int:
-    from bridgeplan.ogbench_pointmaze.generate import generate_dataset
-    from bridgeplan.ogbench_pointmaze.reading import check_dataset
+    from bridgeplan.envs.ogbench_pointmaze.generate import generate_dataset
+    from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset
 
     g = generate_dataset(args.name, args.out or default_out_dir(), seed=args.seed, episodes=args.episodes,
                          episode_steps=args.steps, force=args.force, progress=not args.no_progress)
@@ -64,7 +63,7 @@ def _cmd_generate(args) -> int:
 def _cmd_info(args) -> int:
     from dataclasses import asdict
 
-    from bridgeplan.ogbench_pointmaze.reading import check_dataset
+    from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset
 
     c = check_dataset(args.path, args.maze)
     print(json.dumps(asdict(c), indent=2) if args.json else c.summary())
@@ -72,8 +71,8 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_evaluate_oracle(args) -> int:
+    from bridgeplan.envs.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy, oracle_policy
     from bridgeplan.files import code_version
-    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy, oracle_policy
 
     tasks = None
     if args.tasks is not None:
@@ -161,8 +160,8 @@ def _protocol_flags(p, replan_help: str) -> None:
 
 
 def _execution(args):
-    from bridgeplan.ogbench_pointmaze.planning import PointExecution
-    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK
+    from bridgeplan.envs.ogbench_pointmaze.planning import PointExecution
+    from bridgeplan.envs.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK
 
     if args.lookahead is not None and args.controller != "pursuit":
         raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
@@ -180,8 +179,8 @@ def _run_eval_dir(run: Path) -> Path:
 
 def _write(result: dict, args, out_dir: Path, prefix: str, suffix: str) -> int:
     """Write ``result`` to ``--out``, else into ``out_dir`` named by its settings; print it."""
+    from bridgeplan.envs.ogbench_pointmaze.planning import format_result
     from bridgeplan.evaluate import write_and_show
-    from bridgeplan.ogbench_pointmaze.planning import format_result
 
     tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
     out = Path(args.out) if args.out else out_dir / f"{prefix}-seed{args.seed}{tasks}-{suffix}.json"
@@ -190,7 +189,7 @@ def _write(result: dict, args, out_dir: Path, prefix: str, suffix: str) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from bridgeplan.ogbench_pointmaze.planning import evaluate_run
+    from bridgeplan.envs.ogbench_pointmaze.planning import evaluate_run
 
     execution, episodes = _execution(args)
     result = evaluate_run(Path(args.run), nfe=args.nfe, execution=execution, episodes_per_task=episodes,
@@ -202,7 +201,7 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_hierarchy_eval(args) -> int:
-    from bridgeplan.ogbench_pointmaze.planning import evaluate_hierarchy_run
+    from bridgeplan.envs.ogbench_pointmaze.planning import evaluate_hierarchy_run
 
     execution, episodes = _execution(args)
     result = evaluate_hierarchy_run(Path(args.high), Path(args.low), args.nfe_high, args.nfe_low, execution,
@@ -214,9 +213,9 @@ def _cmd_hierarchy_eval(args) -> int:
 
 
 def _cmd_graph_eval(args) -> int:
+    from bridgeplan.envs.ogbench_pointmaze.names import parse_dataset_name
+    from bridgeplan.envs.ogbench_pointmaze.planning import evaluate_graph
     from bridgeplan.graph import graph_settings
-    from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
-    from bridgeplan.ogbench_pointmaze.planning import evaluate_graph
 
     parse_dataset_name(args.name)
     dataset = Path(args.dataset) if args.dataset else default_out_dir() / f"{args.name}.npz"
