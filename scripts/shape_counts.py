@@ -30,7 +30,7 @@ LAYER_OVERRIDES = {"data.generate": "envs", "data.minari_io": "envs", "data.d4rl
                    "experiments.store": "results"}
 ENV_WORDS = {"maze2d", "ogbench", "ogbench-pointmaze", "pointmaze", "umaze", "medium", "large", "giant", "open",
              "teleport", "navigate", "stitch"}
-NAME_PREDICATES = {"is_pointmaze", "family_of", "require_family"}
+NAME_PREDICATES = {"is_pointmaze", "require_family"}
 NAME_SETS = {"MAZE_NAMES", "MAZES", "KINDS"}
 
 
@@ -173,7 +173,7 @@ def main(src: Path) -> None:
     text = {name: path.read_text() for name, path in mods.items()}
     flags = re.findall(r"add_argument\(\s*\"(--[a-z0-9-]+)\"", "\n".join(text.values()))
     flags += re.findall(r"add_argument\(\s*f?\"(--\{name\})\"", "\n".join(text.values()))
-    evaluation_commands = [c for c in leaf_commands() if re.search(r"eval|oracle|expert", c)]
+    evaluation_commands = [c for c in leaf_commands() if re.search(r"eval|oracle|expert|graph", c)]
     evaluate_functions = sorted(f"{n}.{m}" for n, t in text.items()
                                 for m in re.findall(r"^def (evaluate\w*)\(", t, re.M))
     repeated = {f: flags.count(f) for f in sorted(set(flags)) if flags.count(f) > 1}

@@ -332,11 +332,12 @@ def test_eval_with_a_correction_records_it_and_its_cost(tiny_runs, tmp_path, cap
 def test_a_store_row_records_the_plans_cost_and_residuals(tiny_runs):
     """The store keeps what a correction costs (network-call equivalents per plan) and what it does to the
     plans (their rms residuals), beside the score: the reports read them from the committed rows."""
-    from bridgeplan.evaluate import evaluate
+    from bridgeplan.evaluate import evaluate_run
+    from bridgeplan.experiments.store import row_from_eval_json
 
     deep = Correction((("dynamics", 1e-3),), form="deep")
-    rows = {c: evaluate(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu", correction=c).to_row()
-            for c in (None, deep)}
+    rows = {c: row_from_eval_json(evaluate_run(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu",
+                                               correction=c).to_dict()) for c in (None, deep)}
     assert rows[None]["network_calls_per_plan"] == 2 and rows[deep]["network_calls_per_plan"] == 6
     for row in rows.values():
         assert row["plan_kinematics_rms"] > 0 and row["plan_dynamics_rms"] > 0

@@ -487,7 +487,7 @@ out = "tiny-hierarchy-flat/{{tasks}}-seed{{eval_seed}}.json"
 task_sets = ["single", "multi"]
 
 [[evaluations]]
-command = "hierarchy graph-eval"
+command = "graph"
 runs = ["low"]
 args = {{ nfe_low = 1, keep = 20 }}
 out = "tiny-hierarchy/graph/{{tasks}}-seed{{eval_seed}}.json"
@@ -508,7 +508,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     out = capsys.readouterr().out
     assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
-    assert "  hierarchy graph-eval: 1 evaluation JSONs" in out
+    assert "  graph: 1 evaluation JSONs" in out
     # Units (seed, runs read): the hierarchy's (high, low), the flat eval's (high), the graph's (low); two workers
     # share the runs, each trained once under its lock.
     assert [(seed, [j.runs for j in unit]) for seed, unit in work_units(jobs(load_studies(root)["tiny"], root, root,
@@ -552,9 +552,10 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }', "evaluations[0].args: unrecognized"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { seed = 2 }', "evaluations[0].args.seed: set by"),
     ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
-    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"', "evaluations[0].command: ogbench graph-eval reads"),
-    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
-    ('command = "ogbench graph-eval"\nruns = ["high", "low"]\nout = "x.json"', "graph-eval takes 0 or 1 run"),
+    ('command = "graph"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
+    ('command = "graph"\nruns = ["high", "low"]\nout = "x.json"', "graph takes 0 or 1 run"),
+    ('command = "oracle"\nruns = []\nout = "x.json"\nargs = { maze = "umaze" }\ntask_sets = ["multi", "triple"]',
+     "evaluations[0].task_sets: expected a list of single, multi"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nsplits = ["test", "validation"]',
      "evaluations[0].out: x.json is written twice (by evaluations[0] and [0]"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\n[[evaluations]]\ncommand = "eval"\nruns = ["low"]\n'
@@ -593,23 +594,23 @@ log_every = 2
 device = "cpu"
 
 [[evaluations]]
-command = "ogbench gcbc-eval"
+command = "gcbc eval"
 runs = ["gcbc"]
 args = {{ steps = 4, episodes = 1 }}
 out = "cal/gcbc-step4.json"
 task_seed = 0
 
 [[evaluations]]
-command = "ogbench evaluate-oracle"
+command = "oracle"
 runs = []
-args = {{ maze = "medium", episodes = 1, tasks = "1" }}
+args = {{ maze = "pointmaze-medium-navigate-v0", episodes = 1, tasks = "1" }}
 out = "cal/oracle-medium.json"
 task_seed = 0
 
 [[evaluations]]
-command = "ogbench graph-eval"
+command = "graph"
 runs = []
-args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5 }}
+args = {{ episodes = 1, tasks = "1", controller = "pursuit", keep = 5 }}
 out = "cal/graph.json"
 task_seed = 0
 
@@ -621,9 +622,9 @@ stride = 4
 subgoal_every = 3
 
 [[evaluations]]
-command = "ogbench graph-eval"
+command = "graph"
 runs = ["low"]
-args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
+args = {{ episodes = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
 out = "cal/graph-low.json"
 task_seed = 0
 
@@ -634,9 +635,9 @@ horizon = 10
 stride = 4
 
 [[evaluations]]
-command = "ogbench eval"
+command = "eval"
 runs = ["flow-learned"]
-args = {{ episodes_per_task = 1, tasks = "1", nfe = 1, no_floor = true }}
+args = {{ episodes = 1, tasks = "1", nfe = 1, no_floor = true }}
 out = "cal/flow-learned.json"
 task_seed = 0
 """
@@ -649,8 +650,8 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
 
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
-    assert main(["ogbench", "generate", "pointmaze-medium-navigate-v0", "--episodes", "4", "--steps", "40",
-                 "--out", str(tmp_path), "--no-progress"]) == 0
+    assert main(["data", "generate", "--maze", "pointmaze-medium-navigate-v0", "--episodes", "4",
+                 "--episode-steps", "40", "--out", str(tmp_path), "--no-progress"]) == 0
     (root / "studies" / "cal.toml").write_text(
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
@@ -665,15 +666,16 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     assert load_checkpoint(root / "results" / "cal" / "runs" / prior / "checkpoint.pt")["step"] == 3
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
-    oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())
+    (oracle,) = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())["rows"]
     assert oracle["policy"] == "oracle" and oracle["maze"] == "medium" and oracle["episodes"] == 1
     graph = json.loads((root / "results" / "cal" / "cal" / "graph.json").read_text())
-    assert graph["kind"] == "graph" and graph["dataset"] == "pointmaze-medium-navigate-v0" and graph["episodes"] == 1
+    assert graph["kind"] == "graph" and graph["config"]["dataset"] == "pointmaze-medium-navigate-v0"
+    assert graph["episodes"] == 1
     assert graph["graph"]["keep"] == 5 and graph["config"]["dataset_identity"].startswith("pointmaze-medium-navigate")
     low = json.loads((root / "results" / "cal" / "cal" / "graph-low.json").read_text())
     assert low["run"].endswith("low-s0") and low["low"]["subgoal_every"] == 3 and low["nfe"] == 1
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
     assert "cal: 0 new results" in capsys.readouterr().out
-    assert main(["ogbench", "gcbc-eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
+    assert main(["gcbc", "eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
                  "--out", str(tmp_path / "x.json")]) == 2  # --out takes one evaluation
     assert "--out takes one evaluation" in capsys.readouterr().err

@@ -14,7 +14,7 @@ import torch
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.device import resolve_device
-from bridgeplan.envs import Family, family_of
+from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.nets.prior_mlp import PriorMLP
@@ -148,15 +148,6 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
         planner = planner.with_sampler(sampler, eta)
     return planner, RunInfo(run_dir, config, state["config"], state["step"], state["elapsed_seconds"],
                             bool(state.get("dataset_covers_every_cell", False)), state.get("dataset", ""))
-
-
-def require_family(info: RunInfo, family: Family) -> None:
-    """A :class:`BridgeplanError` unless ``info``'s run was trained in ``family``: a planner is evaluated in the
-    environment family it learned (its layout, tasks and protocol are that family's)."""
-    ours = family_of(info.config.maze)
-    if ours is not family:
-        raise BridgeplanError(f"{info.path} is a {ours.title} planner (trained on {info.config.maze}), not a "
-                              f"{family.title} one: evaluate it with `{ours.eval_command}`")
 
 
 def resolve_run(run: str | Path) -> Path:

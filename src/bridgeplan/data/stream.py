@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import Layout
 
 
@@ -76,6 +77,14 @@ class Stream:
     def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """``[(states [T_k, obs_dim], actions [T_k, act_dim]), ...]`` (views) of the continuous segments."""
         return [(self.states[lo:hi], self.actions[lo:hi]) for lo, hi in self.segment_bounds()]
+
+    def pace(self) -> float:
+        """The median distance the data's position moves in one step, within its segments."""
+        xy = self.layout.state_positions(self.states)
+        moves = [np.linalg.norm(np.diff(xy[lo:hi], axis=0), axis=1) for lo, hi in self.segment_bounds() if hi - lo > 1]
+        if not moves:
+            raise BridgeplanError("the dataset has no two consecutive states: no pace to measure")
+        return float(np.median(np.concatenate(moves)))
 
     def transitions(self) -> np.ndarray:
         """``[T, transition_dim]`` in the trajectory layout: actions, then state."""

@@ -14,7 +14,7 @@ from bridgeplan.envs import maze2d, ogbench_pointmaze
 from bridgeplan.envs.family import Family, unknown
 from bridgeplan.errors import BridgeplanError
 
-__all__ = ["FAMILIES", "Family", "family_of", "get_family"]
+__all__ = ["FAMILIES", "Family", "family_of", "family_of_dataset", "get_family"]
 
 FAMILIES: tuple[Family, ...] = (maze2d.FAMILY, ogbench_pointmaze.FAMILY)
 """The built-in families (their modules import no simulator until one is used)."""
@@ -37,3 +37,12 @@ def get_family(name: str) -> Family:
             return family
     raise BridgeplanError(f"unknown environment family {name!r}: choose from "
                           f"{', '.join(f.name for f in FAMILIES)}")
+
+
+def family_of_dataset(path: str) -> Family:
+    """The family whose dataset format ``path`` is in (:meth:`Family.reads`)."""
+    for family in FAMILIES:
+        if family.reads(path):
+            return family
+    raise BridgeplanError(f"no dataset at {path} that any family reads (a Minari dataset directory or id, a D4RL "
+                          f"maze2d .hdf5 file, an OGBench .npz file)")

@@ -17,7 +17,7 @@ from bridgeplan import layout
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
-from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore
+from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
 
 
@@ -92,6 +92,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     once per task set and controller for the job.
     """
     from bridgeplan.device import configure_threads
+    from bridgeplan.envs import family_of
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
     from bridgeplan.runs import load_planner
     from bridgeplan.train import train
@@ -133,14 +134,15 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                 store.link(key, name)
                 continue
             task_set = tasks[series.multi_task]
-            ex = series.execution
+            family = family_of(settings.maze)
+            ex = series.execution.resolved(family, settings.maze)
             floors_key = (series.multi_task, ex.controller, ex.lookahead)
             if floors_key not in job_floors:
-                job_floors[floors_key] = floors(planner, task_set, ex)
+                job_floors[floors_key] = floors(planner, family, task_set, ex)
             sampled = planner if series.sampler is None else planner.with_sampler(series.sampler)
             sampled = sampled.with_correction(series.correction)
-            row = evaluate_planner(sampled, task_set, series.nfe, run=info, execution=series.execution,
-                                   precomputed_floors=job_floors[floors_key]).to_row(split)
+            row = row_from_eval_json(evaluate_planner(sampled, task_set, series.nfe, run=info, execution=ex,
+                                                      precomputed_floors=job_floors[floors_key]).to_dict(), split)
             if store.add(row, [name]):  # a concurrent sweep may have added it meanwhile
                 rows.append(row)
     return rows

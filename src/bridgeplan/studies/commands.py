@@ -1,5 +1,5 @@
 """Studies whose rows are evaluation JSONs, one command each: named runs trained per training seed as the study
-says, then ``bridgeplan eval``, ``hierarchy eval`` (or ``graph-eval``) or ``ogbench eval`` per training seed, split
+says, then ``bridgeplan eval``, ``hierarchy eval``, ``graph``, ``oracle`` or ``gcbc eval`` per training seed, split
 and task set, each writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table cell one declared
 line, run by ``study run``)::
 
@@ -9,14 +9,12 @@ line, run by ``study run``)::
     stride = 12
 
     [[evaluations]]
-    command = "hierarchy eval"           # eval | hierarchy eval | hierarchy graph-eval | ogbench eval |
-                                         # ogbench hierarchy-eval | ogbench evaluate-oracle | ogbench gcbc-eval |
-                                         # ogbench graph-eval
+    command = "hierarchy eval"           # eval | hierarchy eval | graph | oracle | gcbc eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
     args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
     splits = ["test", "validation"]      # the evaluation seed: the training seed, or 1000 + it
-    task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; Maze2D's commands)
+    task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; where the family has it)
     # task_seed = 0                      # the same test episodes for every training seed (validation: 1000)
 
 A named run from the learned prior (``prior = "learned"``) samples it from the thesis's MLP trained first on the
@@ -38,17 +36,6 @@ from pathlib import Path
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.studies.spec import READS_THE_DATASET, NamedRun, command_argv
 
-EPISODES_FLAG = {"eval": "--episodes", "hierarchy eval": "--episodes", "hierarchy graph-eval": "--episodes",
-                 "ogbench eval": "--episodes-per-task",
-                 "ogbench hierarchy-eval": "--episodes-per-task", "ogbench evaluate-oracle": "--episodes",
-                 "ogbench gcbc-eval": "--episodes", "ogbench graph-eval": "--episodes-per-task"}
-"""Each command's episodes flag: Maze2D's commands take [evaluation] episodes; OGBench's protocol its own (50 per
-task) unless ``args`` says otherwise; the quick scale lowers both (:data:`QUICK_EPISODES`)."""
-QUICK_EPISODES = {"eval": 20, "hierarchy eval": 20, "hierarchy graph-eval": 20, "ogbench eval": 4,
-                  "ogbench hierarchy-eval": 4, "ogbench evaluate-oracle": 4, "ogbench gcbc-eval": 4,
-                  "ogbench graph-eval": 4}
-"""Episodes at the quick scale: Maze2D's per evaluation, OGBench's per task."""
-
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
 @dataclass(frozen=True)
@@ -60,6 +47,7 @@ class Job:
     """Without the study's dataset file, which :func:`run_seed` adds for a command that reads it."""
     seed: int
     runs: tuple[str, ...]
+    command: str
     reads_dataset: bool = False
 
 
@@ -117,19 +105,16 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                 for tasks in e.task_sets:
                     path = out_root / e.out.format(seed=seed, eval_seed=eval_seed, tasks=tasks)
                     args = dict(e.args)
-                    flag = EPISODES_FLAG[e.command]
-                    episodes = args.pop(flag[2:].replace("-", "_"), None)
-                    if not e.command.startswith("ogbench") and episodes is None:
-                        episodes = study.evaluation.episodes
+                    episodes = args.pop("episodes", None) or study.evaluation.episodes
                     if quick:
-                        cap = QUICK_EPISODES[e.command]
+                        cap = study.dataset.family.quick_episodes
                         episodes = cap if episodes is None else min(episodes, cap)
                     dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
                     argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
                                           tuple(sorted(args.items())), dataset),
-                            *([flag, str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
+                            *(["--episodes", str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
                             *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
-                    out.append(Job(path, tuple(argv), seed, e.runs, e.command in READS_THE_DATASET))
+                    out.append(Job(path, tuple(argv), seed, e.runs, e.command, e.command in READS_THE_DATASET))
     return out
 
 
@@ -174,7 +159,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
-        quiet = ["--no-progress"] if not progress and job.argv[0] == "ogbench" else []  # OGBench's have bars
+        quiet = [] if progress else ["--no-progress"]
         if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else []), *quiet]) != 0:
             raise BridgeplanError(f"bridgeplan {' '.join(job.argv)} failed (its error above)")
         written += 1

@@ -51,7 +51,9 @@ class Scale:
         steps = max(1, t.steps // 10)
         training = dataclasses.replace(t, steps=steps, checkpoint_every=max(1, steps // 2), stages=(),
                                        prior_steps=max(1, t.prior_steps // 10), seeds=t.seeds[:2])
-        evaluation = dataclasses.replace(study.evaluation, episodes=min(study.evaluation.episodes, 20))
+        episodes = (study.evaluation.episodes if study.dataset is None else
+                    min(study.episodes, study.dataset.family.quick_episodes))
+        evaluation = dataclasses.replace(study.evaluation, episodes=episodes)
         experiments = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.experiments)
         evaluations = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.evaluations)
         dataset = study.dataset
@@ -101,7 +103,7 @@ def build_experiment(study: Study, index: int):
             for s in exp.series:
                 m = methods[s.method]
                 run = RunSpec(make_process(m.process, steps=steps, **dict(m.params)), m.prior)
-                execution = Execution(**dict(s.execution))
+                execution = Execution(**dict(s.execution)).resolved(study.dataset.family, study.dataset.maze)
                 for nfe in s.nfe:
                     for multi in s.multi_task:
                         for correction in s.correction:
@@ -143,7 +145,7 @@ def sweeps(study: Study, root: Path, scale: Scale = Scale()) -> list[Sweep]:
             settings = SweepSettings(
                 maze=study.dataset.maze, dataset=str((Path(root) / study.dataset.directory()).resolve()),
                 dataset_steps=study.dataset.steps, preset=t.preset, train_steps=t.steps, prior_steps=t.prior_steps,
-                checkpoint_every=t.checkpoint_every, episodes=study.evaluation.episodes,
+                checkpoint_every=t.checkpoint_every, episodes=study.episodes,
                 seeds=exp.seeds or t.seeds, results_dir=str(results_dir(study, root, scale)), overrides=overrides,
                 validation=split == "validation")
             out.append(Sweep(experiment, settings, t.all_stages()))
@@ -343,7 +345,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
         for run, n, done in needed_runs(scaled, results, {(r, j.seed) for j in jsons for r in j.runs}):
             trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
+    return Missing(todo, evaluations, scaled.episodes if scaled.dataset else 0, corrections, wanted, declared, jsons)
 
 
 def committed_not_imported(study: Study, root: Path, m: Missing) -> str | None:
@@ -383,7 +385,7 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
             lines.extend(f"    {tag or 'uncorrected'}: {n} evaluations" for tag, n in by_correction)
     by_command: dict[str, list] = {}
     for job in m.jsons:
-        by_command.setdefault(" ".join(job.argv[:1 if job.argv[0] == "eval" else 2]), []).append(job)
+        by_command.setdefault(job.command, []).append(job)
     for command, todo in by_command.items():
         lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}")
     if scale.committed and (note := committed_not_imported(study, root, m)):

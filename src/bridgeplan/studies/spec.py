@@ -54,18 +54,16 @@ Example (the keys and their defaults: the dataclasses below)::
                 correction_form = "x0" }]  # consistency corrections (CDDB) of x0 (default) or deep form
 
     [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
-    process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, ogbench eval,
+    process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, graph,
     horizon = 32                         #  each writing one JSON, exported to docs/results; prior = "learned"
     stride = 12                          #  trains its prior first, for prior_steps)
 
-    [runs.gcbc]                          # trainer = "gcbc": `ogbench gcbc-train`'s run (GCBCConfig fields)
+    [runs.gcbc]                          # trainer = "gcbc": `gcbc train`'s run (GCBCConfig fields)
     trainer = "gcbc"
     maze = "medium"
 
     [[evaluations]]
-    command = "eval"                     # or hierarchy eval, hierarchy graph-eval, ogbench eval, ogbench
-                                         # hierarchy-eval, ogbench evaluate-oracle, ogbench gcbc-eval, ogbench
-                                         # graph-eval
+    command = "eval"                     # or hierarchy eval, graph, oracle, gcbc eval (any environment's)
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -155,7 +153,8 @@ class Training:
 
 @dataclass(frozen=True)
 class Evaluation:
-    episodes: int = 200
+    episodes: int | None = None
+    """Episodes per task (None: the environment family's, Maze2D 200 in all, OGBench 50 per task)."""
     workers: int = 1
     """Parallel jobs of the local backend (cores divided among them)."""
 
@@ -232,6 +231,11 @@ class Study:
     def data_dir(self) -> str:
         return self.data or self.name
 
+    @property
+    def episodes(self) -> int:
+        """Episodes per task of its evaluations: its [evaluation]'s, else its environment family's."""
+        return self.evaluation.episodes or self.dataset.family.episodes
+
 
 # --- parsing ----------------------------------------------------------------------------------------------------
 
@@ -274,7 +278,8 @@ def _dataclass_fields(cls, value: dict, file, key: str) -> dict:
     for f in dataclasses.fields(cls):
         if f.name in value:
             default = f.default if f.default is not dataclasses.MISSING else None
-            kind = type(default) if isinstance(default, (int, float, str, bool)) else str
+            kind = (type(default) if isinstance(default, (int, float, str, bool)) else
+                    int if str(f.type).startswith("int") else str)
             out[f.name] = _typed(file, f"{key}.{f.name}", value[f.name], kind, positive=kind in (int,) and
                                  f.name in ("steps", "episodes", "workers", "checkpoint_every", "prior_steps",
                                             "diffusion_steps", "piece_steps"))
@@ -416,24 +421,20 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 
 # --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"),
-            "hierarchy graph-eval": ("hierarchy", "graph-eval"), "ogbench eval": ("ogbench", "eval"),
-            "ogbench hierarchy-eval": ("ogbench", "hierarchy-eval"),
-            "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval"),
-            "ogbench graph-eval": ("ogbench", "graph-eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "hierarchy graph-eval": 1, "ogbench eval": 1, "ogbench hierarchy-eval": 2,
-          "ogbench evaluate-oracle": 0, "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
-"""How many runs each command takes (a hierarchy: the high level, then the low one; over the dataset graph, the
-low one; the oracle none)."""
-RUN_FLAGS = {"ogbench graph-eval": ("--low",)}
+COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "graph": ("graph",),
+            "oracle": ("oracle",), "gcbc eval": ("gcbc", "eval")}
+LEVELS = {"eval": 1, "hierarchy eval": 2, "graph": 0, "oracle": 0, "gcbc eval": 1}
+"""How many runs each command takes (a hierarchy: the high level, then the low one; the dataset graph none, or its
+low level as a flag; the oracle none)."""
+RUN_FLAGS = {"graph": ("--low",)}
 """Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
-POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
+POSITIONAL = {"oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
-READS_THE_DATASET = {"ogbench graph-eval"}
-"""Commands that read the study's dataset itself: the runner gives them its name and file (``NAME --dataset
-FILE``); their study's dataset must be OGBench's."""
+READS_THE_DATASET = {"graph"}
+"""Commands that read the study's dataset itself: the runner gives them its name and file (``--maze NAME --dataset
+FILE``)."""
 TRAINERS = ("planner", "gcbc")
-"""What trains a named run: ``bridgeplan train`` (a planner), or ``ogbench gcbc-train`` (GCBC, the calibration
+"""What trains a named run: ``bridgeplan train`` (a planner), or ``bridgeplan gcbc train`` (GCBC, the calibration
 baseline)."""
 SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress", "dataset"}
 TASK_SETS = ("single", "multi")
@@ -525,8 +526,6 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         task_sets = tuple(e.get("task_sets", ["single"]))
         if not task_sets or any(t not in TASK_SETS for t in task_sets):
             raise StudyError(file, f"{key}.task_sets", f"expected a list of single, multi, got {e.get('task_sets')!r}")
-        if "multi" in task_sets and command.startswith("ogbench"):
-            raise StudyError(file, f"{key}.task_sets", "OGBench's protocol has its 5 tasks, no Multi2D")
         evaluation = CommandEvaluation(command, tuple(levels), _typed(file, f"{key}.out", e["out"], str),
                                        tuple(sorted(args.items())), splits, task_sets,
                                        _ints(file, f"{key}.seeds", e["seeds"]) if "seeds" in e else None,
@@ -555,10 +554,10 @@ def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
 def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...],
                  dataset: str | None = None) -> list[str]:
     """``bridgeplan``'s arguments for ``command`` on ``runs`` (positional, or as :data:`RUN_FLAGS` say) with
-    ``args``: its positional ones (the study's ``dataset`` name first, for a command that reads it), then flags."""
+    ``args``: its positional ones, then flags (the study's ``dataset`` name first, for a command that reads it)."""
     positional = POSITIONAL.get(command, ())
     flags = RUN_FLAGS.get(command)
-    return [*COMMANDS[command], *([] if flags else runs), *([dataset] if dataset is not None else []),
+    return [*COMMANDS[command], *([] if flags else runs), *(["--maze", dataset] if dataset is not None else []),
             *(str(v) for k, v in args if k in positional),
             *_flags(tuple((k, v) for k, v in args if k not in positional)),
             *(a for flag, run in zip(flags or (), runs) for a in (flag, run))]
@@ -654,9 +653,11 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
         raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
                                               f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
-        if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
-            raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
-                                                                f"OGBench's (generator = \"ogbench\")")
+        missing = set(e.task_sets) - set(dataset.family.task_sets)
+        if missing:
+            raise StudyError(path, f"evaluations[{i}].task_sets", f"{dataset.family.title} has the task sets "
+                                                                  f"{', '.join(dataset.family.task_sets)}, not "
+                                                                  f"{', '.join(sorted(missing))}")
     return study
 
 

@@ -152,3 +152,23 @@ class WaypointExpert:
         if self.action_noise > 0:  # the law of noisy_action, batched
             actions = np.clip(actions + self.rng.normal(0.0, self.action_noise, size=actions.shape), -1.0, 1.0)
         return actions
+
+
+class ExpertAgent:
+    """The noise-free expert, planning afresh at each episode's start, as an agent of
+    :meth:`bridgeplan.envs.maze2d.Maze2D.run` (the family's oracle)."""
+
+    def __init__(self, maze: Maze):
+        self.maze = maze
+
+    def begin(self, n: int) -> None:
+        self.expert, self.planned = WaypointExpert(self.maze), False
+
+    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        if not self.planned:
+            self.expert.plan(np.asarray(states, np.float64)[:, :2], goals)
+            self.planned = True
+        return self.expert(states)
+
+    def end(self, rows: np.ndarray) -> None:
+        pass

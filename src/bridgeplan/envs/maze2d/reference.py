@@ -86,24 +86,29 @@ def normalized_score(maze_name: str, returns, convention: str) -> tuple[float, f
     return float(scores.mean()), se
 
 
-def expert_on_tasks(mazes, episodes: int, seeds, multi_task=(False, True)) -> list[dict]:
-    """The noise-free expert, planning afresh, on evaluation tasks themselves (``sample_tasks(maze, episodes,
-    seed)`` of each seed, single-task and Multi2D): its normalized score in both conventions and success rate,
-    one row per maze, task set and seed. Normalized scores divide by the expert's single-task return, so on
-    Multi2D's random goals, often near the start, a planner may pass 100; these rows say where the expert stands."""
-    if episodes <= 0:
-        raise BridgeplanError(f"episodes must be positive, got {episodes}")
-    rows = []
-    for name in mazes:
-        maze = get_maze(name)
-        for multi in multi_task:
-            for seed in seeds:
-                starts, goals = sample_tasks(maze, episodes, seed, multi_task=multi)
-                expert = WaypointExpert(maze)
-                expert.plan(starts, goals)
-                result = rollout(maze, lambda t, obs: expert(obs), starts, goals)
-                rows.append({"maze": maze.name, "multi_task": multi, "seed": seed,
-                             **{f"score_{c}": normalized_score(maze.name, result.returns, c)[0] for c in CONVENTIONS},
-                             "success": float(result.success.mean())})
-    return rows
+def mean_se(values: np.ndarray) -> dict[str, float]:
+    values = np.asarray(values, dtype=np.float64)
+    se = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else float("nan")
+    return {"mean": float(values.mean()), "se": se}
 
+
+def score_returns(maze_name: str, returns: np.ndarray, success: np.ndarray) -> dict:
+    """Scores in every convention, raw return and success rate, each as mean and standard error."""
+    scores = {}
+    for convention in CONVENTIONS:
+        mean, se = normalized_score(maze_name, returns, convention)
+        scores[convention] = {"mean": mean, "se": se}
+    return {"score": scores, "return": mean_se(returns), "success_rate": mean_se(success)}
+
+
+def per_start_cell(maze, starts_xy: np.ndarray, returns: np.ndarray) -> list[dict]:
+    """The Minari score of the episodes starting in each cell."""
+    by_cell: dict[tuple[int, int], list[float]] = {}
+    for xy, ret in zip(starts_xy, returns):
+        by_cell.setdefault(tuple(int(v) for v in maze.xy_to_cell(xy)), []).append(float(ret))
+    rows = []
+    for cell in sorted(by_cell):
+        rets = np.asarray(by_cell[cell])
+        mean, se = normalized_score(maze.name, rets, "minari")
+        rows.append({"cell": list(cell), "episodes": len(rets), "score_minari": mean, "score_minari_se": se})
+    return rows

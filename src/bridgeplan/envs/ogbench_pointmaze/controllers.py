@@ -4,8 +4,8 @@ The point's action is a position step: each environment step moves it by ``GAIN 
 walls stop it), the action clipped to [-1, 1] per component. So the action that moves the point from ``p`` to
 a target ``w`` in one step is ``(w - p) / GAIN``, clipped where one step cannot get there
 (:func:`step_action`). Plans are ``[N, S, 2]`` positions, one per environment step (``Plan.states``, densified
-from a stride); their actions are ignored, as Maze2D's controllers ignore theirs. Two controllers
-(:data:`CONTROLLERS`), Maze2D's two (:mod:`bridgeplan.envs.maze2d.controllers`) for this body:
+from a stride); their actions are ignored, as Maze2D's controllers ignore theirs. The two controllers of
+:mod:`bridgeplan.envs.controllers`, with this body (:data:`BODY`):
 
 - ``track`` (Diffuser's): at step ``t`` of a plan, the target is the plan's next state ``plan[t + 1]``, and after
   the plan's end its last position (the goal). The plan's timing is executed as well as its path: a plan that
@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.envs.controllers import Body
+from bridgeplan.trajectory import KINEMATIC_POINT
 
 GAIN = 0.2
 """Position moved per step per unit of action (``ogbench.locomaze.point``: ``qpos += 0.2 * action``; a test
 steps the environment to check it)."""
-CONTROLLERS = ("track", "pursuit")
 DEFAULT_LOOKAHEAD = 2.0
 """Pursuit's default lookahead: half of a 4-unit cell (ten steps), as Maze2D's default (1.0) is a cell of its
 own (1-unit cells) in the middle of its measured best; here it is not tuned yet: choose it on validation
@@ -47,24 +47,6 @@ def step_action(positions: np.ndarray, targets: np.ndarray, gain: float = GAIN) 
     return np.clip(d / gain, -1.0, 1.0)
 
 
-def tracking_targets(plans: np.ndarray, steps_into_plan: np.ndarray) -> np.ndarray:
-    """``[N, 2]``: ``plans[n, s_n + 1]`` for ``steps_into_plan [N]`` (steps since each plan was made), or past
-    a plan's end its last position."""
-    plans = np.asarray(plans, np.float64)
-    steps = np.asarray(steps_into_plan, dtype=np.int64)
-    return plans[np.arange(len(plans)), np.minimum(steps + 1, plans.shape[1] - 1)]
-
-
-def pursuit_waypoints(plans: np.ndarray, positions: np.ndarray, passed: np.ndarray, lookahead: float) -> np.ndarray:
-    """``[N]`` each plan's waypoint index: the first index >= ``passed [N]`` (progress never goes back, so a
-    stretch of the plan on the far side of a wall is not skipped to) whose position is at least ``lookahead``
-    from ``positions [N, 2]``; the plan's last index when there is none."""
-    plans = np.asarray(plans, np.float64)
-    far = np.linalg.norm(plans - np.asarray(positions, np.float64)[:, None], axis=2) >= lookahead
-    far &= np.arange(plans.shape[1])[None, :] >= np.asarray(passed)[:, None]
-    return np.where(far.any(axis=1), far.argmax(axis=1), plans.shape[1] - 1)
-
-
 def pursuit_action(positions: np.ndarray, waypoints: np.ndarray, gain: float = GAIN) -> np.ndarray:
     """A unit step toward ``waypoints [N, 2]`` (the expert's speed), or onto it when it is within one step."""
     positions = np.asarray(positions, np.float64)
@@ -74,31 +56,5 @@ def pursuit_action(positions: np.ndarray, waypoints: np.ndarray, gain: float = G
     return step_action(positions, positions + reach * d, gain)
 
 
-class PointFollower:
-    """A batch of ``n`` controllers of one kind (:data:`CONTROLLERS`) executing the newest plan of each
-    episode: :meth:`new_plans` when episodes get a plan, :meth:`actions` at every step with ``age [n]`` the steps
-    since each plan was made."""
-
-    def __init__(self, n: int, kind: str = "track", lookahead: float = DEFAULT_LOOKAHEAD, gain: float = GAIN):
-        check_controller(kind, lookahead)
-        self.kind, self.lookahead, self.gain = kind, float(lookahead), float(gain)
-        self.passed = np.zeros(int(n), dtype=np.int64)
-
-    def new_plans(self, episodes: np.ndarray) -> None:
-        self.passed[episodes] = 0
-
-    def actions(self, positions: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
-        """Actions ``[n, 2]`` for the points at ``positions [n, 2]`` executing ``plans [n, S, 2]``."""
-        if self.kind == "track":
-            return step_action(positions, tracking_targets(plans, age), self.gain)
-        schedule = np.minimum(np.asarray(age) + 1, np.asarray(plans).shape[1] - 1)  # track's target index
-        self.passed = pursuit_waypoints(plans, positions, np.maximum(self.passed, schedule), self.lookahead)
-        waypoints = np.asarray(plans, np.float64)[np.arange(len(plans)), self.passed]
-        return pursuit_action(positions, waypoints, self.gain)
-
-
-def check_controller(kind: str, lookahead: float) -> None:
-    if kind not in CONTROLLERS:
-        raise BridgeplanError(f"unknown --controller {kind!r}: choose from {', '.join(CONTROLLERS)}")
-    if not lookahead > 0:
-        raise BridgeplanError(f"--lookahead must be > 0 (a distance in position), got {lookahead}")
+BODY = Body(KINEMATIC_POINT, step_action, pursuit_action, DEFAULT_LOOKAHEAD, keeps_schedule=True)
+"""The kinematic point steered by :mod:`bridgeplan.envs.controllers`: a plan's positions are its states."""

@@ -23,8 +23,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from bridgeplan.envs.family import Tasks
 from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
-from bridgeplan.envs.ogbench_pointmaze.names import check_maze, env_id
+from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, check_maze, env_id
 from bridgeplan.errors import BridgeplanError
 
 EVAL_EPISODES_PER_TASK = 50
@@ -35,6 +36,32 @@ TASK_IDS = (1, 2, 3, 4, 5)
 Policy = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``act(observations [N, 2], goals [N, 2]) -> actions [N, 2]``; row ``i`` is always the same episode of the
 batch; a finished episode's row stays at its last observation and its action is ignored."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SuiteTasks(Tasks):
+    """The protocol's episodes of one maze: ``episodes_per_task`` of each task in ``task_ids``."""
+
+    maze: str
+    episodes_per_task: int
+    task_ids: tuple[int, ...] = TASK_IDS
+
+    @classmethod
+    def make(cls, env: str, maze: str, episodes_per_task: int, seed: int = 0,
+             task_ids: tuple[int, ...] | None = None) -> SuiteTasks:
+        if episodes_per_task <= 0:
+            raise BridgeplanError(f"episodes per task must be positive, got {episodes_per_task}")
+        ids = tuple(TASK_IDS if task_ids is None else task_ids)
+        return cls(env, episodes_per_task * len(ids), seed, EVAL_EPISODE_STEPS, maze=check_maze(maze),
+                   episodes_per_task=episodes_per_task, task_ids=ids)
+
+    def fields(self) -> dict:
+        return {"maze": self.maze, "env_id": env_id(self.maze), "episodes_per_task": self.episodes_per_task,
+                "seed": self.seed}
+
+    def first(self) -> SuiteTasks:
+        return SuiteTasks(self.env, 1, self.seed, self.episode_steps, maze=self.maze, episodes_per_task=1,
+                          task_ids=self.task_ids[:1])
 
 
 @dataclass
@@ -96,15 +123,21 @@ def episode_seed(seed: int, task_id: int, index: int) -> int:
     return int(np.random.SeedSequence([seed, task_id, index]).generate_state(1)[0])
 
 
-def oracle_policy(maze: str) -> Policy:
+class OracleAgent:
     """The noise-free oracle: the unit direction to ``get_oracle_subgoal``'s subgoal (the datasets' expert
-    without its action noise)."""
-    oracle = Oracle(check_maze(maze))
+    without its action noise), as an agent of the protocol."""
 
-    def act(observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        return np.stack([oracle.direction(o, g) for o, g in zip(observations, goals)])
+    def __init__(self, maze: str):
+        self.oracle = Oracle(check_maze(maze))
 
-    return act
+    def begin(self, n: int) -> None:
+        pass
+
+    def act(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return np.stack([self.oracle.direction(o, g) for o, g in zip(observations, goals)])
+
+    def end(self, rows: np.ndarray) -> None:
+        pass
 
 
 def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISODES_PER_TASK, seed: int = 0,

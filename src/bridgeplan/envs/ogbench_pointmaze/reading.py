@@ -66,6 +66,8 @@ def check_dataset(path: str | Path, maze: str) -> DatasetCheck:
     """
     maze = check_maze(resolve_maze(maze))
     path = Path(path)
+    if path.is_dir():
+        raise BridgeplanError(f"{path} is a folder, not an npz file (OGBench's datasets are single .npz files)")
     if not path.is_file():
         raise BridgeplanError(f"no dataset file at {path}")
     if not zipfile.is_zipfile(path):
