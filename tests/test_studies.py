@@ -12,7 +12,7 @@ import pytest
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
 from bridgeplan.studies import load_studies, parse_study
-from bridgeplan.studies.commands import jobs, work_units
+from bridgeplan.studies.jobs import jobs, work_units
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, describe_missing, missing
 from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
 from tests.test_experiments import TINY_STUDY
@@ -121,7 +121,7 @@ def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, ca
 
 def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
     """The README's headline table sits between markers that `study report` rewrites and `--check` verifies."""
-    from bridgeplan.studies.reports import markers
+    from bridgeplan.studies.generators import markers
 
     root = _docs_copy(tmp_path)
     readme = root / "README.md"
@@ -145,7 +145,9 @@ def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
 def test_the_headline_reads_the_stores_its_study_uses():
     """Each maze's headline rows come from studies headline.toml declares (so `study list` and the reports'
     dependencies say where they come from), and every store read exists: a renamed folder is not skipped quietly."""
-    from bridgeplan.studies.reports import headline
+    from tests.reports import report
+
+    headline = report("headline")
 
     studies = load_studies(REPO)
     used = {REPO / "docs" / "results" / studies[name].data_dir / "results.csv" for name in studies["headline"].uses}
@@ -225,12 +227,13 @@ BAD = [
 def test_a_bad_study_is_one_error_line_and_nothing_written(tmp_path, capsys, text, message):
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
+    shutil.copytree(REPO / "studies" / "reports", root / "studies" / "reports")  # the generators a report names
     (root / "studies" / "bad.toml").write_text(text)
     for command in (["list"], ["report", "--check"], ["run", "bad", "--dry-run"], ["run", "bad"]):
         assert main(["study", *command, "--root", str(root)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err
-    assert sorted(p.name for p in root.rglob("*")) == ["bad.toml", "studies"]
+    assert sorted(p.name for p in root.rglob("*") if "reports" not in p.parts) == ["bad.toml", "studies"]
 
 
 def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_path, capsys):

@@ -58,28 +58,29 @@ def _add_study_commands(sub) -> None:
 
 
 def _cmd_study_list(args) -> int:
-    from bridgeplan.studies import find_root, load_studies
-    from bridgeplan.studies.reports import GENERATORS
+    from bridgeplan.studies import find_root, generators, load_studies
 
-    for s in load_studies(find_root(args.root)).values():
+    root = find_root(args.root)
+    reports = generators.load(root)
+    for s in load_studies(root).values():
         makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
                  ] if s.experiments else []
         folders = dict.fromkeys(e.out.split("/")[0] for e in s.evaluations)
         commands = dict.fromkeys(e.command for e in s.evaluations)
         makes += [f"docs/results/{f}/ ({', '.join(commands)} JSONs)" for f in folders]
         makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
-        makes += [f"docs/results/{r.output} (feeds {', '.join(GENERATORS[r.generator].feeds)})" for r in s.reports]
+        makes += [f"docs/results/{r.output} (feeds {', '.join(reports[r.generator].feeds)})" for r in s.reports]
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
     return 0
 
 
 def _cmd_study_report(args) -> int:
     from bridgeplan.files import atomic_write_text
-    from bridgeplan.studies import find_root, load_studies, select
+    from bridgeplan.studies import find_root, generators, load_studies, select
     from bridgeplan.studies.export import provenance, provenance_path, stale_rows
-    from bridgeplan.studies.reports import GENERATORS
 
     root = find_root(args.root)
+    reports = generators.load(root)
     studies = load_studies(root)
     chosen = select(studies, args.names, root)
     results = root / "docs" / "results"
@@ -89,7 +90,7 @@ def _cmd_study_report(args) -> int:
         if record is not None:
             texts[provenance_path(s)] = ([s.name], record)
         for r in s.reports:
-            generator = GENERATORS[r.generator]
+            generator = reports[r.generator]
             texts[f"docs/results/{r.output}"] = ([s.name], generator.render(results))
             for feed in generator.feeds:  # the tables the README and docs show between the generator's markers
                 names, current = texts.get(feed, ([], _read_or_empty(root / feed)))
@@ -127,7 +128,7 @@ def _read_or_empty(path: Path) -> str:
 
 
 def _cmd_study_run(args) -> int:
-    from bridgeplan.studies import find_root, load_studies, parse_study, select
+    from bridgeplan.studies import find_root, generators, load_studies, parse_study, select
     from bridgeplan.studies.plan import (
         QUICK_NOTE,
         Scale,
@@ -142,8 +143,9 @@ def _cmd_study_run(args) -> int:
     studies = load_studies(root)
     if Path(args.file).is_file() and not any((root / s.file).resolve() == Path(args.file).resolve()
                                               for s in studies.values()):
-        study = parse_study(args.file)
-        check_reports(study, studies)
+        reports = generators.load(root)
+        study = parse_study(args.file, generators=reports)
+        check_reports(study, studies, reports)
     else:
         study = select(studies, [args.file], root)[0]
     scale = Scale("quick" if args.quick else "committed")
@@ -165,7 +167,7 @@ def _cmd_study_run(args) -> int:
 def _cmd_study_import(args) -> int:
     from bridgeplan.experiments.store import KEY as KEY_NAMES
     from bridgeplan.experiments.store import ResultsStore, key_of, read_csv_rows, read_eval_json_rows
-    from bridgeplan.layout import store_path
+    from bridgeplan.paths import store_path
     from bridgeplan.studies import find_root, load_studies, select
     from bridgeplan.studies.plan import Scale, missing, results_dir
 

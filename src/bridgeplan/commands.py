@@ -67,7 +67,7 @@ def _cmd_data_generate(args) -> int:
             positive("--" + flag.replace("_", "-"), getattr(args, flag))
     out = family.generate_dataset(args.maze, Path(args.out) if args.out else None,
                                   seed=family.data_seed if args.seed is None else args.seed,
-                                  steps=args.steps, piece_steps=args.piece_steps or 0, episodes=args.episodes,
+                                  steps=args.steps, piece_steps=args.piece_steps, episodes=args.episodes,
                                   episode_steps=args.episode_steps, workers=args.workers, force=args.force,
                                   progress=not args.no_progress)
     print(family.dataset_info(str(out), args.maze)[1])
@@ -272,7 +272,8 @@ def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
     except ValueError:
         raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
     if not values or min(values) < minimum:
-        raise BridgeplanError(f"{flag} takes integers >= {minimum}, got {text!r}")
+        kind = "positive integers" if minimum == 1 else f"integers >= {minimum}"
+        raise BridgeplanError(f"{flag} takes {kind}, got {text!r}")
     return values
 
 
@@ -430,7 +431,7 @@ def _show(result, args, out: Path) -> int:
 
 def _cmd_eval(args) -> int:
     from bridgeplan.evaluate import evaluate_run
-    from bridgeplan.layout import eval_dir
+    from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
     execution = _execution(args)
@@ -487,7 +488,7 @@ def _low_level_flags(p, replan_high_help: str) -> None:
 def _cmd_hierarchy_eval(args) -> int:
     from bridgeplan.evaluate import run_tasks
     from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
-    from bridgeplan.layout import eval_dir
+    from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
@@ -538,7 +539,7 @@ def _add_graph_command(sub) -> None:
 def _cmd_graph(args) -> int:
     from bridgeplan.evaluate import make_tasks
     from bridgeplan.hierarchy import evaluate_graph
-    from bridgeplan.layout import eval_dir
+    from bridgeplan.paths import eval_dir
     from bridgeplan.runs import load_planner, run_dir_of
 
     env, dataset = args.maze, args.dataset
@@ -625,7 +626,7 @@ def _add_report_command(sub) -> None:
 
 def _cmd_report(args) -> int:
     from bridgeplan.experiments.store import ResultsStore
-    from bridgeplan.layout import store_path
+    from bridgeplan.paths import store_path
     from bridgeplan.report import write_report
 
     store = store_path(args.results)

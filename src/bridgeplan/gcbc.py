@@ -20,7 +20,7 @@ re-implemented in PyTorch:
 The random stream differs from OGBench's (numpy's ``Generator`` here, seeded from ``seed`` and saved in
 every checkpoint so a resumed run continues the same stream); the distributions are the same.
 
-On disk (:mod:`bridgeplan.layout`): ``RUN/checkpoint.pt`` resumes everything, ``RUN/config.json`` is the
+On disk (:mod:`bridgeplan.paths`): ``RUN/checkpoint.pt`` resumes everything, ``RUN/config.json`` is the
 config beside it, ``RUN/snapshots/step_*.pt`` the policy's weights at every ``checkpoint_every`` steps (what
 evaluation loads), ``RUN/metrics.jsonl`` one line per ``log_every`` steps (loss, MSE, steps/s).
 """
@@ -45,9 +45,9 @@ from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import code_version
-from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.locks import run_lock
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
+from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.train import make_optimizer
 
 KIND = "gcbc"
@@ -385,7 +385,7 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
     Each result is also written to ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>.json``; returns them in order."""
     from bridgeplan.envs.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
     from bridgeplan.files import atomic_write_text
-    from bridgeplan.layout import eval_dir
+    from bridgeplan.paths import eval_dir
 
     run_dir = Path(run_dir)
     episodes = episodes or EVAL_EPISODES_PER_TASK

@@ -44,7 +44,7 @@ def add_gcbc_commands(sub) -> None:
 def _cmd_gcbc_train(args) -> int:
     from bridgeplan.checkpoint import load_checkpoint
     from bridgeplan.gcbc import GCBCConfig, train_gcbc
-    from bridgeplan.layout import checkpoint_path
+    from bridgeplan.paths import checkpoint_path
 
     given = {f: getattr(args, f) for f in ("maze", "steps", "minutes", "batch_size", "lr", "seed", "p_curgoal",
                                            "p_trajgoal", "p_randomgoal", "discount", "checkpoint_every",

@@ -90,7 +90,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
 
     from bridgeplan.envs import family_of
     from bridgeplan.evaluate import PlannerDecisions, generator, run_episodes, run_tasks
-    from bridgeplan.layout import render_dir
+    from bridgeplan.paths import render_dir
     from bridgeplan.replan import Execution
     from bridgeplan.runs import load_planner, load_windows
     from bridgeplan.trajectory import window_conditions

@@ -16,10 +16,10 @@ from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.device import resolve_device
 from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.nets.unet import TemporalUNet
 from bridgeplan.normalizer import Normalizer
+from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.trajectory import Layout

@@ -145,7 +145,7 @@ class Family:
         raise NotImplementedError
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
-                         piece_steps: int = 0, episodes: int | None = None, episode_steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
                          workers: int = 1, force: bool = False, progress: bool = True) -> Path:
         """Make ``env``'s dataset by the family's recipe at ``out`` (None: its default place); returns the path
         that :meth:`load_stream` reads. Options the recipe has no use for are refused."""

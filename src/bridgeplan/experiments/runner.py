@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridgeplan import config as cfg
-from bridgeplan import layout
+from bridgeplan import paths
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
@@ -68,7 +68,7 @@ def _prior_config(s: SweepSettings, seed: int, planner: cfg.TrainConfig) -> cfg.
 
 def _trained_step(run_dir: Path) -> int:
     """Optimizer steps a run has done (-1: not started)."""
-    ckpt = layout.checkpoint_path(run_dir)
+    ckpt = paths.checkpoint_path(run_dir)
     return load_checkpoint(ckpt)["step"] if ckpt.exists() else -1
 
 
@@ -101,11 +101,11 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     if settings.only_runs is not None and config.run_name() not in settings.only_runs:
         return []
     configure_threads(threads or config.threads)
-    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
+    run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
     train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []
-    store = ResultsStore(layout.store_path(settings.results_dir))
+    store = ResultsStore(paths.store_path(settings.results_dir))
     suffix = VALIDATION_SUFFIX if settings.validation else ""
     split = "validation" if settings.validation else "test"
     wanted = [(exp.name + suffix, series) for exp in experiments for series in exp.series if series.run == spec]
@@ -114,7 +114,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     tasks = {multi: make_tasks(settings.maze, settings.episodes, task_seed, multi) for multi in (False, True)}
     job_floors = {}  # per task set and controller, once for the job (same prior, same tasks at every snapshot)
     rows = []
-    steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
+    steps = [s for s in paths.snapshot_steps(run_dir) if s <= config.steps]
     for step in steps:
         todo = []
         for name, series in wanted:
@@ -156,7 +156,7 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
         return settings
     from bridgeplan.envs import family_of
 
-    path = (layout.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
+    path = (paths.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
     if not path.exists():
         family_of(settings.maze).generate_dataset(settings.maze, path, seed=123, steps=settings.dataset_steps)
     return dataclasses.replace(settings, dataset=str(path))
@@ -167,7 +167,7 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
     """Run every job the experiments need; returns the number of new result rows."""
     for exp in experiments:
         exp.validate()
-    ResultsStore(layout.store_path(settings.results_dir))  # refuse a newer schema before any work
+    ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
     if backend not in ("local", "ray"):
         raise BridgeplanError(f"unknown backend {backend!r}: choose from local, ray")
     if workers < 1:
@@ -227,6 +227,6 @@ def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, 
     from bridgeplan.train import train_prior
 
     config = _prior_config(settings, seed, planner)
-    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
+    run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
     train_to(train_prior, config, run_dir, progress)
     return str(run_dir)

@@ -69,7 +69,7 @@ def stale_rows(study: Study, root: Path) -> list[str]:
     its grids (docs/results/DATA/results.csv) and the JSONs of its one-run planner evaluations."""
     from bridgeplan import config as cfg
     from bridgeplan.experiments.runner import _train_config
-    from bridgeplan.studies.commands import jobs, train_config
+    from bridgeplan.studies.jobs import jobs, train_config
     from bridgeplan.studies.plan import sweeps
 
     recorded: dict[str, dict] = {}  # run name -> its config as a row records it
@@ -102,11 +102,11 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
     """The study's results (``store_dir``, its committed-scale results directory) into docs/results: its store as
     ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment in its committed folder,
     and its evaluation JSONs to their ``out`` paths; the files written."""
-    from bridgeplan import layout
+    from bridgeplan import paths
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.report import write_report
 
-    store = layout.store_path(store_dir)
+    store = paths.store_path(store_dir)
     if not study.experiments and not study.evaluations:
         raise BridgeplanError(f"study {study.name} trains and evaluates nothing of its own: nothing to export")
     if not study.experiments:
@@ -127,7 +127,7 @@ def copy_jsons(study: Study, source: Path, target: Path) -> list[Path]:
     """The study's evaluation JSONs that exist under ``source`` copied to the same ``out`` paths under ``target``
     (each atomically); the files written. None there: an error."""
     from bridgeplan.files import atomic_write_text
-    from bridgeplan.studies.commands import jobs
+    from bridgeplan.studies.jobs import jobs
 
     written = []
     for job in jobs(study, source, source, quick=False):

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.commands import jobs, needed_runs, run_commands, train_config
+from bridgeplan.studies.jobs import jobs, needed_runs, run_commands, train_config
 from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError, committed_csv
 
 TRAIN_STEPS_PER_SECOND = 18.6
@@ -192,11 +192,10 @@ def trained_methods(study: Study) -> set:
     return out
 
 
-def check_reports(study: Study, studies: dict[str, Study]) -> None:
+def check_reports(study: Study, studies: dict[str, Study], generators: dict) -> None:
     """Its ``uses`` name known studies, and each report's generator reads only methods that the study or the
     studies it uses train."""
     from bridgeplan.analysis.keys import label
-    from bridgeplan.studies.reports import GENERATORS
 
     for i, name in enumerate(study.uses):
         if name not in studies:
@@ -207,7 +206,7 @@ def check_reports(study: Study, studies: dict[str, Study]) -> None:
     for name in study.uses:
         trained |= trained_methods(studies[name])
     for i, report in enumerate(study.reports):
-        missing = [k for k in GENERATORS[report.generator].reads() if k not in trained]
+        missing = [k for k in generators[report.generator].reads() if k not in trained]
         if missing:
             raise StudyError(study.file, f"reports[{i}].generator",
                              f"{report.generator} reads {label(missing[0])} (N={missing[0].steps}), which neither "
@@ -217,9 +216,9 @@ def check_reports(study: Study, studies: dict[str, Study]) -> None:
 # --- what is missing ---------------------------------------------------------------------------------------------
 
 def _planned_snapshots(run_dir: Path, stages) -> list[int]:
-    from bridgeplan import layout
+    from bridgeplan import paths
 
-    steps = set(layout.snapshot_steps(run_dir)) if run_dir.exists() else set()
+    steps = set(paths.snapshot_steps(run_dir)) if run_dir.exists() else set()
     start = 0
     for total, every in stages:
         steps |= {s for s in range(start + 1, total + 1) if s % every == 0 or s == total}
@@ -291,7 +290,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     """What ``study run`` would train and evaluate: evaluations absent from the store, and the runs they need that are
     short of their steps (a run whose evaluations are all stored, imported say, is not trained)."""
     from bridgeplan import config as cfg
-    from bridgeplan import layout
+    from bridgeplan import paths
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
     from bridgeplan.experiments.runner import _prior_config, _train_config, _trained_step
     from bridgeplan.experiments.store import VALIDATION_SUFFIX, stored_keys
@@ -302,11 +301,11 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     corrections: Counter = Counter()
     wanted: dict[str, set[tuple]] = {}
     declared: dict[str, set[tuple]] = {}
-    keys, members = stored_keys(layout.store_path(results_dir(study, root, scale)))
+    keys, members = stored_keys(paths.store_path(results_dir(study, root, scale)))
     seen = set()
     for sweep in plan:
         s, experiment = sweep.settings, sweep.experiment
-        runs = layout.runs_dir(s.results_dir)
+        runs = paths.runs_dir(s.results_dir)
         planner = cfg.preset_config(s.maze, s.preset, **s.overrides)
         suffix = VALIDATION_SUFFIX if s.validation else ""
         name = experiment.name + suffix
@@ -425,7 +424,8 @@ def ensure_dataset(study: Study, root: Path, progress: bool = True) -> Path:
         raise StudyError(study.file, "dataset.version", f"data version {d.version}, but this bridgeplan generates "
                                                         f"version {family.data_version}")
     if not path.exists():
-        family.generate_dataset(d.maze, path, seed=d.seed, steps=d.steps, piece_steps=d.piece_steps,
+        family.generate_dataset(d.maze, path, seed=d.seed, steps=d.steps if family.sized_data else None,
+                                piece_steps=d.piece_steps or None,
                                 progress=progress)
     return path
 
@@ -466,10 +466,10 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     workers = workers or study.evaluation.workers
     added, only = 0, None
     if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
-        from bridgeplan import layout
+        from bridgeplan import paths
         from bridgeplan.experiments.store import ResultsStore, stored_keys
 
-        path = layout.store_path(results_dir(study, root, scale))
+        path = paths.store_path(results_dir(study, root, scale))
         keys, _ = stored_keys(path)
         links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
         if links:

@@ -16,7 +16,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.evaluate import make_tasks
 from bridgeplan.experiments.runner import _train_config
 from bridgeplan.files import atomic_write_text
-from bridgeplan.layout import runs_dir, snapshot_path
+from bridgeplan.paths import runs_dir, snapshot_path
 from bridgeplan.runs import build_model
 from bridgeplan.shipped import MANIFEST, STUDY, ShippedPlanner, manifest, sha256
 from bridgeplan.studies import load_studies, select

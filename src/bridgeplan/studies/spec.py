@@ -54,7 +54,7 @@ Example (the keys and their defaults: the dataclasses below)::
                 correction_form = "x0" }]  # consistency corrections (CDDB) of x0 (default) or deep form
 
     [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
-    process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, graph,
+    process = "ddpm"                     # (bridgeplan.studies.jobs: eval, hierarchy eval, graph,
     horizon = 32                         #  each writing one JSON, exported to docs/results; prior = "learned"
     stride = 12                          #  trains its prior first, for prior_steps)
 
@@ -71,7 +71,7 @@ Example (the keys and their defaults: the dataclasses below)::
     task_sets = ["single", "multi"]
 
     [[reports]]
-    generator = "findings"               # bridgeplan.studies.reports.GENERATORS
+    generator = "findings"               # the repository's studies/reports (bridgeplan.studies.generators)
     output = "findings.md"               # relative to docs/results
 
 Any other key, an unknown grid, process, parameter, method, sampler or generator, or a report whose generator
@@ -222,9 +222,9 @@ class Study:
     methods: tuple[Method, ...] = ()
     experiments: tuple[ExperimentSpec, ...] = ()
     runs: tuple[NamedRun, ...] = ()
-    """Named runs for :attr:`evaluations` (``studies.commands``)."""
+    """Named runs for :attr:`evaluations` (``studies.jobs``)."""
     evaluations: tuple[CommandEvaluation, ...] = ()
-    """Evaluation JSONs, one command each (``studies.commands``)."""
+    """Evaluation JSONs, one command each (``studies.jobs``)."""
     reports: tuple[ReportSpec, ...] = ()
 
     @property
@@ -419,7 +419,7 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
     return ExperimentSpec(**values)
 
 
-# --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
+# --- evaluations of one command each (bridgeplan.studies.jobs runs them) -----------------------------------
 
 COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "graph": ("graph",),
             "oracle": ("oracle",), "gcbc eval": ("gcbc", "eval")}
@@ -584,11 +584,10 @@ def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
         raise StudyError(file, f"{key}.args", message.split("error: ", 1)[-1]) from None
 
 
-def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
+def read_study(path: Path | str, shown: Path | str | None = None, generators: dict | None = None) -> Study:
     """The study in ``path`` (TOML), its format checked (``bridgeplan.studies.parse_study`` checks the rest);
     :class:`StudyError` names the file (as ``shown``, default ``path``) and the key of the first problem."""
-    from bridgeplan.studies.reports import GENERATORS
-
+    generators = generators or {}
     try:
         text = Path(path).read_text()
     except OSError as e:
@@ -638,10 +637,11 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     for i, r in enumerate(raw.get("reports", [])):
         key = f"reports[{i}]"
         r = _table(path, key, r, {"generator", "output"}, ("generator",))
-        if r["generator"] not in GENERATORS:
+        if r["generator"] not in generators:
             raise StudyError(path, f"{key}.generator",
-                             f"unknown generator {r['generator']!r} (choose from {', '.join(GENERATORS)})")
-        output = _typed(path, f"{key}.output", r.get("output", GENERATORS[r["generator"]].output), str)
+                             f"unknown generator {r['generator']!r} (the repository's studies/reports has: "
+                             f"{', '.join(generators) or 'none'})")
+        output = _typed(path, f"{key}.output", r.get("output", generators[r["generator"]].output), str)
         reports.append(ReportSpec(r["generator"], output))
     study = Study(name=name, file=path, title=_typed(path, "title", raw.get("title", ""), str),
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,

@@ -101,7 +101,7 @@ class Maze2D(Family):
         return f"datasets/{env}-{steps}{pieces}-v{version}"
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
-                         piece_steps: int = 0, episodes: int | None = None, episode_steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
                          workers: int = 1, force: bool = False, progress: bool = True) -> Path:
         """The noisy expert's stream of ``steps`` transitions (default 1 M; or pieces of ``piece_steps``) in the
         Minari format (default ``datasets/<maze>-<steps>``)."""
@@ -111,7 +111,7 @@ class Maze2D(Family):
             raise BridgeplanError("a Maze2D dataset is one stream of --steps transitions (or pieces of "
                                   "--piece-steps): it takes no --episodes or --episode-steps")
         return generate_dataset(env, 1_000_000 if steps is None else steps, seed=seed, out=out, force=force,
-                                progress=progress, workers=workers, piece_steps=piece_steps or None)
+                                progress=progress, workers=workers, piece_steps=piece_steps)
 
     def reads(self, path: str) -> bool:
         """A Minari dataset (directory or id) or a legacy D4RL hdf5 file."""

@@ -31,7 +31,7 @@ from bridgeplan.envs.maze2d.minari_io import (
     write_minari_into,
 )
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.layout import datasets_root
+from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import MAZE2D
 
 CACHE_VERSION = 2

@@ -67,15 +67,15 @@ class OGBenchPointmaze(Family):
         return f"datasets/ogbench/{env}.npz"
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
-                         piece_steps: int = 0, episodes: int | None = None, episode_steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
                          workers: int = 1, force: bool = False, progress: bool = True) -> Path:
         """OGBench's recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz and
         NAME-val.npz in ``out``'s folder (default ``datasets/ogbench``, or under ``$BRIDGEPLAN_DATASETS``);
         returns NAME.npz."""
         from bridgeplan.envs.ogbench_pointmaze.generate import generate_dataset
-        from bridgeplan.layout import datasets_root
+        from bridgeplan.paths import datasets_root
 
-        if steps is not None or piece_steps or workers != 1:
+        if steps is not None or piece_steps is not None or workers != 1:
             raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
                                   "not --steps, --piece-steps or --workers")
         folder = datasets_root() / "ogbench" if out is None else Path(out)

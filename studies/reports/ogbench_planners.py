@@ -24,6 +24,8 @@ import numpy as np
 from bridgeplan.analysis.stats import mean_se
 from bridgeplan.analysis.tables import bold, fmt_mean_se, table
 
+from .ogbench_calibration import oracle_row
+
 READS = ()
 """Its rows are the protocol's JSONs, not a Maze2D store."""
 DATASETS = tuple((maze, kind) for kind in ("navigate", "stitch") for maze in ("medium", "large", "giant"))
@@ -162,7 +164,8 @@ def dataset_lines(root: Path, maze: str, kind: str) -> list[str]:
                          cell(by_seed(rows, m, c, TEST_SEED, floor)),
                          f"{np.mean(list(ms.values())):.0f}" if ms else "-"])
     oracle_path = root / ORACLE / f"{maze}.json"
-    oracle = f"{100 * json.loads(oracle_path.read_text())['success_rate']:.1f}" if oracle_path.exists() else "-"
+    oracle = (f"{100 * oracle_row(json.loads(oracle_path.read_text()))['success_rate']:.1f}" if oracle_path.exists()
+              else "-")
     published = PUBLISHED[kind].get(maze, {})
     trained = [r for r in rows if not graph_alone(r)]
     seeds = sorted({training_seed(r) for r in trained})

@@ -17,7 +17,6 @@ Made by `bridgeplan study report findings` (studies/findings.toml) into docs/res
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,8 @@ from bridgeplan.analysis.selection import steps as choice_steps
 from bridgeplan.analysis.stats import finding_verdict, mean_se, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.replan import Execution
+
+from .headline import expert_rows
 
 MAZES = ("umaze", "medium", "large")
 FLOOR = "floor"
@@ -216,7 +217,7 @@ def render(root: Path) -> str:
              "bridgeplan/studies/reports/findings.py).", "",
              *table(header, [[finding[0], *(cell(results[m], finding, multi) for multi in (0, 1) for m in MAZES)]
                              for finding in FINDINGS])]
-    expert = json.loads((root / "expert-on-eval-tasks.json").read_text())["rows"]
+    expert = expert_rows(root)
     lines += ["", "## Issue 13's goal: a Minari score of 95 or more", "",
               "The setting (method, NFE, execution) with the best mean on the validation episodes "
               "(`experiment --validation`: nfe-curves and controllers), scored on the test episodes; the expert "

@@ -27,7 +27,8 @@ from bridgeplan.analysis.load import load_csvs
 from bridgeplan.analysis.selection import best
 from bridgeplan.analysis.stats import compare, mean_se, paired
 from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
-from bridgeplan.studies.reports.headline import STORES, candidates, describe, expert_scores
+
+from .headline import STORES, candidates, describe, expert_scores
 
 READS = ()
 """Its rows are `bridgeplan hierarchy eval` JSONs (and the maze's batch-32 flat stores)."""

@@ -23,7 +23,8 @@ from bridgeplan.analysis.keys import MethodKey, method
 from bridgeplan.analysis.load import Point, Results, Row, load_csvs
 from bridgeplan.analysis.selection import best
 from bridgeplan.analysis.tables import table
-from bridgeplan.studies.reports import headline
+
+from . import headline
 
 ROWS = "shipped/{maze}/results.csv"
 """A shipped planner's committed rows, relative to docs/results (its study's ``data`` folder)."""

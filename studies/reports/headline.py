@@ -87,10 +87,16 @@ def ms_per_decision(results: Results, point: Point) -> str:
     return f"{mean(results, point, 'plan_ms'):.2f} ms batched"
 
 
+def expert_rows(root: Path) -> list[dict]:
+    """The expert's rows on the evaluation tasks, each with its ``score_minari``: the committed file's (made by
+    ``reference expert-on-tasks``) or rows of ``bridgeplan oracle`` (its score under ``score``)."""
+    return [{**r, "score_minari": r["score"]["minari"]["mean"]} if "score_minari" not in r else r
+            for r in json.loads((root / EXPERT).read_text())["rows"]]
+
+
 def expert_scores(root: Path) -> dict[tuple[str, bool], list[float]]:
-    rows = json.loads((root / EXPERT).read_text())["rows"]
     out: dict[tuple[str, bool], list[float]] = {}
-    for r in rows:
+    for r in expert_rows(root):
         out.setdefault((r["maze"], bool(r["multi_task"])), []).append(r["score_minari"])
     return out
 

@@ -38,7 +38,12 @@ docs/results/ogbench-gcbc/README.md."""
 
 
 def read_rows(folder: Path) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
+    return [oracle_row(json.loads(p.read_text())) for p in sorted(folder.glob("*.json"))]
+
+
+def oracle_row(d: dict) -> dict:
+    """An evaluation JSON as one row: itself, or the one row of ``bridgeplan oracle``'s (with its code version)."""
+    return {**d["rows"][0], "code_version": d["code_version"]} if "rows" in d else d
 
 
 def task_cells(row: dict) -> list[str]:
