@@ -15,6 +15,7 @@ TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "
               "--device", "cpu"]
 
 
+@pytest.mark.slow
 def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     runs = f"{tiny_runs['ddpm']},{tiny_runs['bridge']}"
     assert main(["bench", "--out", str(tmp_path), *TINY_BENCH, "--budget-runs", runs, "--budgets", "1,2,4",
@@ -75,12 +76,27 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (["--budget-runs", "no/such/run"], "no run at no/such/run"),
     (["--budget-steps", "0"], "--budget-steps takes positive integers"),
     (["--side-by-side-seconds", "-1"], "side-by-side-seconds must be >= 0"),
+    (["--methods", "DDPM [fast]"], "unknown method 'DDPM [fast]'"),
+    (["--overhead-repeats", "-1"], "overhead-repeats must be >= 0"),
 ])
 def test_bench_bad_input(tmp_path, capsys, bad, message):
     assert main(["bench", "--out", str(tmp_path), "--no-compile", *bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not (tmp_path / "bench.json").exists()
+
+
+def test_bench_times_the_methods_asked_for_at_any_nfe_and_skips_the_overheads(tmp_path, capsys):
+    """``--methods`` keeps the latency table to those methods; an NFE above 16 gets networks with enough steps
+    (the bridge takes N - 1 at most); ``--overhead-repeats 0`` skips the overhead tables."""
+    args = [*TINY_BENCH, "--methods", "DDPM [ancestral],bridge (line)", "--nfes", "1,20", "--overhead-repeats", "0"]
+    assert main(["bench", "--out", str(tmp_path), *args]) == 0
+    capsys.readouterr()
+    result = json.loads((tmp_path / "bench.json").read_text())
+    assert sorted((r["method"], r["nfe"]) for r in result["latency"]) == [
+        ("DDPM [ancestral]", 1), ("DDPM [ancestral]", 20), ("bridge (line)", 1), ("bridge (line)", 20)]
+    assert result["plan_overhead"] == [] and result["train_overhead"] == []
+    assert "Untrained networks with N = 21 for the timings" in (tmp_path / "bench.md").read_text()
 
 
 def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_path, capsys):
@@ -91,6 +107,7 @@ def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_
     assert not (tmp_path / "bench.json").exists()
 
 
+@pytest.mark.slow
 def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     """Two DDPM runs (say two seeds) are two rows, never one best pooled over both."""
     twin = tmp_path / "ddpm-twin"
@@ -104,6 +121,7 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
     assert "| DDPM (ddpm) | 3 |" in markdown and "| DDPM (ddpm-twin) | 3 |" in markdown
 
 
+@pytest.mark.slow
 def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
     import torch
 
@@ -143,6 +161,7 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
                               any(isinstance(m, torch.nn.Mish) for m in net.modules()) for net in references)
 
 
+@pytest.mark.slow
 def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     import torch
 
@@ -161,9 +180,10 @@ def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     assert len(compiled) == 1 and isinstance(compiled[0], TemporalUNet)  # one network compiled, for those rows
     assert all(r["compile_s"] > 0 for r in timed)
     assert all(r["compile_s"] is None for r in rows if r["implementation"] != "compiled")
-    assert f"| compiled ({timed[0]['compile_s']:.0f} s) |" in "\n".join(format_throughput(rows))
+    assert f"| compiled ({timed[0]['compile_s']:.0f} s) |" in "\n".join(format_throughput(rows, 1024))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif((os.cpu_count() or 1) < 2 or os.name != "posix", reason="a second core; POSIX signals")
 def test_two_jobs_side_by_side(monkeypatch):
     import torch

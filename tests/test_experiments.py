@@ -175,6 +175,7 @@ def test_newer_schema_is_refused_untouched(tmp_path, capsys):
     assert db.read_bytes() == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", [["--workers", "2"], ["--backend", "ray"]])
 def test_parallel_backends_fill_the_same_store(tiny_dataset, tmp_path, backend):
     if "ray" in backend:

@@ -151,6 +151,7 @@ def reference_run(tiny_dataset, tmp_path_factory) -> Path:
     return run
 
 
+@pytest.mark.slow
 def test_training_killed_at_any_moment_resumes_bit_identical(tiny_dataset, tmp_path, reference_run):
     run = tmp_path / "run"
     ckpt, snapshots = run / "checkpoint.pt", run / "snapshots"
@@ -249,6 +250,7 @@ def finished_sweep(tiny_dataset, tmp_path_factory) -> Path:
     return results
 
 
+@pytest.mark.slow
 def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, finished_sweep):
     args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     moments = [  # (while, condition)
@@ -279,6 +281,7 @@ def test_sweep_killed_mid_way_loses_and_redoes_nothing(tiny_dataset, tmp_path, f
     print(f"sweep: {kills} kills survived, {lost} rows lost, {redone} redone")
 
 
+@pytest.mark.slow
 def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_dataset, tmp_path, finished_sweep):
     args, results = sweep("bridge-vs-ddpm", tiny_dataset, tmp_path)
     r = cli(*args, "--workers", "2")
@@ -292,6 +295,7 @@ def test_parallel_sweep_matches_the_sequential_one_and_exits_cleanly(tiny_datase
         assert {m: row[m] for m in measured} == {m: reference[key][m] for m in measured}, key
 
 
+@pytest.mark.slow
 def test_two_sweeps_share_one_store(tiny_dataset, tmp_path):
     # the same grid twice: both want to train the learned prior and the same four runs, and to
     # evaluate the same snapshots
@@ -444,6 +448,7 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     (repo / "docs" / "results" / "umaze" / "report.md").write_text("old\n")
     (repo / "studies").mkdir()
     (repo / "studies" / "x.toml").write_text("title = 'x'\n")
+    (repo / ".gitignore").write_text("__pycache__/\n")  # as the repository's: importing the code writes them
     git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(repo)]
     subprocess.run([*git, "init", "-q"], check=True)
     subprocess.run([*git, "add", "-A"], check=True)
@@ -462,4 +467,11 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
     subprocess.run([*git, "checkout", "-q", "--", "studies/x.toml"], check=True)
     (repo / "src" / "bridgeplan" / "files.py").write_text((repo / "src" / "bridgeplan" / "files.py").read_text() + "\n")
+    assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
+    subprocess.run([*git, "checkout", "-q", "--", "src/bridgeplan/files.py"], check=True)
+    (repo / "docs" / "results" / "new-campaign.md").write_text("new\n")  # an untracked output: not code
+    (repo / "src" / "bridgeplan" / "__pycache__").mkdir(exist_ok=True)
+    (repo / "src" / "bridgeplan" / "__pycache__" / "x.pyc").write_bytes(b"")  # ignored by git: not code either
+    assert version() == f"{bridgeplan.__version__}+{sha}"
+    (repo / "src" / "bridgeplan" / "new_module.py").write_text("X = 1\n")  # code not yet added: code
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"

@@ -249,7 +249,7 @@ def test_refuses_to_overwrite_and_writes_atomically(navigate, monkeypatch, tmp_p
         raise OSError("disk full")
 
     monkeypatch.setattr(gen.np, "savez_compressed", broken)
-    with pytest.raises(OSError):
+    with pytest.raises(BridgeplanError, match="cannot write .*pointmaze-medium-stitch-v0.npz: disk full"):
         generate_dataset("pointmaze-medium-stitch-v0", tmp_path, episodes=1, episode_steps=5, progress=False)
     assert list(tmp_path.iterdir()) == []  # neither a half-written file nor a temporary one
 

@@ -242,7 +242,7 @@ def test_replanning_through_the_protocol():
 def test_eval_settings_are_checked(point_runs, capsys):
     run = str(point_runs["ddpm"])
     for flags in (["--replan-every", "0"], ["--controller", "hold"], ["--lookahead", "1"],
-                  ["--controller", "pursuit", "--lookahead", "0"], ["--episodes", "0"], ["--tasks", "1,9"]):
+                  ["--controller", "pursuit", "--lookahead", "0"], ["--episodes", "0"], ["--tasks", "1,11"]):
         assert main(["eval", run, "--no-progress", *flags]) == 2
         assert capsys.readouterr().err.startswith("error: ")
     assert not (point_runs["ddpm"] / "eval").exists()

@@ -95,7 +95,7 @@ def test_policy_sees_goals_and_a_standing_policy_fails():
 
 def test_errors():
     act = OracleAgent("medium").act
-    for bad in ([0], [6], [1, 7], []):
+    for bad in ([0], [11], [1, 12], []):
         with pytest.raises(BridgeplanError, match="task ids"):
             evaluate_policy("medium", act, episodes_per_task=1, task_ids=bad)
     with pytest.raises(BridgeplanError, match="shape"):
@@ -120,6 +120,43 @@ def test_cli_oracle(capsys):
                  "--no-progress"]) == 0
     (out,) = json.loads(capsys.readouterr().out)["rows"]
     assert list(out["tasks"]) == ["4"] and out["episodes"] == 1 and out["policy"] == "oracle"
-    assert main(["oracle", "pointmaze-medium-navigate-v0", "--tasks", "9"]) == 2
+    assert main(["oracle", "pointmaze-medium-navigate-v0", "--tasks", "11"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: task ids must be in 1..5") and err.count("\n") == 1
+
+
+def test_validation_tasks_are_other_cells_than_the_test_tasks():
+    """Five start-goal pairs per maze, drawn once (the same every time), none on a test task's cells, each at least as
+    long (in cells, the oracle's walk) as the shortest test task."""
+    from bridgeplan.envs.ogbench_pointmaze.maze import bfs
+    from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS, validation_tasks
+
+    for maze in ("medium", "large", "giant"):
+        env = make_env(maze).unwrapped
+        tests = env.task_infos
+        tasks = validation_tasks(env.maze_map, tests)
+        assert [t["task_name"] for t in tasks] == [f"validation_task{i}" for i in VALIDATION_TASK_IDS]
+        pairs = [(tuple(t["init_ij"]), tuple(t["goal_ij"])) for t in tasks]
+        assert len(set(pairs)) == 5 and pairs == [(tuple(t["init_ij"]), tuple(t["goal_ij"]))
+                                                  for t in validation_tasks(env.maze_map, tests)]
+        test_cells = {tuple(t[k]) for t in tests for k in ("init_ij", "goal_ij")}
+        assert not test_cells & {c for pair in pairs for c in pair}
+        shortest = min(bfs(env.maze_map, tuple(t["init_ij"]))[0][tuple(t["goal_ij"])] for t in tests)
+        assert all(env.maze_map[c] == 0 for pair in pairs for c in pair)
+        assert all(bfs(env.maze_map, a)[0][b] >= shortest for a, b in pairs)
+
+
+def test_the_protocol_runs_the_validation_tasks_by_their_ids():
+    from bridgeplan.envs.ogbench_pointmaze.protocol import validation_tasks
+
+    env = make_env("medium").unwrapped
+    expected = validation_tasks(env.maze_map, env.task_infos)
+    r = evaluate_policy("medium", OracleAgent("medium").act, episodes_per_task=1, seed=0, task_ids=[6, 10])
+    assert list(r.tasks) == [6, 10]
+    for task_id, task in ((6, expected[0]), (10, expected[4])):
+        assert (r.tasks[task_id].init_cell, r.tasks[task_id].goal_cell) == (tuple(task["init_ij"]),
+                                                                            tuple(task["goal_ij"]))
+        assert r.tasks[task_id].task_name == task["task_name"]
+    assert r.success_rate == 1.0  # the oracle reaches other goals as well as the test tasks'
+    with pytest.raises(BridgeplanError, match="6..10 .the validation tasks"):
+        evaluate_policy("medium", OracleAgent("medium").act, episodes_per_task=1, task_ids=[11])

@@ -213,7 +213,7 @@ def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_pat
 
 
 def test_hierarchy_report_reads_the_graph_as_a_high_level(tmp_path):
-    """A `hierarchy graph-eval` row: the graph has no training seed (its low level's counts), no span for a line
+    """A `graph --low` row: the graph has no training seed (its low level's counts), no span for a line
     floor ('-'), and a family of its own; the goal is judged on its test episodes."""
     hierarchy = report("hierarchy")
 
@@ -319,3 +319,55 @@ def test_the_reports_read_the_oracles_rows_as_the_committed_files(tmp_path):
     row = {"maze": "medium", "env_id": "pointmaze-medium-v0", "success_rate": 0.9}
     assert calibration.oracle_row({**row, "code_version": "v"}) == {**row, "code_version": "v"}
     assert calibration.oracle_row({"code_version": "v", "rows": [row]}) == {**row, "code_version": "v"}
+def _bench(device, latency, throughput, limits=None):
+    machine = {"device": device, "torch": "2", "code_version": "0.1.0+test", "processor": "x86_64", "cpu": "CPU",
+               "cpu_count": 2} | ({"gpu": "GPU X"} if device == "cuda" else {})
+    rows = [{"preset": "p", "maze": "umaze", "horizon": 128, "stride": 1, "batch": b, "grad_accum": 1,
+             "precision": prec, "implementation": "bridgeplan", "step_ms": 1000 * b / w, "windows_per_s": w,
+             "gflops": g, "limit_gflops": {"matmul": (limits or {}).get(prec, 1.0), "conv": 1.0}, "threads": t,
+             "busy_cores": busy}
+            for b, prec, w, g, t, busy in throughput]
+    return {"machine": machine, "bench": {"repeats": 3, "nfes": [1]}, "throughput": rows,
+            "latency": [{"preset": "p", "method": "m", "batch": b, "nfe": n, "plan_ms": ms} for b, n, ms in latency]}
+
+
+def _eval(nfe, episodes, batch, score, ms):
+    return {"nfe": nfe, "episodes": episodes, "batch_size": batch, "diffusion_steps": 256, "horizon": 256,
+            "maze": "medium", "step": 1000, "train_seconds": 100.0, "score": {"minari": {"mean": score, "se": 1.0}},
+            "success_rate": {"mean": 0.5}, "plan_ms_per_plan": ms, "floor_line": {"score": {"minari": {"mean": 30.0}}},
+            "config": {"preset": "diffuser", "horizon": 256, "stride": 1, "batch_size": 32, "grad_accum": 2,
+                       "precision": "fp32", "dataset": "medium-1000000-v2"}}
+
+
+def test_gpu_report_sets_each_gpu_figure_beside_the_cpu_one(tmp_path):
+    """Speed-ups are CPU over GPU time of the same (preset, method, batch, NFE); CPU figures come from the first bench
+    in name order that has them, its quiet one-thread rows only; the batch-1 evaluation times a plan, it scores
+    nothing; the README's block names the run's best fraction of the bf16 matmul."""
+    gpu = report("gpu")
+
+    folder = tmp_path / "gpu"
+    (folder / "cpu").mkdir(parents=True)
+    (folder / "cpu-more").mkdir()
+    (folder / "bench.json").write_text(json.dumps(_bench(
+        "cuda", [(1, 1, 5.0), (1024, 1, 10.0), (1024, 64, 400.0)],
+        [(1024, "fp32", 20000.0, 30000.0, 16, 0), (1024, "bf16", 25000.0, 40000.0, 16, 0)],
+        limits={"fp32": 50000.0, "bf16": 800000.0})))
+    (folder / "cpu" / "bench.json").write_text(json.dumps(_bench(
+        "cpu", [(1, 1, 2.0), (1024, 1, 3000.0)], [(1024, "fp32", 900.0, 5.0, 2, 0), (1024, "fp32", 800.0, 5.0, 1, 1),
+                                                  (1024, "fp32", 1000.0, 5.0, 1, 0)])))
+    (folder / "cpu-more" / "bench.json").write_text(json.dumps(_bench("cpu", [(1, 1, 99.0), (1024, 64, 8000.0)], [])))
+    for name, e in {"eval-nfe1": _eval(1, 200, 200, 10.0, 2.0), "eval-nfe256": _eval(256, 200, 200, 27.0, 11.0),
+                    "eval-nfe256-batch1": _eval(256, 5, 1, 99.0, 1600.0)}.items():
+        (folder / f"{name}.json").write_text(json.dumps(e))
+
+    text = gpu.render(tmp_path)
+    assert "| p | m | 1 | 1 | 5.00 | 2.0 | 0.4x |" in text  # the CPU is faster at batch 1: from cpu/, not cpu-more/
+    assert "| p | m | 1024 | 1 | 10.00 | 3000.0 | 300x |" in text
+    assert "| p | m | 1024 | 64 | 400.00 | 8000.0 | 20x |" in text  # only cpu-more/ timed it
+    assert "| 20,000 | 30.0 | 0.037 | 1,000 |" in text  # the quiet one-thread CPU row, the bf16 limit's fraction
+    assert "| 25,000 | 40.0 | 0.050 | not timed |" in text
+    assert "| 1 | 200 | 10.0 ± 1.0 |" in text and "| 256 | 200 | 27.0 ± 1.0 |" in text and "99.0" not in text
+    assert "the medium run (256 states, NFE 256) 1600 ms against 9.9 s" in text
+    block = gpu.block(tmp_path)
+    assert "40.0 TFLOP/s at best" in block and "5% of the bf16 matmul rate" in block
+    assert "10.0 ± 1.0 at NFE 1, 27.0 ± 1.0 at NFE 256 (200 episodes)" in block

@@ -11,6 +11,7 @@ import pytest
 
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
+from bridgeplan.experiments.store import ResultsStore
 from bridgeplan.studies import load_studies, parse_study
 from bridgeplan.studies.jobs import jobs, work_units
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, describe_missing, missing
@@ -73,10 +74,11 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
     assert "headline has no committed rows to import" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert ("10 reports, 17 provenance files and the generated blocks in README.md, docs/ogbench_pointmaze.md match "
-            "their studies" in capsys.readouterr().out)
+    assert ("11 reports, 17 provenance files, the generated blocks in docs/results/README.md, README.md, "
+            "docs/ogbench_pointmaze.md and 4 bench pages match their studies and benches" in capsys.readouterr().out)
     # a generator's name (as the markers and the errors say it) selects the studies whose reports it makes
     assert main(["study", "report", "cddb", "--check", "--root", str(REPO)]) == 0
     assert "1 reports" in capsys.readouterr().out
@@ -117,6 +119,18 @@ def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, ca
     assert main(["study", "report", "findings", "--root", str(root)]) == 0
     assert findings.read_text() == text
     assert main(["study", "report", "--check", "--root", str(root)]) == 0
+    # a bench's page is held to its JSON, as `bridgeplan bench` wrote both
+    bench = root / "docs" / "results" / "bench.md"
+    text = bench.read_text()
+    number = next(w for w in text.split() if w[0].isdigit() and "." in w)
+    bench.write_text(text.replace(f" {number} ", " 0.1 ", 1))
+    capsys.readouterr()
+    assert main(["study", "report", "--check", "--root", str(root)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: docs/results/bench.md differs from what docs/results/bench.json generates (run bridgeplan study "
+        "report)"]
+    assert main(["study", "report", "--root", str(root)]) == 0
+    assert bench.read_text() == text and "wrote docs/results/bench.md" in capsys.readouterr().out
 
 
 def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
@@ -170,7 +184,8 @@ def test_study_list(capsys):
     lines = {line.split("\t")[0]: line.split("\t")[1:] for line in capsys.readouterr().out.strip().splitlines()}
     assert {"findings", "prior-curves", "controllers", "medium-v2-curves", "umaze-v2-curves"} <= set(lines)
     assert lines["findings"][0] == "studies/findings.toml"
-    assert "docs/results/findings.md (feeds README.md, docs/history.md)" in lines["findings"][1]
+    assert lines["findings"][1].endswith("; docs/results/findings.md")  # a report that feeds no block elsewhere
+    assert "docs/results/cddb.md (feeds docs/results/README.md)" in lines["cddb"][1]
     assert lines["medium-v2-hold"][1] == "docs/results/medium-v2-hold/results.csv (nfe-curves, closed-loop, candidates)"
 
 
@@ -266,8 +281,9 @@ def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_pat
 
 
 def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_path, capsys):
-    """`study export`: the store's evaluations, a report and a figure into docs/results/NAME; `study report` then
-    writes its provenance (the study file's hash, the code versions), which `--check` holds to the study file."""
+    """`study export`: the store's evaluations, a report and a figure into docs/results/NAME, then the reports
+    regenerated, its provenance among them (the study file's hash, the code versions), which `--check` holds to the
+    study file."""
     import json
 
     root = tmp_path / "repo"
@@ -279,7 +295,8 @@ def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_
     assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
     assert main(["study", "export", "tiny", "--root", str(root)]) == 0
     folder = root / "docs" / "results" / "tiny"
-    assert "wrote docs/results/tiny/results.csv" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "wrote docs/results/tiny/results.csv" in out and "wrote docs/results/tiny/study.json" in out
     rows = list(csv.DictReader((folder / "results.csv").open()))
     assert len(rows) == 4 and {r["experiments"] for r in rows} == {"tiny"}
     assert "## tiny" in (folder / "report.md").read_text() and (folder / "tiny.png").read_bytes()[:4] == b"\x89PNG"
@@ -306,8 +323,7 @@ def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_
     assert main(["study", "import", "tiny", "--experiment", "nope", "--eval-json", str(tmp_path / "nfe1.json"),
                  "--root", str(root)]) == 2
     assert "has no experiment 'nope'" in capsys.readouterr().err
-    assert main(["study", "report", "--check", "--root", str(root)]) == 2  # no provenance yet
-    assert main(["study", "report", "--root", str(root)]) == 0
+    assert main(["study", "report", "--check", "--root", str(root)]) == 0  # the export wrote the provenance
     record = json.loads((folder / "study.json").read_text())
     assert record["study"] == "studies/tiny.toml" and record["evaluations"] == 4 and record["training_seeds"] == [0]
     assert record["code_versions"] == [rows[0]["code_version"]] and record["code_versions"][0].startswith("0.1.0")
@@ -315,6 +331,32 @@ def test_study_export_then_report_writes_the_committed_folder(tiny_dataset, tmp_
     file.write_text(file.read_text().replace("episodes = 4", "episodes = 5"))  # the study changed, its rows not
     assert main(["study", "report", "--check", "--root", str(root)]) == 2
     assert "docs/results/tiny/study.json differs" in capsys.readouterr().err
+
+
+def test_study_run_says_what_next_and_a_quick_run_shows_its_rows_beside_the_committed(tiny_dataset, tmp_path,
+                                                                                      capsys):
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(GOOD.format(dataset=tiny_dataset))
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "next: `bridgeplan study export tiny` writes these rows into docs/results" in capsys.readouterr().out
+    assert main(["study", "export", "tiny", "--root", str(root)]) == 0
+    committed = {int(r["nfe"]): r for r in csv.DictReader((root / "docs/results/tiny/results.csv").open())
+                 if r["step"] == "2"}
+    capsys.readouterr()
+    assert main(["study", "run", "tiny", "--quick", "--no-progress", "--root", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "tiny at the quick scale, beside its committed rows [QUICK SCALE" in out
+    assert "next: `bridgeplan report --results results/quick/tiny`" in out
+    quick = {int(r["nfe"]): r for r in ResultsStore(root / "results/quick/tiny/results.sqlite").rows()}
+    assert {r["step"] for r in quick.values()} == {1}  # a tenth of the steps: one snapshot
+    best = max(quick, key=lambda nfe: quick[nfe]["score_minari"])  # one seed, no validation split: on test
+    row = next(line for line in out.splitlines() if line.startswith("| umaze | single-task | tracked |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == f"DDPM, NFE {best}"
+    assert cells[4] == f"{quick[best]['score_minari']:.1f} ({quick[best]['success_rate']:.2f}), 1 seeds"
+    assert cells[5] == (f"{float(committed[best]['score_minari']):.1f} "
+                        f"({float(committed[best]['success_rate']):.2f}), 1 seeds")
 
 
 CORRECTED = GOOD.replace("steps = 2\ncheckpoint_every = 1", "steps = 1\ncheckpoint_every = 1").replace(
@@ -497,6 +539,7 @@ out = "tiny-hierarchy/graph/{{tasks}}-seed{{eval_seed}}.json"
 """
 
 
+@pytest.mark.slow
 def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_dataset, tmp_path, capsys,
                                                                         monkeypatch):
     import json
@@ -572,6 +615,59 @@ def test_a_bad_command_evaluation_is_one_error_line(tmp_path, capsys, evaluation
     assert main(["study", "run", "bad", "--dry-run", "--root", str(root)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err
+
+
+OGBENCH_SPLITS = """
+[dataset]
+generator = "ogbench"
+maze = "pointmaze-medium-navigate-v0"
+path = "d.npz"
+{evaluation}
+[runs.flow]
+process = "flow"
+horizon = 10
+stride = 4
+
+[[evaluations]]
+command = "{command}"
+runs = ["flow"]
+args = {{ {args} }}
+out = "x/{{eval_seed}}.json"
+task_seed = 0
+splits = ["test", "validation"]
+"""
+
+
+@pytest.mark.parametrize("evaluation, tasks", [("", "6,7,8,9,10"),
+                                               ('[evaluation]\nvalidation = "test-tasks-reseeded"\n', None)])
+def test_an_ogbench_validation_split_runs_the_validation_tasks_unless_pinned(tmp_path, evaluation, tasks):
+    path = tmp_path / "s.toml"
+    path.write_text(OGBENCH_SPLITS.format(evaluation=evaluation, command="eval", args="nfe = 1"))
+    test, validation = jobs(parse_study(path), tmp_path / "results", tmp_path / "out", quick=False)
+    assert "--tasks" not in test.argv and test.argv[test.argv.index("--seed") + 1] == "0"
+    assert validation.argv[validation.argv.index("--seed") + 1] == "1000"
+    if tasks is None:  # the earlier draw: the test tasks, other noise
+        assert "--tasks" not in validation.argv
+    else:
+        assert validation.argv[validation.argv.index("--tasks") + 1] == tasks
+
+
+def test_the_committed_ogbench_studies_pin_the_validation_draw_their_rows_were_made_with():
+    studies = load_studies(REPO)
+    pinned = [s.name for s in studies.values() if s.dataset and s.dataset.family.validation_tasks
+              and any("validation" in e.splits for e in s.evaluations)]
+    assert len(pinned) == 7
+    assert all(studies[name].evaluation.validation == "test-tasks-reseeded" for name in pinned)
+
+
+def test_an_ogbench_command_without_tasks_has_no_validation_split(tmp_path, capsys):
+    (tmp_path / "studies").mkdir()
+    text = OGBENCH_SPLITS.format(evaluation="", command="gcbc eval", args="steps = 4")
+    (tmp_path / "studies" / "g.toml").write_text(text.replace('process = "flow"', 'trainer = "gcbc"\nmaze = "medium"')
+                                                 .replace("horizon = 10\nstride = 4\n", ""))
+    assert main(["study", "run", "g", "--dry-run", "--root", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == ("error: studies/g.toml: evaluations[0].splits: gcbc eval evaluates "
+                                               "OGBench pointmaze's test tasks only: it has no validation split")
 
 
 TINY_CALIBRATION = """

@@ -29,12 +29,27 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
         _verify_crcs(path)
         state = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as e:  # torch raises many types for a truncated or foreign file
-        first_line = (str(e).strip().splitlines() or [""])[0]  # torch adds lines of advice
-        raise BridgeplanError(f"cannot read checkpoint {path} (truncated or corrupted?): "
-                              f"{type(e).__name__}: {first_line}") from None
+        raise _unreadable(path, "checkpoint", e) from None
     if not isinstance(state, dict) or "config" not in state or "kind" not in state:
         raise BridgeplanError(f"{path} is not a bridgeplan checkpoint")
     return state
+
+
+def check_checkpoint_file(path: Path, what: str = "checkpoint") -> None:
+    """Refuse a truncated or corrupted checkpoint or snapshot file (every record against its CRC-32) without
+    loading its tensors: what ``train --resume`` checks of the snapshots it would otherwise leave damaged."""
+    try:
+        _verify_crcs(path)
+    except Exception as e:  # zipfile raises several types for a truncated file
+        raise _unreadable(path, what, e) from None
+
+
+def _unreadable(path: Path, what: str, e: Exception) -> BridgeplanError:
+    first_line = (str(e).strip().splitlines() or [""])[0]  # torch adds lines of advice
+    advice = ("; delete it and resume (its step is then not evaluated, unless it is the checkpoint's, which resume "
+              "writes again), or train the run afresh") if what == "snapshot" else ""
+    return BridgeplanError(f"cannot read {what} {path} (truncated or corrupted?): {type(e).__name__}: "
+                           f"{first_line}{advice}")
 
 
 def _verify_crcs(path: Path) -> None:

@@ -62,27 +62,47 @@ def _cmd_study_list(args) -> int:
 
     root = find_root(args.root)
     reports = generators.load(root)
-    for s in load_studies(root).values():
+    studies = load_studies(root)
+    for s in studies.values():
         makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
                  ] if s.experiments else []
         folders = dict.fromkeys(e.out.split("/")[0] for e in s.evaluations)
         commands = dict.fromkeys(e.command for e in s.evaluations)
         makes += [f"docs/results/{f}/ ({', '.join(commands)} JSONs)" for f in folders]
         makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
-        makes += [f"docs/results/{r.output} (feeds {', '.join(reports[r.generator].feeds)})" for r in s.reports]
+        for r in s.reports:
+            feeds = reports[r.generator].feeds
+            makes.append(f"docs/results/{r.output}" + (f" (feeds {', '.join(feeds)})" if feeds else ""))
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
-    return 0
+    return _report_broken(studies, [])
+
+
+def _report_broken(studies, names: list[str]) -> int:
+    """A study command over every study (no ``names``) does the others' work, then says which files are broken:
+    one ``error:`` line each, exit 2; 0 when none is."""
+    if names:
+        return 0
+    for error in studies.broken.values():
+        print(f"error: {error}", file=sys.stderr)
+    return 2 if studies.broken else 0
 
 
 def _cmd_study_report(args) -> int:
-    from bridgeplan.files import atomic_write_text
-    from bridgeplan.studies import find_root, generators, load_studies, select
-    from bridgeplan.studies.export import provenance, provenance_path, stale_rows
+    from bridgeplan.studies import find_root, load_studies, select
 
     root = find_root(args.root)
-    reports = generators.load(root)
     studies = load_studies(root)
-    chosen = select(studies, args.names, root)
+    return _reports(root, studies, args.names, select(studies, args.names, root), args.check)
+
+
+def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -> int:
+    """Regenerate (or, ``check``, verify) the reports, provenance files and generated blocks of the ``chosen``
+    studies (every study when no ``names`` were given) from the committed rows; 2 when one differs."""
+    from bridgeplan.files import atomic_write_text
+    from bridgeplan.studies import generators
+    from bridgeplan.studies.export import provenance, provenance_path, stale_rows
+
+    found = generators.load(root)
     results = root / "docs" / "results"
     texts = {}  # file (relative to root) -> (the studies that change it, text): nothing written unless all render
     for s in chosen:
@@ -90,37 +110,48 @@ def _cmd_study_report(args) -> int:
         if record is not None:
             texts[provenance_path(s)] = ([s.name], record)
         for r in s.reports:
-            generator = reports[r.generator]
+            generator = found[r.generator]
             texts[f"docs/results/{r.output}"] = ([s.name], generator.render(results))
             for feed in generator.feeds:  # the tables the README and docs show between the generator's markers
                 names, current = texts.get(feed, ([], _read_or_empty(root / feed)))
                 filled = generator.fill_blocks(current, results)
                 if filled is not None:
                     texts[feed] = (names + [s.name] if filled != current else names, filled)
+    benches = {}  # bench.md -> its bench.json: every study's command remakes them, as `bridgeplan bench` wrote them
+    if not names:
+        from bridgeplan.bench.markdown import committed_markdown
+
+        for path in sorted(results.rglob("bench.json")):
+            benches[str(path.with_name("bench.md").relative_to(root))] = path.relative_to(root)
+            texts[str(path.with_name("bench.md").relative_to(root))] = ([], committed_markdown(path))
     differ = 0
-    for output, (names, text) in texts.items():
-        name = ", ".join(names) or "its studies"
+    for output, (makers, text) in texts.items():
+        name = ", ".join(makers) or "its studies"
+        made_by = f"{benches[output]} (run bridgeplan study report)" if output in benches else (
+            f"{name} (run bridgeplan study report {name})")
         path = root / output
-        if args.check:
+        if check:
             if not path.exists() or path.read_text() != text:
-                print(f"error: {output} differs from what {name} generates "
-                      f"(run bridgeplan study report {name})", file=sys.stderr)
+                print(f"error: {output} differs from what {made_by.replace(' (', ' generates (', 1)}",
+                      file=sys.stderr)
                 differ += 1
         elif not path.exists() or path.read_text() != text:
             atomic_write_text(path, text)
             print(f"wrote {output}")
-    if args.check:  # the committed rows were trained as their studies declare today
+    if check:  # the committed rows were trained as their studies declare today
         for s in chosen:
             for line in stale_rows(s, root):
                 print(f"error: {line}", file=sys.stderr)
                 differ += 1
+    fed = [output for output in texts if any(output in found[r.generator].feeds for s in chosen
+                                             for r in s.reports)]
     provenances = sum(output.endswith("/study.json") for output in texts)
-    reports = sum(output.startswith("docs/results/") for output in texts) - provenances
-    if args.check and not differ:
-        fed = [output for output in texts if not output.startswith("docs/results/")]
-        blocks = f" and the generated blocks in {', '.join(fed)}" if fed else ""
-        print(f"{reports} reports, {provenances} provenance files{blocks} match their studies")
-    return 2 if differ else 0
+    reports = len(texts) - provenances - len(fed) - len(benches)
+    if check and not differ:
+        blocks = f", the generated blocks in {', '.join(fed)}" if fed else ""
+        pages = f" and {len(benches)} bench pages" if benches else ""
+        print(f"{reports} reports, {provenances} provenance files{blocks}{pages} match their studies and benches")
+    return max(2 if differ else 0, _report_broken(studies, names))
 
 
 def _read_or_empty(path: Path) -> str:
@@ -133,7 +164,9 @@ def _cmd_study_run(args) -> int:
         QUICK_NOTE,
         Scale,
         check_reports,
+        check_run,
         describe_missing,
+        quick_table,
         results_dir,
         run_study,
         with_used,
@@ -152,6 +185,7 @@ def _cmd_study_run(args) -> int:
     if args.workers is not None:
         positive("--workers", args.workers)
     chain = with_used(study, studies)  # the studies whose rows its reports read first: one command makes them all
+    check_run(chain, root, scale, args.backend, args.dry_run)
     if args.dry_run:
         print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0
@@ -161,6 +195,17 @@ def _cmd_study_run(args) -> int:
         if s.experiments or s.evaluations:
             print(f"{s.name}: {added} new results in {results_dir(s, root, scale)}"
                   + ("" if scale.committed else f" [{QUICK_NOTE}]"))
+    if scale.committed:
+        print(f"next: `bridgeplan study export {study.name}` writes these rows into docs/results and regenerates every "
+              f"report from them (then `git diff` compares them with the committed ones)")
+        return 0
+    for s in chain:
+        if lines := quick_table(s, root):
+            print(f"\n{s.name} at the quick scale, beside its committed rows [{QUICK_NOTE}]:\n" + "\n".join(lines))
+    stored = [s for s in chain if s.experiments]
+    if stored:
+        print(f"next: `bridgeplan report --results {results_dir(stored[-1], root, scale).relative_to(root)}` draws "
+              f"every snapshot's figures and tables")
     return 0
 
 
@@ -207,15 +252,20 @@ def _cmd_study_import(args) -> int:
 
 def _cmd_study_export(args) -> int:
     from bridgeplan.studies import find_root, load_studies, select
-    from bridgeplan.studies.export import export
-    from bridgeplan.studies.plan import Scale, results_dir
+    from bridgeplan.studies.export import export, exportable
+    from bridgeplan.studies.plan import Scale, results_dir, with_used
 
     root = find_root(args.root)
-    study = select(load_studies(root), [args.file], root)[0]
-    for path in export(study, root, results_dir(study, root, Scale())):
-        print(f"wrote {path.relative_to(root)}")
-    print(f"then `bridgeplan study report` regenerates the reports and {study.data_dir}'s provenance from them")
-    return 0
+    studies = load_studies(root)
+    study = select(studies, [args.file], root)[0]
+    # the study and those whose rows its reports read, as `study run` made them: each checked before any is written
+    chain = exportable(with_used(study, studies), root, lambda s: results_dir(s, root, Scale()))
+    for s in chain:
+        for path in export(s, root, results_dir(s, root, Scale())):
+            print(f"wrote {path.relative_to(root)}")
+    code = _reports(root, studies, [], list(studies.values()), check=False)
+    print("then `git diff docs/results README.md` shows how these rows compare with the committed ones")
+    return code
 
 
 def _add_planners_commands(sub) -> None:

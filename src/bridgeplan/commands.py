@@ -116,19 +116,22 @@ def _cmd_reference_show(args) -> int:
 def _cmd_reference_measure(args) -> int:
     from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
     from bridgeplan.envs.maze2d.reference import measure_reference_returns
+    from bridgeplan.files import atomic_write_text, check_writable
 
     names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
     positive("--episodes", args.episodes)
+    if args.out:
+        check_writable(args.out, "JSON file")
     measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
     print(_reference_table(measured))
     if args.out:
-        Path(args.out).write_text(json.dumps(measured, indent=2) + "\n")
+        atomic_write_text(Path(args.out), json.dumps(measured, indent=2) + "\n")
         print(f"wrote {args.out}")
     return 0
 
 
 def _add_train_commands(sub) -> None:
-    p = sub.add_parser("train", help="train a planner (DDPM or bridge)",
+    p = sub.add_parser("train", help="train a planner (DDPM, the I2SB bridge or flow matching)",
                        description="Train a planner. Defaults come from --preset per maze; flags override them.")
     _common_train_flags(p)
     p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
@@ -316,6 +319,10 @@ def _add_eval_commands(sub) -> None:
     p.set_defaults(func=_cmd_render)
 
 
+TASKS_HELP = ("OGBench: comma-separated task ids: 1-5 its test tasks (the default), 6-10 bridgeplan's validation tasks "
+              "(other cells; protocol.validation_tasks)")
+
+
 def _task_flags(p) -> None:
     g = p.add_argument_group("tasks (the environment family's)")
     g.add_argument("--episodes", type=int, default=None,
@@ -323,7 +330,7 @@ def _task_flags(p) -> None:
                         "200), each of OGBench's tasks' (default 50, as OGBench)")
     g.add_argument("--seed", type=int, default=0, help="the tasks' seed (and the planning generator's)")
     g.add_argument("--multi-task", action="store_true", help="Maze2D: random goals too (Multi2D)")
-    g.add_argument("--tasks", default=None, help="OGBench: comma-separated task ids (default 1,2,3,4,5)")
+    g.add_argument("--tasks", default=None, help=TASKS_HELP)
 
 
 def _tasks(args, env: str):
@@ -430,12 +437,13 @@ def _show(result, args, out: Path) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import evaluate_run
+    from bridgeplan.evaluate import check_result_path, evaluate_run
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
     execution = _execution(args)
     correction = _correction(args)
+    check_result_path(args.out, eval_dir(run_dir_of(Path(args.run))))
     result = evaluate_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                           multi_task=args.multi_task, task_ids=_task_ids(args.tasks), batch_size=args.batch_size,
                           snapshot=args.snapshot, device=args.device, sampler=args.sampler, eta=args.eta,
@@ -449,11 +457,15 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_render(args) -> int:
+    from bridgeplan.files import check_writable
     from bridgeplan.render import render_run
 
+    execution = _execution(args)
+    if args.out:
+        check_writable(args.out, "picture")
     for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
                            multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
-                           device=args.device, execution=_execution(args)):
+                           device=args.device, execution=execution):
         print(f"wrote {path}")
     return 0
 
@@ -486,14 +498,19 @@ def _low_level_flags(p, replan_high_help: str) -> None:
 
 
 def _cmd_hierarchy_eval(args) -> int:
-    from bridgeplan.evaluate import run_tasks
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, run_tasks
     from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
+    if args.episodes is not None:
+        positive("--episodes", args.episodes)
+    execution = _execution(args, plans=False)
+    check_controller(execution.controller, execution.lookahead)
+    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))  # before anything is loaded
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
-    execution = _execution(args, plans=False)
     if execution.replan_every is None:
         execution = dataclasses.replace(execution, replan_every=hierarchy.spacing)
     tasks = run_tasks(low, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
@@ -537,11 +554,21 @@ def _add_graph_command(sub) -> None:
 
 
 def _cmd_graph(args) -> int:
-    from bridgeplan.evaluate import make_tasks
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, make_tasks
+    from bridgeplan.graph import check_graph_settings
     from bridgeplan.hierarchy import evaluate_graph
     from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import load_planner, run_dir_of
+    from bridgeplan.runs import load_planner, resolve_run, run_dir_of
 
+    if args.low is not None:  # the run named first, before the flags and files that go with it
+        resolve_run(Path(args.low))
+    if args.episodes is not None:
+        positive("--episodes", args.episodes)
+    execution = _execution(args, plans=False)
+    check_controller(execution.controller, execution.lookahead)
+    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
+    check_graph_settings(**settings)
     env, dataset = args.maze, args.dataset
     if args.low is not None:
         _, low = load_planner(Path(args.low), snapshot=args.low_snapshot, device="cpu")
@@ -553,17 +580,17 @@ def _cmd_graph(args) -> int:
         raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
-    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
+    folder = eval_dir(run_dir_of(Path(args.low))) if args.low else Path("results") / "graph" / env
+    check_result_path(args.out, folder)
     tasks = make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-    result = evaluate_graph(tasks, dataset, settings, _execution(args, plans=False),
+    result = evaluate_graph(tasks, dataset, settings, execution,
                             Path(args.low) if args.low else None, args.nfe_low, args.replan_high_every,
                             args.low_snapshot, args.device, progress=not args.no_progress)
     d = result.to_dict()
     g = d["graph"]
-    tag = _execution(args, plans=False).resolved(result.family, env).tag()
+    tag = execution.resolved(result.family, env).tag()
     name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if args.low else "") + (
         f"-{tag}" if tag else "") + (f"-high{args.replan_high_every}" if args.replan_high_every else "")
-    folder = eval_dir(run_dir_of(Path(args.low))) if args.low else Path("results") / "graph" / env
     return _show(result, args, _out(args, folder, name))
 
 
@@ -575,7 +602,7 @@ def _add_oracle_command(sub) -> None:
     o.add_argument("--task-sets", default="single",
                    help="comma-separated: single (the family's tasks), multi (Maze2D: Multi2D's random goals)")
     o.add_argument("--episodes", type=int, default=None, help="episodes per task (default: the family's)")
-    o.add_argument("--tasks", default=None, help="OGBench: comma-separated task ids (default 1,2,3,4,5)")
+    o.add_argument("--tasks", default=None, help=TASKS_HELP)
     o.add_argument("--out", default=None, help="also write the rows to this JSON file")
     o.add_argument("--json", action="store_true", help="print the JSON instead of a line per row")
     o.add_argument("--no-progress", action="store_true")
@@ -586,9 +613,11 @@ def _add_oracle_command(sub) -> None:
 def _cmd_oracle(args) -> int:
     from bridgeplan.envs import family_of
     from bridgeplan.evaluate import make_tasks
-    from bridgeplan.files import atomic_write_text, code_version
+    from bridgeplan.files import atomic_write_text, check_writable, code_version
 
     seeds = _int_tuple(args.seeds, "--seeds", minimum=0)
+    if args.out:
+        check_writable(args.out, "JSON file")
     sets = args.task_sets.split(",")
     rows = []
     for env in args.maze:
@@ -626,12 +655,16 @@ def _add_report_command(sub) -> None:
 
 def _cmd_report(args) -> int:
     from bridgeplan.experiments.store import ResultsStore
-    from bridgeplan.paths import store_path
+    from bridgeplan.files import check_writable
+    from bridgeplan.paths import report_dir, store_path
     from bridgeplan.report import write_report
 
     store = store_path(args.results)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
+    check_writable(args.out or report_dir(args.results), "report folder", folder=True)
+    if args.csv:
+        check_writable(args.csv, "CSV file")
     path = write_report(Path(args.results), Path(args.out) if args.out else None)
     print(f"wrote {path}")
     if args.csv:
@@ -649,8 +682,10 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--presets", help="comma-separated presets to time")
     p.add_argument("--batch-sizes", help="comma-separated plans per call")
     p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
+    p.add_argument("--methods", help="comma-separated methods of the latency and overhead tables, named as there "
+                                     "(default: all)")
     p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
-    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio")
+    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio (0: skip them)")
     p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
     p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
     p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
@@ -662,6 +697,7 @@ def _add_bench_command(sub) -> None:
     p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
     p.add_argument("--throughput-seconds", type=float,
                    help="seconds of training per figure of the training-throughput table (0: skip)")
+    p.add_argument("--throughput-batch-sizes", help="comma-separated batches of the training-throughput table")
     p.add_argument("--side-by-side-seconds", type=float,
                    help="seconds of training per figure of the two-jobs table (0: skip)")
     p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
@@ -671,53 +707,75 @@ def _add_bench_command(sub) -> None:
 
 def _cmd_bench(args) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
+    from bridgeplan.files import check_writable
 
     given = {"presets": args.presets and tuple(args.presets.split(",")),
+             "methods": args.methods and tuple(args.methods.split(",")),
              "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
              "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
              "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
              "throughput_seconds": args.throughput_seconds, "side_by_side_seconds": args.side_by_side_seconds,
              "compile": False if args.no_compile else None}
-    for name in ("batch_sizes", "nfes", "budgets", "budget_steps"):
+    for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
         text = getattr(args, name)
         given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
+    check_writable(args.out, "bench folder", folder=True)
     path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(path.read_text())
     return 0
 
 
 def _add_demo_command(sub) -> None:
-    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report")
-    p.add_argument("--maze", default="umaze")
-    p.add_argument("--out", default="demo", help="output directory")
-    p.add_argument("--dataset-steps", type=int, default=200_000)
-    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run")
-    p.add_argument("--episodes", type=int, default=100)
+    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report",
+                       description="Generates a small dataset, trains a DDPM planner and a bridge from the straight "
+                                   "line for a few minutes on a CPU, scores both on the maze's test episodes at "
+                                   "their full NFE and at NFE 1, prints the scores and writes a report with "
+                                   "figures. Resumable: run again, only what is missing is done.")
+    p.add_argument("--maze", default="umaze", help="umaze (default), medium or large")
+    p.add_argument("--out", default="demo", help="output folder (default demo/, ignored by git)")
+    p.add_argument("--dataset-steps", type=int, default=200_000, help="transitions generated (default 200 000)")
+    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run (default 1500)")
+    p.add_argument("--episodes", type=int, default=100, help="test episodes per evaluation (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="the runs' training seed (default 0)")
     _threads_flag(p)
     p.set_defaults(func=_cmd_demo)
 
 
+DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge starts from the straight line to the goal, "
+                "so a few minutes of training and one network call already plan; DDPM starts from noise: it needs "
+                "its full NFE and more training than this (at NFE 1 it scores about as a random policy).")
+
+
 def _cmd_demo(args) -> int:
-    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> report with plots."""
+    """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
+    from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.envs.maze2d.reference import load_reference_returns
     from bridgeplan.experiments.grids import Experiment, RunSpec, Series
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.files import check_writable
+    from bridgeplan.paths import store_path
     from bridgeplan.processes import DDPM, Bridge
-    from bridgeplan.report import write_report
+    from bridgeplan.report import last_snapshot_table, write_report
 
-    print(_reference_table({args.maze: load_reference_returns()[args.maze]}))
+    maze = get_maze(args.maze).name
+    for flag in ("--dataset-steps", "--steps", "--episodes"):
+        positive(flag, getattr(args, flag[2:].replace("-", "_")))
+    check_writable(args.out, "demo folder", folder=True)
+    print(_reference_table({maze: load_reference_returns()[maze]}))
     ddpm, bridge = RunSpec(DDPM(16)), RunSpec(Bridge(16), "line")
     demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
                       tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
                             for nfe in (spec.process.max_nfe, 1)))
-    settings = SweepSettings(maze=args.maze, dataset_steps=args.dataset_steps, preset="cpu-small",
+    settings = SweepSettings(maze=maze, dataset_steps=args.dataset_steps, preset="cpu-small",
                              train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
-                             episodes=args.episodes, results_dir=args.out,
+                             episodes=args.episodes, seeds=(args.seed,), results_dir=args.out,
                              overrides=_overrides(args, ("threads",)))
     added = run_sweep([demo], settings)
     report = write_report(Path(args.out))
-    print(f"demo: {added} new results; report: {report}")
+    print(f"\n{last_snapshot_table(ResultsStore(store_path(args.out)), demo.name)}\n{DEMO_READING}")
+    print(f"demo: {added} new results in {store_path(args.out)}; every snapshot and figure: {report}")
     return 0
 
 

@@ -53,7 +53,7 @@ class TrainConfig:
     pointmaze dataset's name (``pointmaze-medium-navigate-v0``: its maze, and the kind of data it holds)."""
     dataset: str = ""
     """Path to the dataset directory (``bridgeplan data generate``) or a legacy D4RL hdf5 file; for OGBench
-    pointmaze, the dataset's ``.npz`` file (``bridgeplan ogbench generate``, or an official one)."""
+    pointmaze, the dataset's ``.npz`` file (``bridgeplan data generate``, or an official one)."""
     horizon: int = 128
     """Planning horizon H (planned states); divisible by the U-Net's downsampling factor."""
     stride: int = 1

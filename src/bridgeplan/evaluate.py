@@ -32,7 +32,7 @@ from bridgeplan.consistency import Correction, sampling_tag
 from bridgeplan.envs import Family, family_of
 from bridgeplan.envs.family import Tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_text, code_version
+from bridgeplan.files import atomic_write_text, check_writable, code_version
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import DecisionSource, Execution, PlanExecutor, PlanSource, percentiles_ms
@@ -352,6 +352,15 @@ def evaluate_run(run: Path, episodes: int | None = None, nfe: int | None = None,
     tasks = run_tasks(info, episodes, seed, multi_task, task_ids)
     return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,
                             execution=execution, floor=floor)
+
+
+def check_result_path(out: str | Path | None, default_dir: Path) -> None:
+    """Before anything is evaluated: the JSON's path can be written (``out``, a file; else ``default_dir``, where the
+    result is named by its settings). :class:`BridgeplanError` otherwise."""
+    if out:
+        check_writable(out, "evaluation JSON")
+    else:
+        check_writable(default_dir, "evaluation folder", folder=True)
 
 
 def write_result(result: dict, path: Path) -> None:

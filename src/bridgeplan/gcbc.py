@@ -44,7 +44,7 @@ from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import code_version
+from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import run_lock
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
 from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
@@ -252,6 +252,7 @@ def train_gcbc(config: GCBCConfig, run_dir: str | Path, resume: bool = False, pr
         raise BridgeplanError(f"run directory {run_dir} already has a checkpoint; pass --resume to continue it")
     if resume and not ckpt.exists():
         raise BridgeplanError(f"--resume given but {ckpt} does not exist")
+    check_writable(run_dir, "run directory", folder=True)
     device = resolve_device(config.device)
     data = GoalDataset.for_config(config)
     with run_lock(run_dir):  # one trainer per run directory

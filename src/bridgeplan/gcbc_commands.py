@@ -76,6 +76,10 @@ def _cmd_gcbc_eval(args) -> int:
             raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {args.steps!r}") from None
     if args.out and (steps is None or len(steps) != 1):
         raise BridgeplanError("--out takes one evaluation: give one snapshot with --steps N")
+    if args.out:
+        from bridgeplan.files import check_writable
+
+        check_writable(args.out, "JSON file")
     if args.threads is not None:
         from bridgeplan.device import configure_threads
 

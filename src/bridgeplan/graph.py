@@ -56,15 +56,18 @@ GOALS_KEPT = 256
 """Goals whose search :meth:`DatasetGraph.to_goal` keeps (a Multi2D evaluation's 200 goals; ~1 MB each)."""
 
 
-def check_graph_settings(keep: int, radius: float, neighbours: int, reach: float) -> None:
-    """Bad settings raise BridgeplanError (the CLI's one-line ``error:``)."""
-    if keep < 1:
+def check_graph_settings(keep: int | None, radius: float | None, neighbours: int | None,
+                         reach: float | None) -> None:
+    """Bad settings raise BridgeplanError (the CLI's one-line ``error:``); None: the family's, not checked here."""
+    if keep is not None and keep < 1:
         raise BridgeplanError(f"--keep must be >= 1 (every keep-th state is a node), got {keep}")
-    if not np.isfinite(radius) or radius < 0:
-        raise BridgeplanError(f"--radius must be a distance >= 0, got {radius}")
-    if neighbours < 0:
-        raise BridgeplanError(f"--neighbours must be >= 0, got {neighbours}")
-    if not np.isfinite(reach) or reach <= 0:
+    if radius is not None and (not np.isfinite(radius) or radius <= 0):
+        raise BridgeplanError(f"--radius must be a distance > 0 (no joins between episodes: no graph to search), "
+                              f"got {radius}")
+    if neighbours is not None and neighbours < 1:
+        raise BridgeplanError(f"--neighbours must be >= 1 (no joins between episodes: no graph to search), got "
+                              f"{neighbours}")
+    if reach is not None and (not np.isfinite(reach) or reach <= 0):
         raise BridgeplanError(f"--reach must be a positive distance, got {reach}")
 
 
@@ -122,17 +125,16 @@ class DatasetGraph:
         i, j = np.flatnonzero(same), np.flatnonzero(same) + 1
         w = (nodes[j] - nodes[i]).astype(np.float64)
         tree = cKDTree(xy)
-        if neighbours and radius > 0:
-            dist, nn = tree.query(xy, k=neighbours + 1, distance_upper_bound=radius)
-            a = np.repeat(np.arange(len(xy)), neighbours + 1)
-            b, d = nn.ravel(), dist.ravel()
-            ok = np.isfinite(d) & (b != a)
-            # within an episode, its own steps say the way: between its consecutive nodes always, elsewhere unless
-            # the episode is a stream that comes back
-            other = episode[a[ok]] != episode[b[ok]]
-            ok[ok] &= other | (within_episodes & (np.abs(a[ok] - b[ok]) > 1))
-            i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
-            w = np.concatenate([w, np.maximum(d[ok], 1e-9) / step])
+        dist, nn = tree.query(xy, k=neighbours + 1, distance_upper_bound=radius)
+        a = np.repeat(np.arange(len(xy)), neighbours + 1)
+        b, d = nn.ravel(), dist.ravel()
+        ok = np.isfinite(d) & (b != a)
+        # within an episode, its own steps say the way: between its consecutive nodes always, elsewhere unless
+        # the episode is a stream that comes back
+        other = episode[a[ok]] != episode[b[ok]]
+        ok[ok] &= other | (within_episodes & (np.abs(a[ok] - b[ok]) > 1))
+        i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
+        w = np.concatenate([w, np.maximum(d[ok], 1e-9) / step])
         # one edge per pair, its cheapest cost (a pair found from both ends, or both a step and a jump)
         lo, hi = np.minimum(i, j), np.maximum(i, j)
         order = np.lexsort((w, hi, lo))

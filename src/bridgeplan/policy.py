@@ -47,14 +47,15 @@ class PlannerPolicy:
     @classmethod
     def from_run(cls, run: str | Path, nfe: int = 1, replan_every: int | None = 8, tolerance: float | None = None,
                  candidates: int = 1, select: str = "arrival", warm: bool = False, arrival: str | None = None,
-                 controller: str = "track", lookahead: float | None = None, device: str = "cpu", seed: int = 0,
+                 controller: str = "track", lookahead: float | None = None, device: str = "auto", seed: int = 0,
                  snapshot: int | None = None) -> PlannerPolicy:
         """Load a trained run (EMA weights; ``snapshot``: that training step's) as a policy.
 
         ``replan_every``/``tolerance``/``candidates``/``select``/``warm``/``arrival``/``controller``/
         ``lookahead``: as ``bridgeplan eval``'s flags (:class:`~bridgeplan.replan.Execution`);
         ``replan_every=None`` and no tolerance plans once per episode (open loop). ``seed`` seeds the planning
-        generator (the same episode, the same plans).
+        generator (the same episode, the same plans). ``device``: ``auto`` (CUDA where present, as every command),
+        ``cpu``, ``cuda``, ...
         """
         from bridgeplan.runs import load_planner
 
@@ -72,7 +73,7 @@ class PlannerPolicy:
     @classmethod
     def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
                        nfe_low: int | None = None, replan_every: int | None = None, tolerance: float | None = None,
-                       controller: str = "pursuit", lookahead: float | None = None, device: str = "cpu",
+                       controller: str = "pursuit", lookahead: float | None = None, device: str = "auto",
                        seed: int = 0, replan_high_every: int | None = None) -> PlannerPolicy:
         """A hierarchy as a policy (:mod:`bridgeplan.hierarchy`): the high level's coarse plan at an episode's
         first step, the low level's plan through it every ``replan_every`` steps (default: the high level's
@@ -88,7 +89,7 @@ class PlannerPolicy:
     @classmethod
     def from_graph(cls, low_run: str | Path, nfe_low: int | None = None, replan_every: int | None = None,
                    tolerance: float | None = None, controller: str = "pursuit", lookahead: float | None = None,
-                   device: str = "cpu", seed: int = 0, replan_high_every: int | None = None,
+                   device: str = "auto", seed: int = 0, replan_high_every: int | None = None,
                    graph: dict | None = None) -> PlannerPolicy:
         """The dataset graph over a low level's own training data as its high level (``bridgeplan.graph``; settings
         ``graph`` over Maze2D's), the low level through its path every ``replan_every`` steps (default: its subgoal

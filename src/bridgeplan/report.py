@@ -159,3 +159,25 @@ def write_report(results_dir: Path, out_dir: Path | None = None, titles: dict[st
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(lines) + "\n")
     return path
+
+
+def last_snapshot_table(store: ResultsStore, name: str) -> str:
+    """A plain-text table of experiment ``name``'s last snapshot, one line per series (score mean ± standard error,
+    success, planning time), and the floor beneath: the straight line to the goal executed the same way, no
+    network (what a terminal shows after a run; ``report.md`` has every snapshot)."""
+    rows = store.rows(name)
+    last = max(r["step"] for r in rows)
+    width = max(len(label) for label in _series(rows))
+    lines = [f"{'series':<{width}}  {'score (Minari)':>15}  {'success':>7}  {'plan ms':>7}   (step {last}, "
+             f"{rows[0]['episodes']} episodes)"]
+    for label, srows in _series(rows).items():
+        at = [r for r in srows if r["step"] == last]
+        if not at:
+            continue
+        _, mean, se, _ = _aggregate(at)[-1]
+        lines.append(f"{label:<{width}}  {f'{mean:.1f} ± {se:.1f}':>15}  "
+                     f"{np.mean([r['success_rate'] for r in at]):>7.2f}  {np.mean([r['plan_ms'] for r in at]):>7.1f}")
+    floors = [r["floor_minari"] for r in rows if r["step"] == last and r["floor_minari"] is not None]
+    if floors:
+        lines.append(f"{'the line alone (no network)':<{width}}  {float(np.mean(floors)):>15.1f}")
+    return "\n".join(lines)

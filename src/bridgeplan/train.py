@@ -22,13 +22,13 @@ import torch
 from tqdm import tqdm
 
 from bridgeplan import config as cfg
-from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
+from bridgeplan.checkpoint import check_checkpoint_file, load_checkpoint, save_checkpoint, write_config
 from bridgeplan.data.windows import hold_tails
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import code_version
+from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import LOCK_NAME, run_lock
-from bridgeplan.paths import checkpoint_path, config_path, snapshot_path
+from bridgeplan.paths import checkpoint_path, config_path, snapshot_path, snapshot_steps
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
 from bridgeplan.trajectory import window_conditions
@@ -100,6 +100,7 @@ def make_ema(model: torch.nn.Module) -> torch.nn.Module:
 
 def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
     """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
+    _check_run_dir(run_dir, resume, "planner", config)  # before the data is read
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     return _fit(planner_job(config, normalizer, device), windows.to(device), run_dir, resume, device, progress)
@@ -128,6 +129,7 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
 def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = False,
                 progress: bool = True) -> Path:
     """Train the learned prior (the thesis's MLP on start and goal) on the same windows and loss."""
+    _check_run_dir(run_dir, resume, "prior", config)  # before the data is read
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     net = build_prior_net(config.layout, config.horizon).to(device)
@@ -197,24 +199,31 @@ def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> Non
 def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
     run_dir = Path(run_dir)
     # refuse a mistake before the lock creates run_dir, so it leaves nothing behind
-    _check_run_dir(run_dir, resume, job)
+    _check_run_dir(run_dir, resume, job.kind, job.config)
     with run_lock(run_dir):  # one trainer per run directory; a second one waits here
-        _check_run_dir(run_dir, resume, job)  # again: another process may have trained it meanwhile
+        # again: another process may have trained it meanwhile
+        _check_run_dir(run_dir, resume, job.kind, job.config)
         # whoever wrote these was killed mid-write (a live writer would hold the lock)
         for tmp in [*run_dir.glob(".*.tmp"), *(run_dir / "snapshots").glob(".*.tmp")]:
             tmp.unlink()
         return _fit_locked(job, windows, run_dir, resume, device, progress)
 
 
-def _check_run_dir(run_dir: Path, resume: bool, job: TrainJob) -> None:
-    """--resume needs a checkpoint; a fresh start needs an empty directory, or the same run killed
-    before its first checkpoint (nothing to continue; what it left is rewritten identically)."""
+def _check_run_dir(run_dir: Path, resume: bool, kind: str, config) -> None:
+    """The run directory can be written; --resume needs a checkpoint and snapshots that read whole; a fresh start
+    needs an empty directory, or the same run killed before its first checkpoint (nothing to continue; what it left
+    is rewritten identically)."""
+    run_dir = Path(run_dir)
+    check_writable(run_dir, "run directory", folder=True)
     ckpt_path = checkpoint_path(run_dir)
     if ckpt_path.exists():
         if not resume:
             raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
+        check_checkpoint_file(ckpt_path)
+        for step in snapshot_steps(run_dir):  # a damaged one would be evaluated (or fail) later, not rewritten
+            check_checkpoint_file(snapshot_path(run_dir, step), "snapshot")
         return
-    killed_early = _same_run(config_path(run_dir), job)
+    killed_early = _same_run(config_path(run_dir), kind, config)
     if resume:
         raise BridgeplanError(f"--resume given but {ckpt_path} does not exist" + (
             " (killed before its first checkpoint: start it again without --resume)" if killed_early else ""))
@@ -222,13 +231,13 @@ def _check_run_dir(run_dir: Path, resume: bool, job: TrainJob) -> None:
         raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
 
 
-def _same_run(config_json: Path, job: TrainJob) -> bool:
+def _same_run(config_json: Path, kind: str, config) -> bool:
     """Whether ``config_json`` describes this training (the fields a resume may change aside)."""
-    current = json.loads(json.dumps(cfg.to_dict(job.config)))  # tuples as JSON has them: lists
+    current = json.loads(json.dumps(cfg.to_dict(config)))  # tuples as JSON has them: lists
     try:
         saved = json.loads(config_json.read_text())
-        _check_resumable(saved["config"], current, config_json, type(job.config))
-        return saved["kind"] == job.kind
+        _check_resumable(saved["config"], current, config_json, type(config))
+        return saved["kind"] == kind
     except (OSError, ValueError, LookupError, TypeError, AttributeError, BridgeplanError):  # not this run
         return False
 
@@ -284,7 +293,7 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
 
     writer = _tensorboard(run_dir)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {job.kind}",
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {run_dir.name}",
                unit="step", dynamic_ncols=True)
     model.train()
     last_saved = step

@@ -34,17 +34,20 @@ class BenchConfig:
     """Plans per call for the latency, overhead and compile figures."""
     nfes: tuple[int, ...] = (1, 2, 4, 8, 15)
     """Network calls per plan for the latency table."""
+    methods: tuple[str, ...] = ()
+    """Methods to time in the latency and overhead tables, named as in them (``DDPM [ancestral]``,
+    ``bridge (line)``, ...); empty: every method."""
     repeats: int = 5
     """Timed repeats per latency figure (after 2 warm-up calls)."""
     overhead_repeats: int = 30
-    """Interleaved rounds for the overhead ratios (plan vs bare forward; train step vs bare step)."""
+    """Interleaved rounds for the overhead ratios (plan vs bare forward; train step vs bare step); 0: skip them."""
     busy_steps: int = 30
     """Training steps per rate of the busy-core figure (0: skip it; CPU devices only)."""
     throughput_seconds: float = 2.0
     """Seconds of training steps per figure of the training-throughput table (0: skip it)."""
     throughput_batch_sizes: tuple[int, ...] = (32, 256)
-    """Batches of the throughput table for ``cpu-small`` (``diffuser``'s network is timed at its own 32 only:
-    a batch of 256 takes seconds per step on a CPU)."""
+    """Batches of the throughput table (on a CPU for ``cpu-small`` only: there ``diffuser``'s network is timed at
+    its own 32, a batch of 256 taking seconds per step)."""
     side_by_side_seconds: float = 2.0
     """Seconds of training steps per figure of the two-jobs table: each maze's step with the other core quiet,
     spinning, or training the same step in another process, alternating (0: skip it; CPU devices with 2+ cores,
@@ -67,9 +70,11 @@ class BenchConfig:
     """``auto`` (CUDA if present), ``cpu``, ``cuda``, ..."""
 
     def validate(self) -> None:
-        for name in ("repeats", "overhead_repeats", "budget_episodes"):
+        for name in ("repeats", "budget_episodes"):
             if getattr(self, name) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        if self.overhead_repeats < 0:
+            raise BridgeplanError(f"overhead-repeats must be >= 0, got {self.overhead_repeats}")
         if self.side_by_side_seconds < 0:
             raise BridgeplanError(f"side-by-side-seconds must be >= 0, got {self.side_by_side_seconds}")
         if self.throughput_seconds < 0 or min(self.throughput_batch_sizes, default=1) <= 0:
@@ -83,6 +88,10 @@ class BenchConfig:
         for preset in self.presets:
             if preset not in PRESETS:
                 raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+        known = suites.method_configs(self.presets[0] if self.presets else "cpu-small")
+        unknown = [m for m in self.methods if m not in known]
+        if unknown:
+            raise BridgeplanError(f"unknown method {unknown[0]!r}: choose from {', '.join(known)}")
         for run in (self.eval_run, *self.budget_runs):
             if run and not Path(run).exists():
                 raise BridgeplanError(f"no run at {run}")
@@ -101,17 +110,19 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
               "train_overhead": [], "busy_core": [], "compile": [], "throughput": [], "side_by_side": []}
     for preset in bench.presets:
         progress(f"[{preset}] planning latency")
-        result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev)
-        progress(f"[{preset}] overheads")
-        result["plan_overhead"] += [suites.plan_overhead(preset, b, bench.overhead_repeats, dev)
-                                    for b in bench.batch_sizes]
-        result["train_overhead"].append(suites.train_overhead(preset, bench.overhead_repeats, dev))
+        result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev,
+                                                     bench.methods)
+        if bench.overhead_repeats:
+            progress(f"[{preset}] overheads")
+            result["plan_overhead"] += [suites.plan_overhead(preset, b, bench.overhead_repeats, dev, bench.methods)
+                                        for b in bench.batch_sizes]
+            result["train_overhead"].append(suites.train_overhead(preset, bench.overhead_repeats, dev))
         if bench.busy_steps and dev.type == "cpu":
             progress(f"[{preset}] training with a busy core")
             result["busy_core"].append(suites.busy_core_training(preset, bench.busy_steps, dev))
         if bench.throughput_seconds:
             progress(f"[{preset}] training throughput")
-            batches = bench.throughput_batch_sizes if preset == "cpu-small" else (32,)
+            batches = (32,) if preset == "diffuser" and dev.type == "cpu" else bench.throughput_batch_sizes
             result["throughput"] += suites.training_throughput(preset, batches, bench.throughput_seconds, dev,
                                                                compiled=bench.compile)
         if bench.side_by_side_seconds and dev.type == "cpu" and (os.cpu_count() or 1) > 1 and os.name == "posix":

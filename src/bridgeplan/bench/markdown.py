@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
-from bridgeplan.bench.suites import DIFFUSION_STEPS
+import torch
+
+from bridgeplan.bench.suites import diffusion_steps, matmul_size
+from bridgeplan.errors import BridgeplanError
 
 
 def table(header: list[str], rows: list[list]) -> list[str]:
@@ -18,25 +22,16 @@ def format_bench(result: dict) -> str:
                          "threads")
     lines = ["# bridgeplan bench", "",
              f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
-             f"with N = {DIFFUSION_STEPS} for the timings; medians over {result['bench']['repeats']} repeats after "
-             f"2 warm-up calls, ratios over {result['bench']['overhead_repeats']} interleaved rounds.", "",
+             f"with N = {diffusion_steps(result['bench']['nfes'])} for the timings; medians over "
+             f"{result['bench']['repeats']} repeats after 2 warm-up calls, ratios over "
+             f"{result['bench']['overhead_repeats']} interleaved rounds.", "",
              "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
              "of it and shown separately.", ""]
     lines += table(["preset", "method", "batch", "NFE", "plan ms", "of which prior ms"],
                     [[r["preset"], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}", f"{r['prior_ms']:.2f}"]
                      for r in result["latency"]])
-    lines += ["", "## Overheads", "", "Plan at NFE 1 over one bare forward pass of the same network and input "
-              "shape (target <= 1.2):", ""]
-    methods = list(result["plan_overhead"][0]["plan_nfe1_over_forward"]) if result["plan_overhead"] else []
-    lines += table(["preset", "batch", "forward ms", *methods],
-                    [[o["preset"], o["batch"], f"{o['forward_ms']:.2f}",
-                      *(f"{o['plan_nfe1_over_forward'][k]:.2f}" for k in methods)] for o in result["plan_overhead"]])
-    lines += ["", "Training step of `train.py` over a bare step on prepared batches: as many forward+backward "
-              "passes as the loop accumulates, then one Adam step (target <= 1.15):", ""]
-    lines += table(["preset", "batch x accumulated", "train step ms", "bare step ms", "train / bare"],
-                    [[o["preset"], f"{o['batch']} x {o['grad_accum']}", f"{o['train_step_ms']:.1f}",
-                      f"{o['bare_train_step_ms']:.1f}", f"{o['train_step_over_bare']:.2f}"]
-                     for o in result["train_overhead"]])
+    if result["plan_overhead"]:
+        lines += format_overheads(result)
     if result.get("busy_core"):
         lines += ["", "## Threads on a busy machine", "",
                   "Training steps per second with the machine quiet and with one core kept busy by another process "
@@ -50,7 +45,7 @@ def format_bench(result: dict) -> str:
                          f"{b['busy_over_quiet_1thread']:.2f}", f"{b[f'busy_{cores}thread_over_quiet_1thread']:.2f}"]
                         for b in result["busy_core"]])
     if result.get("throughput"):
-        lines += format_throughput(result["throughput"])
+        lines += format_throughput(result["throughput"], matmul_size(torch.device(m["device"])))
     if result.get("side_by_side"):
         lines += format_side_by_side(result["side_by_side"])
     if result["compile"]:
@@ -72,16 +67,35 @@ def format_bench(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def format_throughput(rows: list[dict]) -> list[str]:
+def format_overheads(result: dict) -> list[str]:
+    """A plan at NFE 1 over a bare forward pass, and the training loop's step over a bare step."""
+    lines = ["", "## Overheads", "", "Plan at NFE 1 over one bare forward pass of the same network and input "
+             "shape (target <= 1.2):", ""]
+    methods = list(result["plan_overhead"][0]["plan_nfe1_over_forward"])
+    lines += table(["preset", "batch", "forward ms", *methods],
+                   [[o["preset"], o["batch"], f"{o['forward_ms']:.2f}",
+                     *(f"{o['plan_nfe1_over_forward'][k]:.2f}" for k in methods)] for o in result["plan_overhead"]])
+    lines += ["", "Training step of `train.py` over a bare step on prepared batches: as many forward+backward "
+              "passes as the loop accumulates, then one Adam step (target <= 1.15):", ""]
+    lines += table(["preset", "batch x accumulated", "train step ms", "bare step ms", "train / bare"],
+                   [[o["preset"], f"{o['batch']} x {o['grad_accum']}", f"{o['train_step_ms']:.1f}",
+                     f"{o['bare_train_step_ms']:.1f}", f"{o['train_step_over_bare']:.2f}"]
+                    for o in result["train_overhead"]])
+    return lines
+
+
+def format_throughput(rows: list[dict], matmul_n: int) -> list[str]:
     """Training windows/s and achieved GFLOP/s of each setting, next to the machine's limit in the same run."""
     lines = ["", "## Training throughput", "",
              "`train.py`'s own step (window gathering, prior, loss, fused Adam, EMA) at each preset's plan shape per "
              "maze; GFLOP/s count the network's forward and backward passes only (torch's FLOP counter), so they "
-             "are a lower bound. The limit is the same run's 1024 x 1024 matmul and a 256 -> 256-channel, kernel-5 "
-             "convolution on 64 x 256 states, in the same precision and threads. `reference` is the implementation "
-             "before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter loop); `compiled` "
-             "is `train --compile`'s step (the network through `torch.compile`), its first step compiling for the "
-             "seconds shown (an empty inductor cache; a cached compile of the same shape takes a fraction).", ""]
+             f"are a lower bound. The limit is the same run's {matmul_n} x {matmul_n} matmul and a 256 -> "
+             "256-channel, kernel-5 convolution on 64 x 256 states, in the same precision and threads. `reference` is "
+             "the implementation before bridgeplan's own Mish and the fused Adam (torch's Mish, Adam's per-parameter "
+             "loop)"
+             + ("; `compiled` is `train --compile`'s step (the network through `torch.compile`), its first step "
+                "compiling for the seconds shown (an empty inductor cache; a cached compile of the same shape takes "
+                "a fraction)." if any(r["implementation"] == "compiled" for r in rows) else "."), ""]
     body = [[r["preset"], f"{r['maze']} {r['horizon']} x {r['stride']}", r["batch"], r["precision"],
              r["implementation"] + (f" ({r['compile_s']:.0f} s)" if r.get("compile_s") else ""), r["threads"],
              r["busy_cores"], f"{r['step_ms']:.1f}", f"{r['windows_per_s']:.0f}",
@@ -131,3 +145,14 @@ def format_budget(s: dict) -> list[str]:
         steps = "; ".join(f"{m} at {', '.join(map(str, sorted(v)))}" for m, v in steps_per_run.items())
         lines += ["", f"**Unequal training budgets** (steps): {steps}; compare with care."]
     return lines
+
+
+def committed_markdown(path: Path) -> str:
+    """The Markdown that ``bridgeplan bench`` wrote beside the bench JSON at ``path``, made again from it (what
+    ``study report --check`` holds the committed ``bench.md`` to)."""
+    try:
+        return format_bench(json.loads(Path(path).read_text()))
+    except OSError as e:
+        raise BridgeplanError(f"cannot read bench {path}: {e.strerror or e}") from None
+    except (ValueError, KeyError, TypeError, IndexError) as e:
+        raise BridgeplanError(f"{path}: not a bench JSON ({type(e).__name__}: {e})") from None

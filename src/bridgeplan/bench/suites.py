@@ -27,7 +27,14 @@ from bridgeplan.processes import DDPM, Bridge
 from bridgeplan.runs import build_model, build_planner, build_prior_net, windows_of
 
 DIFFUSION_STEPS = 16
-"""N of the untrained networks timed here (the ``cpu-small`` default); timings depend on NFE, not on N."""
+"""N of the untrained networks timed here (the ``cpu-small`` default) unless an NFE asks for more; timings depend
+on NFE, not on N."""
+
+
+def diffusion_steps(nfes) -> int:
+    """N of the timed networks: :data:`DIFFUSION_STEPS`, or enough for every NFE asked for (a bridge takes
+    N - 1 at most)."""
+    return max(DIFFUSION_STEPS, max(nfes, default=1) + 1)
 
 
 def small_windows(horizon: int, stride: int = 1):
@@ -41,21 +48,24 @@ def small_windows(horizon: int, stride: int = 1):
     return windows_of(stream, horizon, stride)
 
 
-def method_configs(preset: str) -> dict[str, TrainConfig]:
-    """One config per method timed: DDPM with each sampler, the bridge from each prior."""
+def method_configs(preset: str, steps: int = DIFFUSION_STEPS) -> dict[str, TrainConfig]:
+    """One config per method timed, at ``steps`` diffusion steps: DDPM with each sampler, the bridge from each
+    prior."""
     base = preset_config("umaze", preset)
     out = {}
     for sampler in DDPM.samplers:
-        out[f"DDPM [{sampler}]"] = dataclasses.replace(base, process=DDPM(DIFFUSION_STEPS, sampler=sampler))
+        out[f"DDPM [{sampler}]"] = dataclasses.replace(base, process=DDPM(steps, sampler=sampler))
     for prior in ("gaussian", "line", "learned"):
-        config = dataclasses.replace(base, process=Bridge(DIFFUSION_STEPS), prior=prior)
+        config = dataclasses.replace(base, process=Bridge(steps), prior=prior)
         out[config.label()] = config
     return out
 
 
-def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device) -> dict[str, Planner]:
-    """Every method's planner around one (untrained) network; the learned prior's net is untrained too."""
-    configs = method_configs(preset)
+def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device, methods=(),
+             steps: int = DIFFUSION_STEPS) -> dict[str, Planner]:
+    """Each method's planner (``methods``; empty: every one) around one (untrained) network; the learned prior's
+    net is untrained too."""
+    configs = {name: c for name, c in method_configs(preset, steps).items() if not methods or name in methods}
     first = next(iter(configs.values()))
     prior_net = build_prior_net(first.layout, first.horizon).to(device).eval()
     return {name: build_planner(c, model, normalizer, device, prior_net=prior_net) for name, c in configs.items()}
@@ -65,13 +75,13 @@ def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
     return np.repeat([[0.9, -0.9, 0.0, 0.0]], batch, 0), np.repeat([[-1.0, 1.0]], batch, 0)
 
 
-def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device) -> list[dict]:
+def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device, methods=()) -> list[dict]:
     """Milliseconds per plan call (whole batch) vs NFE, per method; prior sampling time shown separately."""
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
     rows = []
-    for name, planner in planners(preset, model, normalizer, dev).items():
+    for name, planner in planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes)).items():
         for batch in batch_sizes:
             starts, goals = _tasks(batch)
             cond = planner.conditions(starts, goals)
@@ -85,7 +95,7 @@ def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.de
     return rows
 
 
-def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device) -> dict:
+def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device, methods=()) -> dict:
     """Plan at NFE 1 over one bare forward pass of the same network on an input of the same shape."""
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
@@ -100,7 +110,7 @@ def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device) -> di
             model(x, t)
 
     fns = {"forward": forward} | {name: (lambda p=p: p.plan(starts, goals, 1, gen))
-                                  for name, p in planners(preset, model, normalizer, dev).items()}
+                                  for name, p in planners(preset, model, normalizer, dev, methods).items()}
     ratios = interleaved_ratios(fns, "forward", rounds, dev)
     return {"preset": preset, "batch": batch, "forward_ms": ratios.pop("forward_ms"), "plan_nfe1_over_forward": ratios}
 
@@ -276,13 +286,20 @@ THROUGHPUT_MAZES = ("umaze", "medium", "large")
 states)."""
 
 
+def matmul_size(dev: torch.device) -> int:
+    """Side of the square matmul that measures a device's limit: 1024 fills a CPU, a GPU needs 8192 to
+    approach its peak."""
+    return 1024 if dev.type == "cpu" else 8192
+
+
 def machine_limit(threads: int, dtype: torch.dtype, dev: torch.device, seconds: float = 1.0) -> dict:
-    """GFLOP/s of work the machine does at its best: a 1024 x 1024 matmul and a large convolution (Diffuser's
-    widest layer, 256 -> 256 channels, kernel 5, on 64 windows of 256 states), at ``threads`` threads."""
-    a = torch.randn(1024, 1024, device=dev, dtype=dtype)
+    """GFLOP/s of work the machine does at its best: an n x n matmul (:func:`matmul_size`) and a large convolution
+    (Diffuser's widest layer, 256 -> 256 channels, kernel 5, on 64 windows of 256 states), at ``threads`` threads."""
+    n = matmul_size(dev)
+    a = torch.randn(n, n, device=dev, dtype=dtype)
     x = torch.randn(64, 256, 256, device=dev, dtype=dtype)
     w = torch.randn(256, 256, 5, device=dev, dtype=dtype)
-    work = {"matmul": (lambda: a @ a, 2 * 1024 ** 3),
+    work = {"matmul": (lambda: a @ a, 2 * n ** 3),
             "conv": (lambda: torch.nn.functional.conv1d(x, w, padding=2), 2 * 64 * 256 * 256 * 256 * 5)}
     before = torch.get_num_threads()
     torch.set_num_threads(threads)

@@ -17,6 +17,7 @@ planned state in one step, and how it drives toward a waypoint. The rules are th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -46,8 +47,8 @@ class Body:
 def check_controller(kind: str, lookahead: float | None) -> None:
     if kind not in CONTROLLERS:
         raise BridgeplanError(f"unknown --controller {kind!r}: choose from {', '.join(CONTROLLERS)}")
-    if lookahead is not None and not lookahead > 0:
-        raise BridgeplanError(f"--lookahead must be > 0 (a distance in position), got {lookahead}")
+    if lookahead is not None and not (math.isfinite(lookahead) and lookahead > 0):
+        raise BridgeplanError(f"--lookahead must be a finite distance > 0 (in position), got {lookahead}")
 
 
 def tracking_targets(plans: np.ndarray, steps_into_plan: np.ndarray, layout: Layout) -> np.ndarray:

@@ -87,6 +87,9 @@ class Family:
     """Episodes per task an evaluation runs unless told (Maze2D: its single task set; OGBench: each of its tasks)."""
     quick_episodes: int
     """Episodes per task at a study's quick scale."""
+    validation_tasks: tuple[int, ...] = ()
+    """Task ids of its own validation tasks, apart from its test tasks (a study's validation split evaluates them);
+    none: a validation split draws other episodes of the same tasks by its seed alone."""
     task_sets: tuple[str, ...] = ("single",)
     """``single``: the family's tasks; ``multi``: Multi2D's random goals too, where the family has them."""
     goal_radius: float | None = None

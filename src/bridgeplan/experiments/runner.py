@@ -162,14 +162,21 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
     return dataclasses.replace(settings, dataset=str(path))
 
 
+BACKENDS = ("local", "ray")
+
+
+def check_backend(backend: str) -> None:
+    if backend not in BACKENDS:
+        raise BridgeplanError(f"unknown backend {backend!r}: choose from {', '.join(BACKENDS)}")
+
+
 def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: str = "local",
               workers: int = 1, ray_address: str | None = None, progress: bool = True) -> int:
     """Run every job the experiments need; returns the number of new result rows."""
     for exp in experiments:
         exp.validate()
+    check_backend(backend)
     ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
-    if backend not in ("local", "ray"):
-        raise BridgeplanError(f"unknown backend {backend!r}: choose from local, ray")
     if workers < 1:
         raise BridgeplanError(f"workers must be >= 1, got {workers}")
     ray = None

@@ -24,7 +24,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import sqlite3
+import tempfile
 import time
 from collections.abc import Iterable
 from contextlib import contextmanager
@@ -32,7 +34,7 @@ from pathlib import Path
 from typing import Iterator
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_text
+from bridgeplan.files import atomic_write_text, check_writable
 
 SCHEMA_VERSION = 6
 
@@ -105,13 +107,12 @@ def stored_keys(path: Path) -> tuple[set[tuple], set[tuple[str, tuple]]]:
     path = Path(path)
     if not path.exists():
         return set(), set()
+    check_store(path)
     try:
         db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
         try:
             db.row_factory = sqlite3.Row
             if db.execute("PRAGMA user_version").fetchone()[0] < 5:
-                if not db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'results'").fetchone():
-                    return set(), set()
                 rows = [_upgraded(dict(r)) for r in db.execute("SELECT * FROM results")]
                 return {key_of(r) for r in rows}, {(r["experiment"], key_of(r)) for r in rows}
             keys = {tuple(r) for r in db.execute(f"SELECT {', '.join(KEY)} FROM evaluations")}
@@ -123,6 +124,65 @@ def stored_keys(path: Path) -> tuple[set[tuple], set[tuple[str, tuple]]]:
             db.close()
     except sqlite3.DatabaseError as e:
         raise BridgeplanError(f"cannot use results store {path}: {e}") from None
+
+
+def check_store(path: Path) -> None:
+    """Refuse (:class:`BridgeplanError`) a store file that is not a whole store, read only, before anything reads
+    or writes it: empty (0 bytes: never a store, since :class:`ResultsStore` creates one whole, and taking it for an
+    empty one would compute every row again), corrupted (SQLite's quick check), or of a newer schema."""
+    path = Path(path)
+    if path.stat().st_size == 0:
+        raise BridgeplanError(f"results store {path} is empty (0 bytes), not a store; left as it is (remove it to "
+                              f"start an empty store)")
+    try:
+        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60.0)
+        try:
+            problems = [" ".join(r[0].split()) for r in db.execute("PRAGMA quick_check")]
+            version = db.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as e:
+        raise BridgeplanError(f"cannot use results store {path}: {e}") from None
+    if problems != ["ok"]:
+        raise BridgeplanError(f"results store {path} is corrupted ({problems[0]}); left as it is")
+    if version > SCHEMA_VERSION:
+        raise BridgeplanError(f"{path} has schema version {version}, newer than this bridgeplan understands "
+                              f"({SCHEMA_VERSION}); upgrade bridgeplan")
+    expected = {"evaluations", "memberships"} if version >= 5 else {"results"}
+    if not expected <= tables:  # a damaged header (its version), or another program's database
+        raise BridgeplanError(f"results store {path} is corrupted or not a results store (schema version {version} "
+                              f"without its table {sorted(expected - tables)[0]!r}); left as it is")
+
+
+def _create(path: Path) -> None:
+    """A new, empty store at ``path``, made whole under a temporary name and linked into place (a store killed as it
+    was created leaves no 0-byte file); another process that made it first wins."""
+    check_writable(path.parent, "results folder", folder=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        db = sqlite3.connect(tmp)
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            with db:
+                for statement in _tables():
+                    db.execute(statement)
+                db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+        finally:
+            db.close()
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            pass
+        except OSError:  # a file system without hard links
+            if not path.exists():
+                os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+        for suffix in ("-wal", "-shm"):
+            Path(tmp + suffix).unlink(missing_ok=True)
 
 
 def _upgraded(old: dict) -> dict:
@@ -143,8 +203,9 @@ class ResultsStore:
     def __init__(self, path: Path):
         self.path = Path(path)
         if self.path.exists():
-            self._check_version()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+            check_store(self.path)  # before anything is written to it: a damaged page would show up mid-sweep
+        else:
+            _create(self.path)
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
         with self._connect() as db:
@@ -178,17 +239,6 @@ class ResultsStore:
                 db.close()
         except sqlite3.DatabaseError as e:
             raise BridgeplanError(f"cannot use results store {self.path}: {e}") from None
-
-    def _check_version(self) -> None:
-        with self._connect(read_only=True) as db:
-            # before anything is written to it: a damaged page would otherwise show up mid-sweep
-            problems = [" ".join(r[0].split()) for r in db.execute("PRAGMA quick_check")]
-            version = db.execute("PRAGMA user_version").fetchone()[0]
-        if problems != ["ok"]:
-            raise BridgeplanError(f"results store {self.path} is corrupted ({problems[0]}); left as it is")
-        if version > SCHEMA_VERSION:
-            raise BridgeplanError(f"{self.path} has schema version {version}, newer than this bridgeplan "
-                                  f"understands ({SCHEMA_VERSION}); upgrade bridgeplan")
 
     @staticmethod
     def _insert(db: sqlite3.Connection, row: dict, experiments: Iterable[str]) -> bool:

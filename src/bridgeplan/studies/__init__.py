@@ -21,7 +21,7 @@ from bridgeplan.studies import generators
 from bridgeplan.studies.plan import check_reports, check_study
 from bridgeplan.studies.spec import Study, StudyError, read_study
 
-__all__ = ["Study", "StudyError", "find_root", "load_studies", "parse_study", "select"]
+__all__ = ["Studies", "Study", "StudyError", "broken_error", "find_root", "load_studies", "parse_study", "select"]
 
 
 def find_root(root: str | Path | None = None) -> Path:
@@ -48,18 +48,55 @@ def parse_study(path: Path | str, shown: Path | str | None = None, generators: d
     return study
 
 
-def load_studies(root: Path) -> dict[str, Study]:
+class Studies(dict):
+    """The studies of a repository by name, and in :attr:`broken` the files that are not studies (that do not parse,
+    or whose ``uses`` name a broken study or form a cycle), each with its error: one broken file stops only the
+    commands that need it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.broken: dict[str, BridgeplanError] = {}
+        """Each broken study file (as its errors show it) and its error."""
+        self.broken_names: dict[str, str] = {}
+        """The name of each broken study that parsed (broken by its ``uses``), and its file."""
+
+
+def load_studies(root: Path) -> Studies:
     """Every study of ``root/studies``, parsed and checked against each other (``uses``, reports' methods)."""
-    studies = {}
+    studies = Studies()
     reports = generators.load(root)
     for path in sorted((Path(root) / "studies").glob("*.toml")):
-        study = parse_study(path, shown=path.relative_to(root), generators=reports)
-        if study.name in studies:
-            raise StudyError(study.file, "name", f"{study.name!r} is also the name of {studies[study.name].file}")
+        try:
+            study = parse_study(path, shown=path.relative_to(root), generators=reports)
+            if study.name in studies:
+                raise StudyError(study.file, "name", f"{study.name!r} is also the name of {studies[study.name].file}")
+        except BridgeplanError as e:
+            studies.broken[str(path.relative_to(root))] = e
+            continue
         studies[study.name] = study
-    for study in studies.values():
-        check_reports(study, studies, reports)
-    return studies
+    while True:  # a study that uses a broken one is broken in its turn
+        errors = {}
+        for study in studies.values():
+            try:
+                check_reports(study, studies, reports)
+            except BridgeplanError as e:
+                errors[study.name] = e
+        if not errors:
+            return studies
+        for name, error in errors.items():
+            studies.broken[str(studies[name].file)] = error
+            studies.broken_names[name] = str(studies.pop(name).file)
+
+
+def broken_error(studies: dict[str, Study], name: str, root: Path) -> BridgeplanError | None:
+    """The error of the broken study file that ``name`` (a study's name, or its file) means; None if none."""
+    broken = getattr(studies, "broken", {})
+    if name in getattr(studies, "broken_names", {}):
+        return broken[studies.broken_names[name]]
+    for file, error in broken.items():
+        if name in (Path(file).stem, file) or Path(name).resolve() == (Path(root) / file).resolve():
+            return error
+    return None
 
 
 def select(studies: dict[str, Study], names: list[str], root: Path) -> list[Study]:
@@ -73,6 +110,7 @@ def select(studies: dict[str, Study], names: list[str], root: Path) -> list[Stud
                  or Path(name).resolve() == (root / s.file).resolve()]
         match = match or [s for s in studies.values() if any(r.generator == name for r in s.reports)]
         if not match:
-            raise BridgeplanError(f"unknown study {name!r}: choose from {', '.join(studies)}")
+            raise broken_error(studies, name, root) or BridgeplanError(
+                f"unknown study {name!r}: choose from {', '.join(studies)}")
         out.append(match[0])
     return out

@@ -98,26 +98,51 @@ def stale_rows(study: Study, root: Path) -> list[str]:
             if run in declared for d in differences(declared[run], config)]
 
 
-def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
-    """The study's results (``store_dir``, its committed-scale results directory) into docs/results: its store as
-    ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment in its committed folder,
-    and its evaluation JSONs to their ``out`` paths; the files written."""
-    from bridgeplan import paths
-    from bridgeplan.experiments.store import ResultsStore
-    from bridgeplan.report import write_report
+def exportable(chain: list[Study], root: Path, store_dir) -> list[Study]:
+    """The studies of ``chain`` (a study and those it uses) that have rows of their own, each checked to have them
+    in its results (``store_dir(study)``) and to be writable into docs/results, before any is written."""
+    own = [s for s in chain if s.experiments or s.evaluations]
+    if not own:
+        raise BridgeplanError(f"study {chain[-1].name} trains and evaluates nothing of its own, nor do the studies "
+                              f"it uses: nothing to export")
+    for s in own:
+        _pairs(s, root, Path(store_dir(s)))
+    return own
 
-    store = paths.store_path(store_dir)
+
+def _pairs(study: Study, root: Path, store_dir: Path) -> list[tuple[Path, Path]]:
+    """What :func:`export` copies or writes: (source, target) pairs, the targets' folders writable; an error when the
+    study has nothing to export."""
+    from bridgeplan import paths
+    from bridgeplan.experiments.store import stored_keys
+    from bridgeplan.files import check_writable
+
     if not study.experiments and not study.evaluations:
         raise BridgeplanError(f"study {study.name} trains and evaluates nothing of its own: nothing to export")
     if not study.experiments:
-        return copy_jsons(study, Path(store_dir), Path(root) / "docs" / "results")
+        return _json_pairs(study, store_dir, Path(root) / "docs" / "results")
+    store = paths.store_path(store_dir)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
                               f"`study import`) first")
-    out = committed_csv(study, root).parent
-    n = ResultsStore(store).export_csv(out / "results.csv")
-    if n == 0:
+    if not stored_keys(store)[0]:  # read only, before the committed rows are overwritten
         raise BridgeplanError(f"{store} holds no evaluation yet")
+    check_writable(committed_csv(study, root).parent, "committed results folder", folder=True)
+    return [(store, committed_csv(study, root))]
+
+
+def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
+    """The study's results (``store_dir``, its committed-scale results directory) into docs/results: its store as
+    ``results.csv`` (every evaluation, one schema), ``report.md`` and a PNG per experiment in its committed folder,
+    or its evaluation JSONs copied to their ``out`` paths (each atomically); the files written."""
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.report import write_report
+
+    pairs = _pairs(study, root, Path(store_dir))
+    if not study.experiments:
+        return copy_jsons(study, Path(store_dir), Path(root) / "docs" / "results")
+    out = committed_csv(study, root).parent
+    ResultsStore(pairs[0][0]).export_csv(out / "results.csv")
     titles = {e.name + suffix: e.title for e in study.experiments if e.title for suffix in ("", "-validation")}
     report = write_report(Path(store_dir), out, titles)
     return [out / "results.csv", report, *sorted(out.glob("*.png"))]
@@ -125,17 +150,26 @@ def export(study: Study, root: Path, store_dir: Path) -> list[Path]:
 
 def copy_jsons(study: Study, source: Path, target: Path) -> list[Path]:
     """The study's evaluation JSONs that exist under ``source`` copied to the same ``out`` paths under ``target``
-    (each atomically); the files written. None there: an error."""
+    (each atomically, every target folder checked first); the files written. None there: an error."""
     from bridgeplan.files import atomic_write_text
+
+    pairs = _json_pairs(study, source, target)
+    for path, out in pairs:
+        atomic_write_text(out, path.read_text())
+    return [out for _, out in pairs]
+
+
+def _json_pairs(study: Study, source: Path, target: Path) -> list[tuple[Path, Path]]:
+    """(the JSON under ``source``, where it goes under ``target``) for each evaluation JSON of the study that
+    exists, every target folder checked writable; an error when none exists."""
+    from bridgeplan.files import check_writable
     from bridgeplan.studies.jobs import jobs
 
-    written = []
-    for job in jobs(study, source, source, quick=False):
-        if job.path.exists():
-            out = target / job.path.relative_to(source)
-            atomic_write_text(out, job.path.read_text())
-            written.append(out)
-    if not written:
+    found = [job.path for job in jobs(study, source, source, quick=False) if job.path.exists()]
+    if not found:
         raise BridgeplanError(f"no evaluation JSON of study {study.name} under {source}; run `bridgeplan study run "
                               f"{study.file}` (or `study import`) first")
-    return written
+    pairs = [(path, Path(target) / path.relative_to(source)) for path in found]
+    for folder in dict.fromkeys(out.parent for _, out in pairs):
+        check_writable(folder, "committed results folder", folder=True)
+    return pairs

@@ -23,8 +23,9 @@ by the runs of one plan shape). ``out`` may name ``{seed}`` (training), ``{eval_
 or ``multi``). ``study run`` writes each under the study's results directory (results/NAME/OUT): a JSON there is
 done; it trains what the missing ones need and runs their commands (``--workers`` training seeds side by side, one
 torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
-import`` copies the committed ones back. ``ogbench graph-eval`` takes no run (``runs = []``), or its low level
-(``runs = ["low"]``, given as ``--low``); the runner gives it the study's dataset.
+import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its low level
+(``runs = ["low"]``, given as ``--low``); the runner gives it the study's dataset. A validation split of a family
+with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier draw.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import READS_THE_DATASET, NamedRun, command_argv
+from bridgeplan.studies.spec import READS_THE_DATASET, TAKES_TASKS, NamedRun, command_argv
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
@@ -110,6 +111,10 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                         cap = study.dataset.family.quick_episodes
                         episodes = cap if episodes is None else min(episodes, cap)
                     dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
+                    validation_tasks = study.dataset.family.validation_tasks
+                    if (split == "validation" and validation_tasks and e.command in TAKES_TASKS and "tasks" not in args
+                            and study.evaluation.validation == "other-tasks"):
+                        args["tasks"] = ",".join(map(str, validation_tasks))  # not the test tasks, reseeded
                     argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
                                           tuple(sorted(args.items())), dataset),
                             *(["--episodes", str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),

@@ -193,13 +193,19 @@ def trained_methods(study: Study) -> set:
 
 
 def check_reports(study: Study, studies: dict[str, Study], generators: dict) -> None:
-    """Its ``uses`` name known studies, and each report's generator reads only methods that the study or the
-    studies it uses train."""
+    """Its ``uses`` name known studies that parse, with no cycle through them (itself included), and each report's
+    generator reads only methods that the study or the studies it uses train."""
     from bridgeplan.analysis.keys import label
 
+    broken = getattr(studies, "broken", {})
     for i, name in enumerate(study.uses):
         if name not in studies:
+            bad = [file for file in broken if Path(file).stem == name]
+            if bad:
+                raise StudyError(study.file, f"uses[{i}]", f"study {name!r} is broken ({bad[0]}: see its own error)")
             raise StudyError(study.file, f"uses[{i}]", f"unknown study {name!r} (known: {', '.join(sorted(studies))})")
+    if cycle := _cycle(study, studies):
+        raise StudyError(study.file, "uses", f"a study cannot read its own results: {' -> '.join(cycle)}")
     if not study.reports:
         return
     trained = set(trained_methods(study))
@@ -211,6 +217,21 @@ def check_reports(study: Study, studies: dict[str, Study], generators: dict) -> 
             raise StudyError(study.file, f"reports[{i}].generator",
                              f"{report.generator} reads {label(missing[0])} (N={missing[0].steps}), which neither "
                              f"{study.name} nor the studies it uses ({', '.join(study.uses) or 'none'}) train")
+
+
+def _cycle(study: Study, studies: dict[str, Study]) -> list[str]:
+    """The names along a path of ``uses`` from ``study`` back to itself ([] when there is none)."""
+    def walk(uses: tuple[str, ...], path: list[str], seen: set[str]) -> list[str]:
+        for used in uses:
+            if used == study.name:
+                return [*path, used]
+            if used not in seen and used in studies:
+                seen.add(used)
+                if found := walk(studies[used].uses, [*path, used], seen):
+                    return found
+        return []
+
+    return walk(study.uses, [study.name], set())
 
 
 # --- what is missing ---------------------------------------------------------------------------------------------
@@ -406,6 +427,55 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     return lines
 
 
+def quick_table(study: Study, root: Path) -> list[str]:
+    """After ``study run --quick``: per maze, task set and controller, the best planner of the quick rows (its last
+    snapshot; chosen on the validation episodes where the study has them, else on the test episodes) beside the
+    same planner's committed score (docs/results, the committed scale's last snapshot) and the line alone, a table
+    shaped like the headline's; [] for a study without grid rows (its evaluations are JSON files)."""
+    from bridgeplan.analysis.keys import label, tasks_label
+    from bridgeplan.analysis.load import Point, Results, load_csvs, row_from_csv
+    from bridgeplan.analysis.stats import mean_se
+    from bridgeplan.analysis.tables import fmt_mean_se, table
+    from bridgeplan.experiments.store import ResultsStore
+    from bridgeplan.paths import store_path
+
+    store = store_path(results_dir(study, root, Scale("quick")))
+    if not study.experiments or not store.exists():
+        return []
+    quick = Results(row_from_csv({k: "" if v is None else str(v) for k, v in r.items()})  # as its CSV has them
+                    for r in ResultsStore(store).rows())
+    committed = load_csvs([committed_csv(study, root)])
+    groups: dict[tuple, list[Point]] = {}
+    for key in quick.keys():
+        last = quick.steps(key)[-1]
+        group = (next(iter(quick.rows(Point(key, last, quick.nfes(key, last)[0])).values())).maze,
+                 tasks_label(key), "pursued" if key.execution.controller == "pursuit" else "tracked")
+        groups.setdefault(group, []).extend(quick.points(key, last))
+    has_validation = any(quick.keys("validation"))
+
+    def score(results: Results, point: Point | None) -> str:
+        if point is None or not results.values(point):
+            return "-"
+        return (f"{fmt_mean_se(results.values(point), one_seed='mean')} "
+                f"({mean_se(results.values(point, field='success')).mean:.2f}), {len(results.values(point))} seeds")
+
+    def at_last(results: Results, point: Point) -> Point | None:
+        steps = [s for s in results.steps(point.key) if point.nfe in results.nfes(point.key, s)]
+        return Point(point.key, steps[-1], point.nfe) if steps else None
+
+    lines = []
+    for (maze, tasks, controller), points in groups.items():
+        split = "validation" if has_validation else "test"
+        chosen = max(points, key=lambda q: mean_se(quick.values(q, split)).mean if quick.values(q, split) else -1e9)
+        floor = fmt_mean_se(quick.values(chosen, field="floor"), one_seed="mean")
+        lines.append([maze, tasks, controller,
+                      f"{label(chosen.key)}, NFE {chosen.nfe}" + (f", {chosen.key.tag}" if chosen.key.tag else ""),
+                      score(quick, chosen), score(committed, at_last(committed, chosen)), floor])
+    chosen_on = "validation" if has_validation else "test"
+    return table(["maze", "tasks", "executed", f"best planner (quick, chosen on {chosen_on})", "quick score (success)",
+                  "committed score (success)", "line alone (quick)"], lines)
+
+
 def _hours(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.1f} min"
 
@@ -445,6 +515,24 @@ def with_used(study: Study, studies: dict[str, Study]) -> list[Study]:
 
     visit(study)
     return list(out.values())
+
+
+def check_run(chain: list[Study], root: Path, scale: Scale, backend: str = "local", dry_run: bool = False) -> None:
+    """What ``study run`` refuses before any work, for every study of ``chain`` (:func:`with_used`): an unknown
+    backend, and (unless a dry run, which writes nothing) a results folder or a dataset's folder that cannot be
+    written."""
+    from bridgeplan.experiments.runner import check_backend
+    from bridgeplan.files import check_writable
+
+    check_backend(backend)
+    if dry_run:
+        return
+    for s in chain:
+        if s.experiments or s.evaluations:
+            check_writable(results_dir(s, root, scale), "results folder", folder=True)
+            dataset = Path(root) / scale.apply(s).dataset.directory()
+            if not dataset.exists():
+                check_writable(dataset.parent, "dataset folder", folder=True)
 
 
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,

@@ -151,12 +151,21 @@ class Training:
         return (*self.stages, (self.steps, self.checkpoint_every))
 
 
+VALIDATIONS = ("other-tasks", "test-tasks-reseeded")
+
+
 @dataclass(frozen=True)
 class Evaluation:
     episodes: int | None = None
     """Episodes per task (None: the environment family's, Maze2D 200 in all, OGBench 50 per task)."""
     workers: int = 1
     """Parallel jobs of the local backend (cores divided among them)."""
+    validation: str = "other-tasks"
+    """What the validation split evaluates in a family with validation tasks of its own (``Family.validation_tasks``:
+    OGBench's, ``protocol.validation_tasks``, other cells than the test tasks'): ``other-tasks``, those;
+    ``test-tasks-reseeded``, the test tasks themselves with other noise (the training seed + 1000), the draw the
+    studies made before them, which they pin so that their committed rows keep reproducing. A family without them
+    draws its validation episodes by the seed alone."""
 
 
 @dataclass(frozen=True)
@@ -430,6 +439,8 @@ RUN_FLAGS = {"graph": ("--low",)}
 """Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
 POSITIONAL = {"oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
+TAKES_TASKS = {"eval", "hierarchy eval", "graph", "oracle"}
+"""Commands that take ``--tasks`` (so a validation split can give them a family's validation tasks)."""
 READS_THE_DATASET = {"graph"}
 """Commands that read the study's dataset itself: the runner gives them its name and file (``--maze NAME --dataset
 FILE``)."""
@@ -589,15 +600,24 @@ def read_study(path: Path | str, shown: Path | str | None = None, generators: di
     :class:`StudyError` names the file (as ``shown``, default ``path``) and the key of the first problem."""
     generators = generators or {}
     try:
-        text = Path(path).read_text()
+        data = Path(path).read_bytes()
     except OSError as e:
         raise BridgeplanError(f"cannot read study {path}: {e.strerror or e}") from None
     stem = Path(path).stem
     path = Path(shown or path)
     try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise StudyError(path, "(encoding)", f"not UTF-8 text (TOML is): byte {e.start} is "
+                                             f"{data[e.start:e.start + 1]!r}") from None
+    try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise StudyError(path, "(syntax)", str(e)) from None
+    if not raw:
+        raise StudyError(path, "(file)", "empty: a study declares what it trains and evaluates ([dataset], "
+                                         "[[experiments]] or [[evaluations]]), or the studies it reads (uses) and "
+                                         "its [[reports]]")
     top = {"name", "title", "data", "uses", "dataset", "training", "evaluation", "methods", "experiments", "runs",
            "evaluations", "reports"}
     _table(path, "", raw, top)
@@ -617,9 +637,12 @@ def read_study(path: Path | str, shown: Path | str | None = None, generators: di
             raise StudyError(path, "dataset.generator", f"{dataset.maze} is a {family.title} environment: its data "
                                                         f"is made by {family.generator!r}, not {dataset.generator!r}")
     training = _training(path, raw.get("training", {}))
+    fields = {f.name for f in dataclasses.fields(Evaluation)}
     evaluation = Evaluation(**_dataclass_fields(
-        Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), {"episodes", "workers"}), path,
-        "evaluation"))
+        Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), fields), path, "evaluation"))
+    if evaluation.validation not in VALIDATIONS:
+        raise StudyError(path, "evaluation.validation", f"expected one of {', '.join(VALIDATIONS)}, "
+                                                        f"got {evaluation.validation!r}")
     methods = {}
     for mname, m in _table(path, "methods", raw.get("methods", {}), set(raw.get("methods", {}))).items():
         key = f"methods.{mname}"
@@ -647,12 +670,19 @@ def read_study(path: Path | str, shown: Path | str | None = None, generators: di
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
                   training=training, evaluation=evaluation, methods=tuple(methods.values()),
                   experiments=experiments, runs=runs, evaluations=evaluations, reports=tuple(reports))
+    if not (experiments or evaluations or reports or uses):
+        raise StudyError(path, "(file)", "declares nothing to run or report: add [[experiments]] or [[evaluations]] "
+                                         "(with a [dataset]), or [[reports]] of the studies it uses")
     if (experiments or evaluations) and dataset is None:
         raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
     if experiments and not dataset.family.sweeps:
         raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
                                               f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
+        if ("validation" in e.splits and dataset.family.validation_tasks and e.command not in TAKES_TASKS
+                and evaluation.validation == "other-tasks"):
+            raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates {dataset.family.title}'s test "
+                                                               f"tasks only: it has no validation split")
         missing = set(e.task_sets) - set(dataset.family.task_sets)
         if missing:
             raise StudyError(path, f"evaluations[{i}].task_sets", f"{dataset.family.title} has the task sets "

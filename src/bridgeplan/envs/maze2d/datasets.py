@@ -31,6 +31,7 @@ from bridgeplan.envs.maze2d.minari_io import (
     write_minari_into,
 )
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import check_writable
 from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import MAZE2D
 
@@ -77,6 +78,7 @@ def generate_dataset(maze_name: str, steps: int, seed: int = 123, out: str | Pat
         raise BridgeplanError(f"{out} already exists; pass --force to overwrite it")
     if out.exists() and not out.is_dir():
         raise BridgeplanError(f"{out} exists and is not a directory")
+    check_writable(out, "dataset folder", folder=True)
     streams = generate_streams(maze, steps, seed, workers=workers, progress=progress, piece_steps=piece_steps)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp.", dir=out.parent))

@@ -17,6 +17,7 @@ from bridgeplan.envs.controllers import Body
 from bridgeplan.envs.family import Family
 from bridgeplan.envs.ogbench_pointmaze import plans
 from bridgeplan.envs.ogbench_pointmaze.names import KINDS, MAZES, parse_dataset_name
+from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import KINEMATIC_POINT, Layout
 
@@ -36,6 +37,7 @@ class OGBenchPointmaze(Family):
     goal_radius = GOAL_TOLERANCE
     default_arrival = "end"  # the environment ends an episode at its goal: nothing needs to hold it
     floor_replans = True
+    validation_tasks = VALIDATION_TASK_IDS  # other cells than the test tasks'
 
     def owns(self, env: str) -> bool:
         return env.startswith(PREFIX)

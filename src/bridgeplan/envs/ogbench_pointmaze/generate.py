@@ -26,7 +26,7 @@ import numpy as np
 from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, legacy_rng, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import ACTION_NOISE, KINDS, DatasetName, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_bytes
+from bridgeplan.files import atomic_write_bytes, check_writable
 
 STITCH_CELLS = 4
 """BFS distance (in cells) from a stitch episode's start cell to its goal cell."""
@@ -145,6 +145,7 @@ def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: in
     if existing and not force:
         raise BridgeplanError(f"{' and '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
                               "pass --force to overwrite")
+    check_writable(out_dir, "dataset folder", folder=True)
     n_val = validation_episodes(episodes)
     t0 = time.perf_counter()
     with tqdm(total=(episodes + n_val) * episode_steps, disable=not progress, desc=f"generate {name}",

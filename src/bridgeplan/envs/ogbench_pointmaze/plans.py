@@ -5,7 +5,7 @@ The one place that says it for the pointmaze family (:func:`bridgeplan.config.pl
 step has to reach the goal, so its span, ``(horizon - 1) * stride + 1`` steps, must cover the longest of the
 maze's 5 evaluation tasks at the pace of the data the planner imitates:
 
-- the noise-free oracle on the protocol (50 episodes per task, seed 0; ``bridgeplan ogbench evaluate-oracle``)
+- the noise-free oracle on the protocol (50 episodes per task, seed 0; ``bridgeplan oracle``)
   needs at most, over its successful episodes (90th percentile; the maximum is the same but for a few episodes
   that hung on a wall corner first): medium 169 steps (tasks 1-5: 169, 165, 95, 161, 135), large 325 (266,
   325, 225, 246, 266), giant 511 (511, 455, 488, 440, 287), teleport 601 (601, 269, 60, 72, 346; its BFS

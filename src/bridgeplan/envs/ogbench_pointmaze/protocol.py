@@ -28,6 +28,11 @@ from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, check_maze, env_id
 from bridgeplan.errors import BridgeplanError
 
+VALIDATION_TASK_IDS = (6, 7, 8, 9, 10)
+"""Task ids past OGBench's five test tasks: bridgeplan's validation tasks (:func:`validation_tasks`), on which
+settings are chosen (``--tasks 6,7,8,9,10``; a study's validation split, unless it pins the earlier draw)."""
+VALIDATION_TASKS_SEED = 44
+"""The seed that draws each maze's validation tasks (fixed: the same tasks on every machine and run)."""
 EVAL_EPISODES_PER_TASK = 50
 """Every pointmaze line of OGBench's ``impls/hyperparameters.sh`` passes ``--eval_episodes=50`` (``main.py``'s
 own default, 20, is not what the paper's numbers use)."""
@@ -118,6 +123,31 @@ class ProtocolResult:
         return "\n".join(lines)
 
 
+def validation_tasks(maze_map: np.ndarray, test_tasks: Sequence[dict]) -> list[dict]:
+    """Five tasks that are not the test tasks, to choose settings on without looking at them: pairs of distinct free
+    cells (start, goal) drawn uniformly, without replacement (NumPy's ``default_rng(VALIDATION_TASKS_SEED)``), among
+    the pairs where neither cell is a start or goal cell of a test task and the shortest path between them (4-connected
+    cells, as ogbench's oracle walks) is at least as long as the shortest test task's. In ogbench's ``task_info``
+    form (``task_name``, ``init_ij``, ``goal_ij``), named ``validation_task6`` to ``validation_task10``."""
+    from bridgeplan.envs.ogbench_pointmaze.maze import bfs
+
+    maze_map = np.asarray(maze_map)
+    used = {tuple(map(int, t[k])) for t in test_tasks for k in ("init_ij", "goal_ij")}
+    shortest = min(int(bfs(maze_map, tuple(map(int, t["init_ij"])))[0][tuple(map(int, t["goal_ij"]))])
+                   for t in test_tasks)
+    free = [tuple(map(int, c)) for c in np.argwhere(maze_map == 0) if tuple(map(int, c)) not in used]
+    pairs = []
+    for a in free:
+        dist = bfs(maze_map, a)[0]
+        pairs += [(a, b) for b in free if b != a and dist[b] >= shortest]
+    if len(pairs) < len(VALIDATION_TASK_IDS):
+        raise BridgeplanError(f"the maze has {len(pairs)} start-goal pairs apart from its test tasks' cells, fewer "
+                              f"than {len(VALIDATION_TASK_IDS)} validation tasks")
+    chosen = np.random.default_rng(VALIDATION_TASKS_SEED).choice(len(pairs), len(VALIDATION_TASK_IDS), replace=False)
+    return [{"task_name": f"validation_task{i}", "init_ij": np.array(pairs[k][0]), "goal_ij": np.array(pairs[k][1])}
+            for i, k in zip(VALIDATION_TASK_IDS, sorted(chosen))]
+
+
 def episode_seed(seed: int, task_id: int, index: int) -> int:
     """The seed of episode ``index`` of task ``task_id``."""
     return int(np.random.SeedSequence([seed, task_id, index]).generate_state(1)[0])
@@ -159,10 +189,13 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
                               f"and {batch_size}")
     task_ids = list(TASK_IDS if task_ids is None else task_ids)
     probe = make_env(maze).unwrapped
-    infos = probe.task_infos
-    bad = [t for t in task_ids if not (isinstance(t, (int, np.integer)) and 1 <= t <= len(infos))]
-    if bad or not task_ids:
-        raise BridgeplanError(f"task ids must be in 1..{len(infos)}, got {list(task_ids)}")
+    known = TASK_IDS + VALIDATION_TASK_IDS
+    if not task_ids or any(not isinstance(t, (int, np.integer)) or t not in known for t in task_ids):
+        raise BridgeplanError(f"task ids must be in 1..5 (OGBench's test tasks) or 6..10 (the validation tasks), got "
+                              f"{list(task_ids)}")
+    infos = list(probe.task_infos)
+    if any(t in VALIDATION_TASK_IDS for t in task_ids):
+        infos += validation_tasks(probe.maze_map, infos)
     episodes = [(int(t), k) for t in task_ids for k in range(episodes_per_task)]
     envs = [make_env(maze) for _ in range(min(batch_size, len(episodes)))]
     success = np.zeros(len(episodes), dtype=bool)
@@ -173,7 +206,7 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
             batch = episodes[lo:lo + len(envs)]
             if on_batch_start is not None:
                 on_batch_start(len(batch))
-            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update, on_episodes_end)
+            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update, on_episodes_end, infos)
             success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
     for env in envs:
         env.close()
@@ -203,8 +236,10 @@ def _may_teleport(env) -> Callable[[np.ndarray], bool]:
 
 
 def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
-               finished: Callable[[int], None], on_episodes_end: Callable[[np.ndarray], None] | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+               finished: Callable[[int], None], on_episodes_end: Callable[[np.ndarray], None] | None = None,
+               infos: Sequence[dict] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """Run one batch of (task id, index) episodes; a task past OGBench's own (``TASK_IDS``) resets to its entry of
+    ``infos``."""
     n = len(batch)
     may_teleport = _may_teleport(envs[0])
     seeds = [episode_seed(seed, t, k) for t, k in batch]
@@ -213,7 +248,8 @@ def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
     goals = np.empty((n, 2))
     for i, (env, (task, _)) in enumerate(zip(envs, batch)):
         with legacy_rng(rngs[i]):
-            ob, info = env.reset(seed=seeds[i], options=dict(task_id=task))
+            options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
+            ob, info = env.reset(seed=seeds[i], options=options)
         obs[i], goals[i] = ob, info["goal"]
     active = np.ones(n, dtype=bool)
     success = np.zeros(n, dtype=bool)
