@@ -6,6 +6,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export MUJOCO_GL=${MUJOCO_GL:-egl}
-.venv/bin/python -m ruff check src tests
+.venv/bin/python -m ruff check src tests studies scripts
 .venv/bin/bridgeplan study report --check --root .
 exec .venv/bin/python -m pytest "$@"

@@ -16,7 +16,9 @@ from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.replan import Execution
 from bridgeplan.report import method_label
-from bridgeplan.studies.reports import controllers, findings, prior_curves
+from tests.reports import report
+
+controllers, findings, prior_curves = report("controllers"), report("findings"), report("prior-curves")
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 CSVS = sorted(RESULTS.glob("*/results.csv"))

@@ -110,15 +110,15 @@ def test_6_data_generate_out_below_a_file(capsys, tmp_path, a_file):
     assert f"{a_file} is a file, not a folder" in line
 
 
-def test_7_ogbench_generate_out_in_a_read_only_folder(capsys, tmp_path, read_only):
-    line = refused(capsys, "ogbench", "generate", OGBENCH, "--episodes", "1", "--steps", "10", "--no-progress",
-                   "--out", read_only / "og", watch=tmp_path)
+def test_7_data_generate_ogbench_out_in_a_read_only_folder(capsys, tmp_path, read_only):
+    line = refused(capsys, "data", "generate", "--maze", OGBENCH, "--episodes", "1", "--episode-steps", "10",
+                   "--no-progress", "--out", read_only / "og", watch=tmp_path)
     assert "cannot write" in line and str(read_only) in line
 
 
-def test_8_ogbench_generate_out_that_is_a_file(capsys, tmp_path, a_file):
-    line = refused(capsys, "ogbench", "generate", OGBENCH, "--episodes", "1", "--steps", "10", "--no-progress",
-                   "--out", a_file, watch=tmp_path)
+def test_8_data_generate_ogbench_out_that_is_a_file(capsys, tmp_path, a_file):
+    line = refused(capsys, "data", "generate", "--maze", OGBENCH, "--episodes", "1", "--episode-steps", "10",
+                   "--no-progress", "--out", a_file, watch=tmp_path)
     assert f"{a_file}: it is a file, not a folder" in line
 
 
@@ -199,7 +199,7 @@ def test_16_an_infinite_lookahead(capsys, tmp_path, tiny_runs):
     line = refused(capsys, "eval", tiny_runs["ddpm"], *EVAL, "--controller", "pursuit", "--lookahead", "inf",
                    watch=tmp_path)
     assert line == "error: --lookahead must be a finite distance > 0 (in position), got inf"
-    line = refused(capsys, "ogbench", "graph-eval", OGBENCH, "--controller", "pursuit", "--lookahead", "inf",
+    line = refused(capsys, "graph", "--maze", OGBENCH, "--controller", "pursuit", "--lookahead", "inf",
                    watch=tmp_path)
     assert "got inf" in line
 
@@ -260,13 +260,13 @@ def test_20_resume_past_a_truncated_snapshot(capsys, tmp_path, tiny_dataset, tin
 
 def test_21_a_graph_without_joins(capsys, tmp_path, tiny_runs):
     for flags in (["--neighbours", "0"], ["--radius", "0"]):
-        line = refused(capsys, "ogbench", "graph-eval", OGBENCH, *flags, watch=tmp_path)
+        line = refused(capsys, "graph", "--maze", OGBENCH, *flags, watch=tmp_path)
         assert "no joins between episodes" in line
-        line = refused(capsys, "hierarchy", "graph-eval", tiny_runs["ddpm"], *flags, watch=tmp_path)
+        line = refused(capsys, "graph", "--low", tiny_runs["ddpm"], *flags, watch=tmp_path)
         assert "no joins between episodes" in line
 
 
 def test_22_a_missing_low_run_is_reported_first(capsys, tmp_path):
     # no --replan-every (which a low level needs) and no dataset file: the run named is what is reported
-    line = refused(capsys, "ogbench", "graph-eval", OGBENCH, "--low", tmp_path / "nowhere", watch=tmp_path)
+    line = refused(capsys, "graph", "--maze", OGBENCH, "--low", tmp_path / "nowhere", watch=tmp_path)
     assert f"no checkpoint or run directory {str(tmp_path / 'nowhere')!r}" in line

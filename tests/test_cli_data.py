@@ -11,9 +11,9 @@ import sys
 import pytest
 
 from bridgeplan.cli import main
-from bridgeplan.data.datasets import CACHE_NAME
-from bridgeplan.data.generate import DATA_VERSION
-from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
+from bridgeplan.envs.maze2d.datasets import CACHE_NAME
+from bridgeplan.envs.maze2d.generate import DATA_VERSION
+from bridgeplan.envs.maze2d.minari_io import METADATA_FILE, VERSION_KEY
 
 
 def _error(capsys, argv) -> str:
@@ -58,7 +58,8 @@ def test_default_location(tmp_path, capsys, monkeypatch):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--maze", "maze9"], "unknown maze 'maze9': choose from open, umaze, medium, large"),
+    (["--maze", "maze9"], "unknown environment 'maze9': Maze2D: open, umaze, medium, large; OGBench pointmaze: "
+                          "pointmaze-{medium,large,giant,teleport}-{navigate,stitch}-v0"),
     (["--maze", "umaze", "--steps", "0"], "--steps must be positive, got 0"),
     (["--maze", "umaze", "--steps", "-5"], "--steps must be positive, got -5"),
     (["--maze", "umaze", "--workers", "0"], "--workers must be positive, got 0"),

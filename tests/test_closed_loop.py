@@ -3,6 +3,7 @@ policy in a real gymnasium env, and the CLI's bad input."""
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
 import math
@@ -14,24 +15,49 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
+from bridgeplan.envs import maze2d
+from bridgeplan.envs.maze2d.expert import WaypointExpert
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, get_maze
+from bridgeplan.envs.maze2d.reference import normalized_score, score_returns
+from bridgeplan.envs.maze2d.sim import BatchedPointMaze
+from bridgeplan.envs.maze2d.tasks import MazeTasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.evaluate import evaluate_planner, make_tasks, score_returns
-from bridgeplan.maze.controllers import Follower
-from bridgeplan.maze.expert import WaypointExpert
-from bridgeplan.maze.layouts import get_maze
-from bridgeplan.maze.reference import normalized_score
-from bridgeplan.maze.rollout import execute_closed_loop, execute_plans
-from bridgeplan.maze.sim import BatchedPointMaze
+from bridgeplan.evaluate import evaluate_planner, execute_plans, make_tasks
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Plan, Planner
 from bridgeplan.policy import PlannerPolicy
 from bridgeplan.priors import PRIORS, WarmPrior, make_prior
-from bridgeplan.replan import Execution, PlanSource, arrival_index, select_candidates, truncate_at_arrival
+from bridgeplan.replan import (
+    Execution,
+    PlanExecutor,
+    PlanSource,
+    arrival_index,
+    select_candidates,
+    truncate_at_arrival,
+)
 from bridgeplan.runs import load_planner
 from bridgeplan.trajectory import MAZE2D
 
 UMAZE = get_maze("umaze")
 README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def closed_loop(tasks: MazeTasks, plan_fn, replan_every=None, tolerance=None, steps=None, controller="track"):
+    """``plan_fn``'s decisions executed in Maze2D's episodes (``replan.PlanExecutor``, at most ``steps`` steps):
+    the outcome, and the executor (its plans made and the steps its decisions came at)."""
+    if steps is not None:
+        tasks = dataclasses.replace(tasks, episode_steps=steps)
+    called = []
+
+    def decide(states, goals, idx, t):
+        called.append(t)
+        return plan_fn(states, goals, idx, t)
+
+    executor = PlanExecutor(lambda n: decide, lambda n: maze2d.FAMILY.follower("umaze", n, controller),
+                            replan_every, tolerance)
+    outcome = maze2d.FAMILY.run(tasks, executor)
+    executor.call_steps = called
+    return outcome, executor
 
 
 # ---------------------------------------------------------------- open loop is unchanged
@@ -45,12 +71,12 @@ def test_open_loop_json_scores_are_todays(tiny_runs, tmp_path):
     saved = json.loads(out.read_text())
     planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
     tasks = make_tasks("umaze", 5, 0)
-    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, tasks.generator(planner.device))
-    today = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states)
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, torch.Generator().manual_seed(0))
+    today = execute_plans(tasks, plan.states)
     expected = json.loads(json.dumps(score_returns("umaze", today.returns, today.success)))
     assert {k: saved[k] for k in expected} == expected
     assert saved["execution"]["mode"] == "open_loop" and saved["plans_per_episode"]["max"] == 1
-    assert saved["calls_per_episode"] == 2 and "decision_ms_batch1" not in saved
+    assert saved["calls_per_episode"] == 2 and saved["decision_ms_batch1"]["count"] == 1  # its one decision
 
 
 def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny_runs, tmp_path):
@@ -61,15 +87,14 @@ def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny
     saved = json.loads(out.read_text())
     planner, _ = load_planner(tiny_runs["bridge"], device="cpu")
     tasks = make_tasks("umaze", 5, 0)
-    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, tasks.generator(planner.device))
-    pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, plan.states,
-                            follower=Follower(5, "pursuit", 0.7))
+    plan = planner.plan(tasks.start_states, tasks.goals_xy, 2, torch.Generator().manual_seed(0))
+    pursuit = Execution(controller="pursuit", lookahead=0.7)
+    pursued = execute_plans(tasks, plan.states, pursuit)
     expected = json.loads(json.dumps(score_returns("umaze", pursued.returns, pursued.success)))
     assert {k: saved[k] for k in expected} == expected
     line = planner.with_prior(make_prior("line", planner.normalizer, planner.layout, stride=planner.stride))
-    line_plan = line.plan(tasks.start_states, tasks.goals_xy, 1, tasks.generator(planner.device), prior_only=True)
-    line_pursued = execute_plans(tasks.maze, tasks.starts_xy, tasks.goals_xy, line_plan.states,
-                                 follower=Follower(5, "pursuit", 0.7))
+    line_plan = line.plan(tasks.start_states, tasks.goals_xy, 1, torch.Generator().manual_seed(0), prior_only=True)
+    line_pursued = execute_plans(tasks, line_plan.states, pursuit)
     assert saved["floor_line"]["return"]["mean"] == pytest.approx(line_pursued.returns.mean())
     assert saved["execution"]["controller"] == "pursuit" and saved["execution"]["lookahead"] == 0.7
     assert saved["plans_per_episode"]["max"] == 1 and saved["calls_per_episode"] == 2
@@ -77,13 +102,13 @@ def test_pursuit_executes_the_same_plans_and_the_floors_with_its_controller(tiny
 
 def test_closed_loop_without_replanning_is_open_loop():
     """The closed-loop controller with neither K nor D plans once and moves exactly as execute_plans."""
-    tasks = make_tasks("umaze", 4, 1)
+    tasks = dataclasses.replace(make_tasks("umaze", 4, 1), episode_steps=60)
     plans = np.stack([np.linspace(np.r_[s, 0, 0], np.r_[g, 0, 0], 40) for s, g in zip(tasks.starts_xy, tasks.goals_xy)])
-    open_loop = execute_plans(UMAZE, tasks.starts_xy, tasks.goals_xy, plans, steps=60)
-    closed = execute_closed_loop(UMAZE, tasks.starts_xy, tasks.goals_xy, lambda s, g, idx, t: plans[idx], steps=60)
+    open_loop = execute_plans(tasks, plans)
+    closed, executor = closed_loop(tasks, lambda s, g, idx, t: plans[idx])
     np.testing.assert_array_equal(open_loop.states, closed.states)
     np.testing.assert_array_equal(open_loop.returns, closed.returns)
-    assert closed.plans_made.tolist() == [1] * 4 and closed.call_steps == [0]
+    assert executor.plans_made.tolist() == [1] * 4 and executor.call_steps == [0]
 
 
 # ---------------------------------------------------------------- replanning counts
@@ -130,8 +155,8 @@ def test_tolerance_replans_only_the_drifted_episode():
         plans[idx == 1, 1:, 0] += 1.0  # unreachable in one step: the state drifts from it
         return plans
 
-    result = execute_closed_loop(UMAZE, starts, goals, plan_fn, tolerance=0.3, steps=20)
-    assert result.plans_made[0] == 1 and result.plans_made[1] > 1
+    _, executor = closed_loop(MazeTasks.of(UMAZE, starts, goals), plan_fn, tolerance=0.3, steps=20)
+    assert executor.plans_made[0] == 1 and executor.plans_made[1] > 1
     assert calls[0] == [0, 1] and all(c == [1] for c in calls[1:])
 
 
@@ -196,7 +221,7 @@ def test_warm_replans_start_from_the_previous_plan(tiny_runs):
 
     spy = Spy(**{f: getattr(planner, f)
                  for f in ("model", "process", "prior", "normalizer", "horizon", "device", "layout")})
-    source = PlanSource(spy, Execution(replan_every=4, warm=True), 1, torch.Generator().manual_seed(0), 2, UMAZE)
+    source = PlanSource(spy, Execution(replan_every=4, warm=True), 1, torch.Generator().manual_seed(0), 2, GOAL_RADIUS)
     tasks = make_tasks("umaze", 2, 0)
     first = source(tasks.start_states, tasks.goals_xy, np.arange(2), 0)
     source(np.c_[first[:, 4, :2], first[:, 4, 2:]], tasks.goals_xy, np.arange(2), 4)
@@ -236,15 +261,15 @@ def test_keep_holds_replans_to_the_first_plans_arrival(tiny_runs):
     spy = Spy(**{f: getattr(planner, f)
                  for f in ("model", "process", "prior", "normalizer", "horizon", "device", "layout")})
     source = PlanSource(spy, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 3,
-                        UMAZE)
+                        GOAL_RADIUS)
     tasks = make_tasks("umaze", 3, 0)
     first = source(tasks.start_states, tasks.goals_xy, np.arange(3), 0)
     full = np.c_[np.zeros((3, first.shape[1], 2)), first]
-    before = arrival_index(full, tasks.goals_xy, MAZE2D)
+    before = arrival_index(full, tasks.goals_xy, MAZE2D, GOAL_RADIUS)
     second = source(first[:, 4], tasks.goals_xy, np.arange(3), 4)
     assert seen[0] is None
     np.testing.assert_array_equal(seen[1], np.clip(before - 4, 1, planner.horizon - 1))
-    after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy, MAZE2D)
+    after = arrival_index(np.c_[np.zeros((3, second.shape[1], 2)), second], tasks.goals_xy, MAZE2D, GOAL_RADIUS)
     assert (after <= seen[1]).all()
     source(second[:, 6], tasks.goals_xy, np.arange(3), 10)
     np.testing.assert_array_equal(seen[2], np.clip(before - 10, 1, planner.horizon - 1))
@@ -271,9 +296,8 @@ def test_replanning_a_perfect_plan_source_beats_open_loop():
     the way and scores far higher."""
     tasks = make_tasks("umaze", 6, 0)
     plan_fn = lambda s, g, idx, t: expert_paths(s, g, 32)  # noqa: E731
-    open_loop = execute_plans(UMAZE, tasks.starts_xy, tasks.goals_xy,
-                              plan_fn(tasks.start_states, tasks.goals_xy, None, 0))
-    closed = execute_closed_loop(UMAZE, tasks.starts_xy, tasks.goals_xy, plan_fn, replan_every=8)
+    open_loop = execute_plans(tasks, plan_fn(tasks.start_states, tasks.goals_xy, None, 0))
+    closed, _ = closed_loop(tasks, plan_fn, replan_every=8)
     far = np.linalg.norm(tasks.starts_xy - tasks.goals_xy, axis=1) > 1.5
     assert far.any()
     assert (closed.returns[far] > open_loop.returns[far] + 50).all()
@@ -290,7 +314,7 @@ def test_truncate_at_arrival_holds_the_goal():
     traj[:, :, 2] = np.linspace(0, 2, h)  # along x toward the goal at x = 2
     traj[:, :, 4] = 1.0
     goals = np.array([[2.0, 0.0], [0.9, 0.0]])
-    out, arrival = truncate_at_arrival(traj, goals, MAZE2D)
+    out, arrival = truncate_at_arrival(traj, goals, MAZE2D, GOAL_RADIUS)
     assert arrival.tolist() == [7, 3]  # first x within 0.45 of the goal: 1.56 (index 7); 0.67 (index 3)
     np.testing.assert_array_equal(out[1, :4], traj[1, :4])
     np.testing.assert_array_equal(out[1, 4:, 2:4], np.repeat(goals[1:], h - 4, axis=0))
@@ -339,19 +363,20 @@ def test_candidates_pick_by_the_criterion(how, expected):
     planner.plan = lambda s, g, nfe, gen, **kw: batches.append(len(s)) or original(s, g, nfe, gen, **kw)
     starts = np.array([[-1.0, -1.0, 0, 0], [-1.2, -0.9, 0, 0]])  # bottom left; goals top left, over the wall
     goals = np.array([[-1.0, 1.0], [-1.1, 1.1]])
-    source = PlanSource(planner, Execution(replan_every=8, candidates=4, select=how), 1, None, 2, UMAZE)
+    source = PlanSource(planner, Execution(replan_every=8, candidates=4, select=how), 1, None, 2, GOAL_RADIUS,
+                        UMAZE.is_free_xy)
     chosen = source(starts, goals, np.arange(2), 0)
     assert batches == [8]  # 2 episodes x 4 candidates, one batch
     want = planner.plan(np.repeat(starts, 4, axis=0), np.repeat(goals, 4, axis=0), 1, None).states
     want, _ = truncate_at_arrival(np.concatenate([np.zeros((8, 24, 2)), want], axis=2), np.repeat(goals, 4, axis=0),
-                                  MAZE2D)
+                                  MAZE2D, GOAL_RADIUS)
     np.testing.assert_array_equal(chosen, want.reshape(2, 4, 24, 6)[:, expected, :, 2:])
 
 
 def test_agreement_picks_the_medoid():
     traj = np.zeros((1, 3, 5, 6))
     traj[0, 0, :, 2], traj[0, 1, :, 2], traj[0, 2, :, 2] = 0.0, 0.1, 1.0  # 1 sits between 0 and the outlier 2
-    assert select_candidates(traj, np.zeros((1, 2)), "agreement", MAZE2D).tolist() == [1]
+    assert select_candidates(traj, np.zeros((1, 2)), "agreement", MAZE2D, GOAL_RADIUS).tolist() == [1]
 
 
 def test_candidates_through_the_cli(tiny_runs, tmp_path):

@@ -12,8 +12,8 @@ import pytest
 import torch
 
 from bridgeplan import config as cfg
-from bridgeplan.data import load_stream
 from bridgeplan.device import configure_threads
+from bridgeplan.envs.maze2d.datasets import load_stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import RunSpec, get_experiment
 from bridgeplan.experiments.runner import SweepSettings, _train_config
@@ -112,10 +112,11 @@ def test_defaults_follow_the_maze():
 
 
 def test_eval_result_is_a_store_row_with_its_method(tiny_runs, tiny_dataset):
-    from bridgeplan.evaluate import evaluate
+    from bridgeplan.evaluate import evaluate_run
+    from bridgeplan.experiments.store import row_from_eval_json
 
-    result = evaluate(tiny_runs["bridge"], episodes=2, nfe=1, device="cpu")
-    row = result.to_row()
+    result = evaluate_run(tiny_runs["bridge"], episodes=2, nfe=1, device="cpu")
+    row = row_from_eval_json(result.to_dict())
     assert set(row) <= set(COLUMNS) and set(KEY) <= set(row)
     # the row names its data by what it is: name, maze, size, version and the arrays' hash (no machine path)
     assert row["dataset"] == load_stream(tiny_dataset).identity()

@@ -53,8 +53,8 @@ def test_point_mass_is_point_maze_v3():
     """The constants of the residual are those of the MuJoCo model the simulator steps."""
     import mujoco
 
-    from bridgeplan.maze.layouts import get_maze
-    from bridgeplan.maze.sim import MAX_SPEED, point_maze_model
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.sim import MAX_SPEED, point_maze_model
 
     model = point_maze_model(get_maze("umaze"))
     assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
@@ -69,8 +69,8 @@ def _simulate(stride: int, steps: int = 24, seed: int = 0) -> np.ndarray:
     """``[4, steps // stride + 1, 6]`` physical rows of the real simulator from the open maze's centre, random
     actions (some beyond [-1, 1], clipped by the simulator) held ``stride`` steps, starting speeds beyond the
     clip; one row every ``stride`` steps (its state, and the action applied from it)."""
-    from bridgeplan.maze.layouts import get_maze
-    from bridgeplan.maze.sim import BatchedPointMaze
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.sim import BatchedPointMaze
 
     rng = np.random.default_rng(seed)
     sim = BatchedPointMaze(get_maze("open"), 4)
@@ -332,11 +332,12 @@ def test_eval_with_a_correction_records_it_and_its_cost(tiny_runs, tmp_path, cap
 def test_a_store_row_records_the_plans_cost_and_residuals(tiny_runs):
     """The store keeps what a correction costs (network-call equivalents per plan) and what it does to the
     plans (their rms residuals), beside the score: the reports read them from the committed rows."""
-    from bridgeplan.evaluate import evaluate
+    from bridgeplan.evaluate import evaluate_run
+    from bridgeplan.experiments.store import row_from_eval_json
 
     deep = Correction((("dynamics", 1e-3),), form="deep")
-    rows = {c: evaluate(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu", correction=c).to_row()
-            for c in (None, deep)}
+    rows = {c: row_from_eval_json(evaluate_run(tiny_runs["bridge"], episodes=4, nfe=2, device="cpu",
+                                               correction=c).to_dict()) for c in (None, deep)}
     assert rows[None]["network_calls_per_plan"] == 2 and rows[deep]["network_calls_per_plan"] == 6
     for row in rows.values():
         assert row["plan_kinematics_rms"] > 0 and row["plan_dynamics_rms"] > 0

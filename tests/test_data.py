@@ -11,17 +11,25 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
-from bridgeplan.data.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
-from bridgeplan.data.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
-from bridgeplan.data.generate import DATA_VERSION, _plan, generate_stream, generate_streams
-from bridgeplan.data.info import summarize
-from bridgeplan.data.minari_io import METADATA_FILE, VERSION_KEY
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.data.windows import WindowDataset, hold_tails, window_starts
+from bridgeplan.envs.maze2d.d4rl_io import continuity_breaks, read_d4rl, to_d4rl
+from bridgeplan.envs.maze2d.datasets import CACHE_NAME, generate_dataset, load_stream, stream_from_generated
+from bridgeplan.envs.maze2d.expert import (
+    D_GAIN,
+    P_GAIN,
+    WAYPOINT_RADIUS,
+    WaypointExpert,
+    noisy_action,
+    pd_action,
+    waypoints,
+)
+from bridgeplan.envs.maze2d.generate import DATA_VERSION, _plan, generate_stream, generate_streams
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, get_maze
+from bridgeplan.envs.maze2d.info import summarize
+from bridgeplan.envs.maze2d.minari_io import METADATA_FILE, VERSION_KEY
+from bridgeplan.envs.maze2d.rollout import rollout
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.expert import D_GAIN, P_GAIN, WAYPOINT_RADIUS, WaypointExpert, noisy_action, pd_action, waypoints
-from bridgeplan.maze.layouts import GOAL_RADIUS, get_maze
-from bridgeplan.maze.rollout import rollout
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.trajectory import MAZE2D
 
@@ -247,7 +255,7 @@ def _two_segment_stream() -> Stream:
     rng = np.random.default_rng(0)
     states = rng.normal(size=(50, 4))
     actions = rng.uniform(-1, 1, size=(50, 2))
-    return Stream("umaze", states, actions, np.array([0, 30]), episodes=3, goals_reached=2)
+    return Stream("umaze", states, actions, np.array([0, 30]), episodes=3, goals_reached=2, layout=MAZE2D)
 
 
 def test_windows():

@@ -210,7 +210,7 @@ def test_closed_loop_sweep(tiny_dataset, tmp_path, capsys):
     for r in rows:
         replanned = r["execution"] != ""
         assert r["calls_per_episode"] == (10 * r["nfe"] if replanned else r["nfe"])  # ceil(300 / 32) plans
-        assert (r["decision_ms_p50"] is not None) == replanned
+        assert r["decision_ms_p50"] > 0  # a lone episode's decisions at batch 1, open loop (one) or replanned
         assert r["network_calls_per_plan"] == r["nfe"]
         assert (r["plan_dynamics_rms"] is None) == replanned  # residuals of the one plan, open loop only
     capsys.readouterr()

@@ -23,8 +23,8 @@ import torch
 
 import bridgeplan
 from bridgeplan.config import PriorTrainConfig
-from bridgeplan.data.datasets import CACHE_NAME, read_cache
-from bridgeplan.data.info import summarize
+from bridgeplan.envs.maze2d.datasets import CACHE_NAME, read_cache
+from bridgeplan.envs.maze2d.info import summarize
 from bridgeplan.experiments.store import KEY
 from bridgeplan.locks import run_lock
 from tests.test_experiments import tiny_study

@@ -200,15 +200,15 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
 
     from bridgeplan.cli import main
 
-    assert main(["ogbench", "generate", "pointmaze-medium-navigate-v0", "--episodes", "4", "--steps", "40",
-                 "--out", str(tmp_path), "--no-progress"]) == 0
+    assert main(["data", "generate", "--maze", "pointmaze-medium-navigate-v0", "--episodes", "4",
+                 "--episode-steps", "40", "--out", str(tmp_path), "--no-progress"]) == 0
     data, run = str(tmp_path / "pointmaze-medium-navigate-v0.npz"), tmp_path / "run"
-    train = ["ogbench", "gcbc-train", data, "--run-dir", str(run), "--maze", "medium", "--steps", "4",
+    train = ["gcbc", "train", data, "--run-dir", str(run), "--maze", "medium", "--steps", "4",
              "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--log-every", "2",
              "--device", "cpu", "--no-progress"]
     assert main(train) == 0
     assert "step 4" in capsys.readouterr().out
-    assert main(["ogbench", "gcbc-eval", str(run), "--steps", "all", "--episodes", "1", "--no-progress",
+    assert main(["gcbc", "eval", str(run), "--steps", "all", "--episodes", "1", "--no-progress",
                  "--json"]) == 0
     out = capsys.readouterr().out
     assert out.count('"env_id": "pointmaze-medium-v0"') == 1
@@ -219,7 +219,7 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
     assert "pass --resume" in capsys.readouterr().err
     assert main([*train[:-1], "--lr", "0", "--run-dir", str(tmp_path / "r2")]) == 2
     assert capsys.readouterr().err.strip().splitlines() == ["error: lr must be a positive, finite number, got 0.0"]
-    assert main(["ogbench", "gcbc-train", data, "--run-dir", str(tmp_path / "r3"), "--maze", "large"]) == 2
+    assert main(["gcbc", "train", data, "--run-dir", str(tmp_path / "r3"), "--maze", "large"]) == 2
     assert "not a pointmaze-large dataset" in capsys.readouterr().err
-    assert main(["ogbench", "gcbc-eval", str(run), "--steps", "3"]) == 2
+    assert main(["gcbc", "eval", str(run), "--steps", "3"]) == 2
     assert "no snapshot at step 3" in capsys.readouterr().err

@@ -9,14 +9,15 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
-from bridgeplan.maze.controllers import Follower
-from bridgeplan.maze.rollout import ClosedLoopController
+from bridgeplan.envs.controllers import Follower
+from bridgeplan.envs.maze2d.controllers import BODY
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.planner import Planner
 from bridgeplan.priors import GaussianPrior
 from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.processes.base import Process
-from bridgeplan.replan import Execution, PlanSource
+from bridgeplan.replan import Execution, PlanExecutor, PlanSource
 from bridgeplan.runs import load_windows
 from bridgeplan.trajectory import MAZE2D
 from tests.test_train import train_args
@@ -47,23 +48,25 @@ def test_pursuit_progress_restarts_on_a_new_plan_and_continues_on_a_kept_one():
         calls.append((t, episodes.tolist()))
         return np.stack([a if t == 0 else b for _ in episodes])
 
-    follower = Follower(2, "pursuit", lookahead=1.0)
-    controller = ClosedLoopController(plan_fn, 2, follower=follower)
+    follower = Follower(2, BODY, "pursuit", lookahead=1.0)
+    controller = PlanExecutor(lambda n: plan_fn, lambda n: follower)
+    controller.begin(2)
     goals = np.array([[3.0, 0.0], [3.0, 0.0]])
 
     def at(*xy_per_episode):
         return np.array([[x, y, 0.0, 0.0] for x, y in xy_per_episode])
 
     # step 0: both plan A; at the origin the first position 1.0 away is index 4 (x = 1.0); PD: clip(10 * 1) = 1
-    act = controller.act(0, at((0, 0), (0, 0)), goals)
+    act = controller.act(at((0, 0), (0, 0)), goals)
     assert follower.passed.tolist() == [4, 4]
     np.testing.assert_allclose(act, [[1.0, 0.0], [1.0, 0.0]])
     # step 1: at x = 0.6 the first position from index 4 on at least 1.0 away is index 7 (x = 1.75)
-    act = controller.act(1, at((0.6, 0), (0.6, 0)), goals)
+    act = controller.act(at((0.6, 0), (0.6, 0)), goals)
     assert follower.passed.tolist() == [7, 7]
     # step 2: episode 0 replans (plan B); episode 1 keeps plan A
     states = np.array([[1.0, 0.0, 0.0, 0.0], [1.2, 0.0, 0.5, 0.0]])
-    act = controller.act(2, states, goals, due=np.array([True, False]))
+    controller.replan(np.array([0]))
+    act = controller.act(states, goals)
     assert calls == [(0, [0, 1]), (2, [0])]
     np.testing.assert_array_equal(controller.plans[0], b)
     np.testing.assert_array_equal(controller.plans[1], a)
@@ -72,7 +75,7 @@ def test_pursuit_progress_restarts_on_a_new_plan_and_continues_on_a_kept_one():
     # the expert's PD law toward (1, 1) from (1, 0) at rest, and toward (2.25, 0) from (1.2, 0) at vx = 0.5
     np.testing.assert_allclose(act, [[0.0, 1.0], [np.clip(10 * 1.05 - 0.5, -1, 1), 0.0]])
     # step 3: both continue from there (B from index 4, A from index 9)
-    controller.act(3, np.array([[1.0, 0.4, 0.0, 1.0], [1.5, 0.0, 1.0, 0.0]]), goals, due=np.array([False, False]))
+    controller.act(np.array([[1.0, 0.4, 0.0, 1.0], [1.5, 0.0, 1.0, 0.0]]), goals)
     assert follower.passed.tolist() == [6, 10]  # B: y = 1.5 (1.1 from 0.4, 1.25 < 1); A: x = 2.5 (1.0 from 1.5)
 
 
@@ -172,7 +175,8 @@ def test_keep_arrival_at_a_stride_counts_env_steps_and_holds_from_the_next_plann
             return super().plan(starts, goals, nfe, generator, prior_only, arrival)
 
     planner = Spy(_Ramp(norm, h), DDPM(steps=6), GaussianPrior(MAZE2D), norm, h, torch.device("cpu"), MAZE2D, stride=k)
-    source = PlanSource(planner, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 1)
+    source = PlanSource(planner, Execution(replan_every=4, arrival="keep"), 1, torch.Generator().manual_seed(0), 1,
+                        GOAL_RADIUS)
     goal = np.array([[2.0, 0.0]])
     first = source(np.zeros((1, 4)), goal, np.arange(1), 0)
     assert first.shape == (1, 25, 4) and seen == [None]

@@ -179,7 +179,7 @@ def test_the_graph_hierarchy_as_a_policy(levels):
 
 
 def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
-    from bridgeplan.hierarchy import load_hierarchy
+    from bridgeplan.hierarchy import COARSE_ARRIVAL, load_hierarchy
     from bridgeplan.replan import arrival_index
 
     hierarchy, _, _ = load_hierarchy(levels["high"], levels["low"], device="cpu")
@@ -189,7 +189,7 @@ def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
     assert coarse.shape == (6, 8, 4) and seconds > 0
     plan = hierarchy.high.plan(starts, goals, 1, torch.Generator().manual_seed(0))  # the same draw, uncut
     full = hierarchy.high.normalizer.unnormalize(plan.sampled.double().numpy())
-    arrival, raw = arrival_index(full, goals, MAZE2D), MAZE2D.states(full)
+    arrival, raw = arrival_index(full, goals, MAZE2D, COARSE_ARRIVAL), MAZE2D.states(full)
     assert list(arrival[3:]) == [0, 0, 0]
     for k in range(6):
         a = arrival[k]
@@ -198,15 +198,15 @@ def test_coarse_plans_hold_the_goal_from_their_first_arrival(levels):
 
 
 def test_coarse_diagnostics_measure_walls_and_arrival():
+    from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.hierarchy import coarse_diagnostics
-    from bridgeplan.maze.layouts import get_maze
 
     maze = get_maze("umaze")  # cell (2, 2) is a wall; (1, 1) and (3, 1) are free
     a, wall, b = maze.cell_to_xy(np.array([[1, 1], [2, 2], [3, 1]]))
     dense = np.zeros((2, 5, 4))
     dense[0, :, :2] = [a, a, wall, b, b]  # one of five positions in a wall, at the goal from step 3
     dense[1, :, :2] = a                   # never arrives: the last step
-    out = coarse_diagnostics(dense, np.array([b, b]), maze, MAZE2D)
+    out = coarse_diagnostics(dense, np.array([b, b]), maze.is_free_xy, MAZE2D)
     assert out == {"in_walls": 0.1, "crossing_walls": 0.5, "arrival_step": (3 + 4) / 2}
 
 
@@ -230,20 +230,21 @@ def test_progress_along_a_plan_that_winds_back(rule, expected):
 
 
 def test_graph_eval_makes_the_data_the_high_level(levels, tmp_path, capsys):
-    """`hierarchy graph-eval LOW`: the graph over the low level's own dataset plans once per episode (no network
-    call), the low level every 12 steps; its coarse plans never cross a wall of umaze (the data never does)."""
+    """`graph --low LOW` on Maze2D: the graph over the low level's own dataset plans once per episode (no network
+    call), the low level every 12 steps (its subgoal spacing, by default); its coarse plans never cross a wall of
+    umaze (the data never does)."""
     out = tmp_path / "g.json"
-    args = ["hierarchy", "graph-eval", str(levels["low"]), "--episodes", "4", "--nfe-low", "1", "--device", "cpu"]
+    args = ["graph", "--low", str(levels["low"]), "--episodes", "4", "--nfe-low", "1", "--device", "cpu"]
     assert main([*args, "--out", str(out)]) == 0
     r = json.loads(out.read_text())
-    assert r["kind"] == "hierarchy" and r["high"]["method"] == "dataset graph" and r["high"]["nfe"] == 0
+    assert r["kind"] == "graph" and r["high"]["method"] == "dataset graph" and r["high"]["nfe"] == 0
     assert r["high"]["stride"] == 12 and r["execution"]["replan_every"] == 12
     g = r["high"]["graph"]
     assert (g["keep"], g["radius"]) == (10, 0.2) and g["paths_found"] == 1.0 and g["nodes"] > 500
     assert g["dataset_identity"].startswith("umaze-tiny (umaze, ") and "/" not in g["dataset_identity"]
     assert r["calls_per_episode"] == 25 and "floor_line" not in r  # one low-level call per 12 of 300 steps
     assert r["coarse_plans"]["in_walls"] == 0.0
-    assert "hierarchy" in capsys.readouterr().out
+    assert "dataset graph -> " in capsys.readouterr().out
     assert main([*args, "--replan-high-every", "100", "--out", str(out)]) == 0
     assert json.loads(out.read_text())["execution"]["replan_high_every"] == 100
     for bad in (["--keep", "0"], ["--radius", "-1"], ["--nfe-low", "0"], ["--replan-high-every", "0"]):
@@ -252,5 +253,5 @@ def test_graph_eval_makes_the_data_the_high_level(levels, tmp_path, capsys):
         assert err.startswith("error: ") and err.count("\n") == 1
     assert not (tmp_path / "bad.json").exists()
     # the graph holds Maze2D states; a high level's run is no low level
-    assert main(["hierarchy", "graph-eval", str(levels["high"]), "--episodes", "2", "--device", "cpu"]) == 2
+    assert main(["graph", "--low", str(levels["high"]), "--episodes", "2", "--device", "cpu"]) == 2
     assert "low level must plan between subgoals" in capsys.readouterr().err

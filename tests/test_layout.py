@@ -10,6 +10,7 @@ import torch
 from bridgeplan.consistency import KinematicPoint, dynamics_error, kinematics_error, plan_residuals, residual
 from bridgeplan.data.stream import Stream
 from bridgeplan.data.windows import WindowDataset, hold_tails
+from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.nets.unet import TemporalUNet
@@ -18,7 +19,7 @@ from bridgeplan.planner import Planner
 from bridgeplan.priors import GaussianPrior, LearnedPrior, LinePrior, WarmPrior, make_prior, train_prior_loss
 from bridgeplan.processes import DDPM, Bridge, Flow
 from bridgeplan.replan import arrival_index, truncate_at_arrival
-from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, apply_conditions, densify, layout_for, window_conditions
+from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, apply_conditions, densify, window_conditions
 
 POINT = KINEMATIC_POINT
 B, H = 3, 8
@@ -57,14 +58,14 @@ def test_layouts_name_their_columns():
 @pytest.mark.parametrize("name, layout", [("umaze", MAZE2D), ("large", MAZE2D), ("open", MAZE2D),
                                           ("pointmaze-medium-navigate-v0", POINT),
                                           ("pointmaze-giant-stitch-v0", POINT)])
-def test_layout_for_names_the_environment(name, layout):
-    assert layout_for(name) is layout
+def test_the_family_names_the_environments_layout(name, layout):
+    assert family_of(name).layout(name) is layout
 
 
 @pytest.mark.parametrize("name", ["", "antmaze-medium-navigate-v0", "Umaze", "pointmaze"])
-def test_layout_for_refuses_unknown_environments(name):
+def test_no_family_owns_an_unknown_environment(name):
     with pytest.raises(BridgeplanError, match="unknown environment") as e:
-        layout_for(name)
+        family_of(name)
     assert "umaze" in str(e.value) and "pointmaze-" in str(e.value)
 
 
@@ -194,14 +195,15 @@ def test_point_mass_residuals_refuse_a_layout_without_velocities():
 def test_windows_and_holds_of_a_kinematic_point_stream():
     rng = np.random.default_rng(0)
     states, actions = rng.uniform(-1, 1, (40, 2)), rng.uniform(-1, 1, (40, 2))
-    stream = Stream("pointmaze-medium-navigate-v0", states, actions, np.array([0, 25]), episodes=2)
+    stream = Stream("pointmaze-medium-navigate-v0", states, actions, np.array([0, 25]), episodes=2, layout=POINT)
     assert stream.layout is POINT and stream.transitions().shape == (40, 4)
     windows = WindowDataset(stream, 6, Normalizer.fit(stream.transitions()), stride=2)
     assert windows.layout is POINT and windows.batch(torch.arange(len(windows))).shape == (len(windows), 6, 4)
     with pytest.raises(ValueError, match=r"\[T, 2\] / \[T, 2\]"):
-        Stream("pointmaze-medium-navigate-v0", rng.uniform(size=(40, 4)), actions, np.array([0]), episodes=1)
+        Stream("pointmaze-medium-navigate-v0", rng.uniform(size=(40, 4)), actions, np.array([0]), episodes=1,
+               layout=POINT)
     with pytest.raises(ValueError, match=r"\[T, 4\] / \[T, 2\]"):
-        Stream("umaze", states, actions, np.array([0]), episodes=1)
+        Stream("umaze", states, actions, np.array([0]), episodes=1, layout=MAZE2D)
     with pytest.raises(BridgeplanError, match="normalizer has 6 columns"):
         WindowDataset(stream, 6, Normalizer((0.0,) * 6, (1.0,) * 6))
 

@@ -5,14 +5,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bridgeplan.envs.controllers import Follower, pursuit_waypoints, tracking_targets
+from bridgeplan.envs.maze2d.controllers import (
+    BODY,
+    tracking_action,
+)
+from bridgeplan.envs.maze2d.expert import WaypointExpert, shortest_path, waypoints
+from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, MAZE_NAMES, get_maze
+from bridgeplan.envs.maze2d.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
+from bridgeplan.envs.maze2d.rollout import rollout
+from bridgeplan.envs.maze2d.sim import make_gym_env
+from bridgeplan.envs.maze2d.tasks import MazeTasks, sample_tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import Follower, planned_target, pursuit_waypoints, tracking_action, tracking_actions
-from bridgeplan.maze.expert import WaypointExpert, shortest_path, waypoints
-from bridgeplan.maze.layouts import GOAL_RADIUS, MAZE_NAMES, get_maze
-from bridgeplan.maze.reference import CONVENTIONS, load_reference_returns, normalized_score, reference_bounds
-from bridgeplan.maze.rollout import execute_plans, rollout
-from bridgeplan.maze.sim import make_gym_env
-from bridgeplan.maze.tasks import sample_tasks
+from bridgeplan.evaluate import execute_plans
+from bridgeplan.replan import Execution
+from bridgeplan.trajectory import MAZE2D
+
+
+def _execute(maze, starts, goals, plans, controller="track"):
+    return execute_plans(MazeTasks.of(maze, starts, goals), plans, Execution(controller=controller))
 
 
 @pytest.mark.parametrize("name", MAZE_NAMES)
@@ -116,12 +127,13 @@ def test_tracking_controller():
     nxt = np.array([[0.1, 0.2, 1.5, -0.1], [5.0, -5.0, 0.0, 0.0]])
     np.testing.assert_allclose(tracking_action(state, nxt), [[0.6, 0.1], [1.0, -1.0]])
     plans = np.arange(2 * 3 * 4, dtype=float).reshape(2, 3, 4)
-    np.testing.assert_array_equal(planned_target(plans, 0), plans[:, 1])
-    held = planned_target(plans, 2)
+    at = lambda t: np.full(2, t)  # noqa: E731
+    np.testing.assert_array_equal(tracking_targets(plans, at(0), MAZE2D), plans[:, 1])
+    held = tracking_targets(plans, at(2), MAZE2D)
     np.testing.assert_array_equal(held[:, :2], plans[:, -1, :2])
     np.testing.assert_array_equal(held[:, 2:], 0.0)
-    np.testing.assert_array_equal(planned_target(plans, 50), held)
-    np.testing.assert_array_equal(tracking_actions(state, plans, 0), tracking_action(state, plans[:, 1]))
+    np.testing.assert_array_equal(tracking_targets(plans, at(50), MAZE2D), held)
+    np.testing.assert_array_equal(Follower(2, BODY).actions(state, plans, at(0)), tracking_action(state, plans[:, 1]))
 
 
 def test_tracking_controller_follows_a_plan_and_holds_the_end():
@@ -131,10 +143,10 @@ def test_tracking_controller_follows_a_plan_and_holds_the_end():
     x = np.linspace(-2.0, 2.0, horizon)
     speed = 4.0 / (horizon - 1) / 0.01
     plan = np.stack([x, np.zeros(horizon), np.full(horizon, speed), np.zeros(horizon)], axis=1)
-    result = execute_plans(maze, start, goal, plan[None])
+    result = _execute(maze, start, goal, plan[None])
     assert result.success[0]
     assert np.linalg.norm(result.states[0, -1, :2] - goal[0]) < 0.1  # held at the plan's end
-    np.testing.assert_allclose(tracking_actions(np.zeros((1, 4)), plan[None], horizon + 5),
+    np.testing.assert_allclose(Follower(1, BODY).actions(np.zeros((1, 4)), plan[None], np.array([horizon + 5])),
                                np.clip(plan[-1:, :2], -1, 1))
 
 
@@ -146,24 +158,25 @@ def test_execute_plans_tracks_an_expert_trajectory():
     expert.plan(starts, goals)
     demo = rollout(maze, lambda t, obs: expert(obs), starts, goals, steps=250)
     assert demo.success.all()
-    result = execute_plans(maze, starts, goals, demo.states)
+    result = _execute(maze, starts, goals, demo.states)
     assert result.success.all()
     assert result.returns.min() > 100
     with pytest.raises(BridgeplanError, match="plans"):
-        execute_plans(maze, starts, goals, demo.states[:, :, :2])
+        _execute(maze, starts, goals, demo.states[:, :, :2])
 
 
 def test_pursuit_waypoint_is_the_first_unpassed_position_a_lookahead_away():
     xs = np.arange(13) * 0.25  # a straight plan along x, 0.25 apart
     plan = np.stack([xs, np.zeros(13), np.zeros(13), np.zeros(13)], axis=1)[None]
     at = lambda x: np.array([[x, 0.0]])  # noqa: E731
-    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.0), np.array([0]), 1.0), [4])  # x = 1.0
-    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.6), np.array([4]), 1.0), [7])  # x = 1.75 >= 1.6
+    xy = plan[..., :2]
+    np.testing.assert_array_equal(pursuit_waypoints(xy, at(0.0), np.array([0]), 1.0), [4])  # x = 1.0
+    np.testing.assert_array_equal(pursuit_waypoints(xy, at(0.6), np.array([4]), 1.0), [7])  # x = 1.75 >= 1.6
     # a passed position is never taken again, even when the point mass falls back behind it
-    np.testing.assert_array_equal(pursuit_waypoints(plan, at(0.0), np.array([9]), 1.0), [9])
+    np.testing.assert_array_equal(pursuit_waypoints(xy, at(0.0), np.array([9]), 1.0), [9])
     # nothing far enough ahead: the plan's last position (the goal)
-    np.testing.assert_array_equal(pursuit_waypoints(plan, at(2.5), np.array([10]), 1.0), [12])
-    follower = Follower(1, "pursuit", lookahead=1.0)
+    np.testing.assert_array_equal(pursuit_waypoints(xy, at(2.5), np.array([10]), 1.0), [12])
+    follower = Follower(1, BODY, "pursuit", lookahead=1.0)
     # the expert's PD law toward x = 1.0 from rest at the origin: clip(10 * 1.0 - 0) = 1
     np.testing.assert_allclose(follower.actions(np.zeros((1, 4)), plan, np.zeros(1, dtype=int)), [[1.0, 0.0]])
     np.testing.assert_allclose(follower.drift(np.array([[1.0, 0.3, 0, 0]]), plan, np.zeros(1, dtype=int)), [0.3])
@@ -179,8 +192,8 @@ def test_pursuit_runs_a_slowed_expert_path_at_the_expert_pace():
     demo = rollout(maze, lambda t, obs: expert(obs), starts, goals, steps=300)
     slow = np.repeat(demo.states, 3, axis=1)  # each state held for 3 steps
     slow[..., 2:] /= 3
-    tracked = execute_plans(maze, starts, goals, slow)
-    pursued = execute_plans(maze, starts, goals, slow, follower=Follower(len(slow), "pursuit"))
+    tracked = _execute(maze, starts, goals, slow)
+    pursued = _execute(maze, starts, goals, slow, "pursuit")
     assert pursued.success.all()
     assert (pursued.returns >= demo.returns - 5).all()
     assert pursued.returns.mean() > tracked.returns.mean() + 50
@@ -210,26 +223,24 @@ def test_normalized_score():
         normalized_score("umaze", [], "minari")
 
 
-def test_expert_on_tasks_scores_the_evaluation_episodes(tmp_path):
-    """The expert's rows on evaluation tasks: its score is the normalized mean return of those very episodes, and
-    the command writes them (with the code version) as the reports read them."""
+def test_the_oracle_scores_the_evaluation_episodes(tmp_path, capsys):
+    """``bridgeplan oracle``: Maze2D's expert, planning afresh, on evaluation tasks themselves: its score is the
+    normalized mean return of those very episodes, one row per task set and seed, as the reports read them."""
     import json
 
     from bridgeplan.cli import main
-    from bridgeplan.maze.reference import expert_on_tasks
 
-    rows = expert_on_tasks(["umaze"], 6, (0, 3), multi_task=(False,))
-    assert [(r["maze"], r["multi_task"], r["seed"]) for r in rows] == [("umaze", False, 0), ("umaze", False, 3)]
+    out = tmp_path / "expert.json"
+    assert main(["oracle", "umaze", "--episodes", "6", "--seeds", "0,3", "--task-sets", "single,multi",
+                 "--out", str(out), "--no-progress"]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [(r["maze"], r["multi_task"], r["seed"], r["episodes"]) for r in rows] == [
+        ("umaze", False, 0, 6), ("umaze", False, 3, 6), ("umaze", True, 0, 6), ("umaze", True, 3, 6)]
     maze = get_maze("umaze")
     starts, goals = sample_tasks(maze, 6, 3)
     expert = WaypointExpert(maze)
     expert.plan(starts, goals)
     returns = rollout(maze, lambda t, obs: expert(obs), starts, goals).returns
-    assert rows[1]["score_minari"] == pytest.approx(normalized_score("umaze", returns, "minari")[0])
-    assert rows[1]["success"] == 1.0
-    out = tmp_path / "expert.json"
-    assert main(["reference", "expert-on-tasks", "--maze", "umaze", "--episodes", "6", "--seeds", "0,3",
-                 "--out", str(out)]) == 0
-    written = json.loads(out.read_text())
-    assert written["episodes"] == 6 and [r["seed"] for r in written["rows"]] == [0, 3, 0, 3]  # single, Multi2D
-    assert written["rows"][1]["score_minari"] == pytest.approx(rows[1]["score_minari"])
+    assert rows[1]["score"]["minari"]["mean"] == pytest.approx(normalized_score("umaze", returns, "minari")[0])
+    assert rows[1]["success_rate"]["mean"] == 1.0 and rows[1]["policy"] == "oracle"
+    assert "umaze single seed 3:" in capsys.readouterr().out

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
+from bridgeplan.envs.maze2d.sim import BatchedPointMaze, make_gym_env
+from bridgeplan.envs.maze2d.tasks import sample_tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
-from bridgeplan.maze.sim import BatchedPointMaze, make_gym_env
-from bridgeplan.maze.tasks import sample_tasks
 
 
 def test_reset_places_start_and_goal():

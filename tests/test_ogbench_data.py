@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import zipfile
 
@@ -9,12 +10,12 @@ import numpy as np
 import pytest
 
 from bridgeplan.cli import main
+from bridgeplan.envs.ogbench_pointmaze import generate as gen
+from bridgeplan.envs.ogbench_pointmaze.generate import KEYS, generate_dataset, generate_episodes
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, make_env
+from bridgeplan.envs.ogbench_pointmaze.names import ACTION_NOISE, KINDS, MAZES, env_id, parse_dataset_name
+from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset, load_dataset
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze import generate as gen
-from bridgeplan.ogbench_pointmaze.generate import KEYS, generate_dataset, generate_episodes
-from bridgeplan.ogbench_pointmaze.maze import Oracle, bfs, geometry, make_env
-from bridgeplan.ogbench_pointmaze.names import ACTION_NOISE, KINDS, MAZES, env_id, parse_dataset_name
-from bridgeplan.ogbench_pointmaze.reading import check_dataset, load_dataset
 
 NAV_EPISODES, NAV_STEPS = 3, 400
 STITCH_EPISODES, STITCH_STEPS = 12, 201
@@ -254,8 +255,8 @@ def test_refuses_to_overwrite_and_writes_atomically(navigate, monkeypatch, tmp_p
 
 
 def test_cli_generate_and_info(tmp_path, capsys):
-    args = ["ogbench", "generate", "pointmaze-giant-stitch-v0", "--out", str(tmp_path), "--episodes", "2",
-            "--steps", "30", "--seed", "4", "--no-progress"]
+    args = ["data", "generate", "--maze", "pointmaze-giant-stitch-v0", "--out", str(tmp_path), "--episodes", "2",
+            "--episode-steps", "30", "--seed", "4", "--no-progress"]
     assert main(args) == 0
     assert "60 steps in 2 episodes of 30 steps" in capsys.readouterr().out
     assert zipfile.is_zipfile(tmp_path / "pointmaze-giant-stitch-v0-val.npz")
@@ -264,7 +265,17 @@ def test_cli_generate_and_info(tmp_path, capsys):
     assert err.startswith("error: ") and "--force" in err and "\n" not in err
     assert main(args + ["--force"]) == 0
     capsys.readouterr()
-    assert main(["ogbench", "info", str(tmp_path / "pointmaze-giant-stitch-v0.npz"), "--maze", "medium"]) == 2
+    assert main(["data", "info", str(tmp_path / "pointmaze-giant-stitch-v0.npz"),
+                 "--maze", "pointmaze-medium-stitch-v0"]) == 2
     assert capsys.readouterr().err.startswith("error: ")
-    assert main(["ogbench", "generate", "pointmaze-giant-v0", "--out", str(tmp_path)]) == 2
+    assert main(["data", "info", str(tmp_path / "pointmaze-giant-stitch-v0.npz")]) == 2  # an npz names no maze
+    assert "give --maze" in capsys.readouterr().err
+    assert main(["data", "info", str(tmp_path / "pointmaze-giant-stitch-v0.npz"), "--maze",
+                 "pointmaze-giant-stitch-v0", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["transitions"] == 60
+    assert main(["data", "generate", "--maze", "pointmaze-giant-v0", "--out", str(tmp_path)]) == 2
     assert "unknown OGBench pointmaze dataset" in capsys.readouterr().err
+    for bad in (["--steps", "100"], ["--workers", "2"], ["--piece-steps", "10"]):  # the recipe's size, one process
+        assert main(["data", "generate", "--maze", "pointmaze-giant-stitch-v0", "--out", str(tmp_path / "x"),
+                     *bad]) == 2
+        assert "recipe's size" in capsys.readouterr().err and not (tmp_path / "x").exists()

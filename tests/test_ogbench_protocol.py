@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from bridgeplan.cli import main
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
-from bridgeplan.ogbench_pointmaze.protocol import (
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.envs.ogbench_pointmaze.protocol import (
     EVAL_EPISODES_PER_TASK,
     TASK_IDS,
+    OracleAgent,
     episode_seed,
     evaluate_policy,
-    oracle_policy,
 )
+from bridgeplan.errors import BridgeplanError
 
 
 def test_protocol_constants():
@@ -25,7 +25,7 @@ def test_protocol_constants():
 
 
 def test_oracle_one_episode_per_task():
-    r = evaluate_policy("medium", oracle_policy("medium"), episodes_per_task=1, seed=0)
+    r = evaluate_policy("medium", OracleAgent("medium").act, episodes_per_task=1, seed=0)
     assert list(r.tasks) == [1, 2, 3, 4, 5]
     assert r.tasks[1].init_cell == (1, 1) and r.tasks[1].goal_cell == (6, 6)
     for t in r.tasks.values():
@@ -53,7 +53,7 @@ def _plain_episode(maze: str, task: int, seed: int, act) -> tuple[bool, int]:
 
 def test_batched_equals_one_env_at_a_time():
     # teleport: its env draws from the global RNG inside step(), so interleaved episodes must not share it
-    act = oracle_policy("teleport")
+    act = OracleAgent("teleport").act
     r = evaluate_policy("teleport", act, episodes_per_task=2, seed=3, task_ids=[1, 3], batch_size=3)
     for t in (1, 3):
         plain = [_plain_episode("teleport", t, episode_seed(3, t, k), act) for k in range(2)]
@@ -66,7 +66,7 @@ def test_batched_equals_one_env_at_a_time():
 
 
 def test_actions_are_clipped():
-    oracle = oracle_policy("medium")
+    oracle = OracleAgent("medium").act
 
     def act(obs, goals):
         return 10 * oracle(obs, goals)
@@ -94,7 +94,7 @@ def test_policy_sees_goals_and_a_standing_policy_fails():
 
 
 def test_errors():
-    act = oracle_policy("medium")
+    act = OracleAgent("medium").act
     for bad in ([0], [11], [1, 12], []):
         with pytest.raises(BridgeplanError, match="task ids"):
             evaluate_policy("medium", act, episodes_per_task=1, task_ids=bad)
@@ -103,11 +103,11 @@ def test_errors():
     with pytest.raises(BridgeplanError, match="non-finite"):
         evaluate_policy("medium", lambda o, g: np.full_like(o, np.nan), episodes_per_task=1, task_ids=[1])
     with pytest.raises(BridgeplanError, match="unknown"):
-        oracle_policy("umaze")
+        OracleAgent("umaze").act
 
 
 def test_oracle_policy_is_the_unit_direction():
-    act, oracle = oracle_policy("giant"), Oracle("giant")
+    act, oracle = OracleAgent("giant").act, Oracle("giant")
     obs = np.array([[0.3, 0.1], [9.0, 12.2]])
     goals = np.array([[52.0, 36.0], [0.0, 0.0]])
     a = act(obs, goals)
@@ -115,12 +115,12 @@ def test_oracle_policy_is_the_unit_direction():
     np.testing.assert_array_equal(a[1], oracle.direction(obs[1], goals[1]))
 
 
-def test_cli_evaluate_oracle(capsys):
-    assert main(["ogbench", "evaluate-oracle", "medium", "--episodes", "1", "--tasks", "4", "--json",
+def test_cli_oracle(capsys):
+    assert main(["oracle", "pointmaze-medium-navigate-v0", "--episodes", "1", "--tasks", "4", "--json",
                  "--no-progress"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    assert list(out["tasks"]) == ["4"] and out["episodes"] == 1
-    assert main(["ogbench", "evaluate-oracle", "medium", "--tasks", "11"]) == 2
+    (out,) = json.loads(capsys.readouterr().out)["rows"]
+    assert list(out["tasks"]) == ["4"] and out["episodes"] == 1 and out["policy"] == "oracle"
+    assert main(["oracle", "pointmaze-medium-navigate-v0", "--tasks", "11"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: task ids must be in 1..5") and err.count("\n") == 1
 
@@ -128,8 +128,8 @@ def test_cli_evaluate_oracle(capsys):
 def test_validation_tasks_are_other_cells_than_the_test_tasks():
     """Five start-goal pairs per maze, drawn once (the same every time), none on a test task's cells, each at least as
     long (in cells, the oracle's walk) as the shortest test task."""
-    from bridgeplan.ogbench_pointmaze.maze import bfs
-    from bridgeplan.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS, validation_tasks
+    from bridgeplan.envs.ogbench_pointmaze.maze import bfs
+    from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS, validation_tasks
 
     for maze in ("medium", "large", "giant"):
         env = make_env(maze).unwrapped
@@ -147,11 +147,11 @@ def test_validation_tasks_are_other_cells_than_the_test_tasks():
 
 
 def test_the_protocol_runs_the_validation_tasks_by_their_ids():
-    from bridgeplan.ogbench_pointmaze.protocol import validation_tasks
+    from bridgeplan.envs.ogbench_pointmaze.protocol import validation_tasks
 
     env = make_env("medium").unwrapped
     expected = validation_tasks(env.maze_map, env.task_infos)
-    r = evaluate_policy("medium", oracle_policy("medium"), episodes_per_task=1, seed=0, task_ids=[6, 10])
+    r = evaluate_policy("medium", OracleAgent("medium").act, episodes_per_task=1, seed=0, task_ids=[6, 10])
     assert list(r.tasks) == [6, 10]
     for task_id, task in ((6, expected[0]), (10, expected[4])):
         assert (r.tasks[task_id].init_cell, r.tasks[task_id].goal_cell) == (tuple(task["init_ij"]),
@@ -159,4 +159,4 @@ def test_the_protocol_runs_the_validation_tasks_by_their_ids():
         assert r.tasks[task_id].task_name == task["task_name"]
     assert r.success_rate == 1.0  # the oracle reaches other goals as well as the test tasks'
     with pytest.raises(BridgeplanError, match="6..10 .the validation tasks"):
-        evaluate_policy("medium", oracle_policy("medium"), episodes_per_task=1, task_ids=[11])
+        evaluate_policy("medium", OracleAgent("medium").act, episodes_per_task=1, task_ids=[11])

@@ -93,7 +93,7 @@ def test_line_prior_in_physical_units():
 
 def test_max_speed_matches_the_simulator():
     pytest.importorskip("mujoco")
-    from bridgeplan.maze.sim import MAX_SPEED as SIM_MAX_SPEED
+    from bridgeplan.envs.maze2d.sim import MAX_SPEED as SIM_MAX_SPEED
 
     assert MAX_SPEED == SIM_MAX_SPEED
 

@@ -7,7 +7,9 @@ import csv
 import json
 
 from bridgeplan.processes import make_process
-from bridgeplan.studies.reports import GENERATORS, cddb
+from tests.reports import GENERATORS, report
+
+cddb = report("cddb")
 
 SEEDS = (0, 1, 2)
 FIELDS = ["id", "experiment", "run_name", "maze", "process", "prior", "diffusion_steps", "seed", "step", "nfe",
@@ -117,7 +119,7 @@ def test_each_maze_and_execution_is_judged_against_its_own_ddpm(tmp_path):
 
 def test_ogbench_calibration_averages_the_last_three_evaluations_per_seed(tmp_path):
     """GCBC as OGBench averages it: per training seed the mean of its last 3 evaluations, then over seeds."""
-    from bridgeplan.studies.reports import ogbench_calibration as oc
+    oc = report("ogbench-calibration")
 
     def row(seed, step, rate, **extra):
         tasks = {str(i): {"task_id": i, "success_rate": rate} for i in range(1, 6)}
@@ -159,7 +161,7 @@ def _hierarchy_row(seed, eval_seed, low, nfe_low, score, coarse, multi=False):
 
 
 def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(tmp_path):
-    from bridgeplan.studies.reports import hierarchy
+    hierarchy = report("hierarchy")
 
     folder = tmp_path / "large-hierarchy"
     for nfe_low, test_score, validation_score in ((1, 90.0, 80.0), (4, 95.0, 70.0)):
@@ -184,7 +186,7 @@ def test_hierarchy_report_chooses_on_validation_and_pairs_with_the_coarse_plans(
 
 
 def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_path):
-    from bridgeplan.studies.reports import hierarchy
+    hierarchy = report("hierarchy")
 
     for seed in SEEDS:
         for eval_seed in (seed, 1000 + seed):
@@ -211,9 +213,9 @@ def test_hierarchy_report_pairs_a_replanned_high_level_with_itself_alone(tmp_pat
 
 
 def test_hierarchy_report_reads_the_graph_as_a_high_level(tmp_path):
-    """A `hierarchy graph-eval` row: the graph has no training seed (its low level's counts), no span for a line
+    """A `graph --low` row: the graph has no training seed (its low level's counts), no span for a line
     floor ('-'), and a family of its own; the goal is judged on its test episodes."""
-    from bridgeplan.studies.reports import hierarchy
+    hierarchy = report("hierarchy")
 
     for seed in SEEDS:
         for eval_seed in (seed, 1000 + seed):
@@ -242,7 +244,7 @@ def test_hierarchy_report_reads_the_graph_as_a_high_level(tmp_path):
 def test_hierarchy_report_has_a_stitching_section_with_its_own_flat_planners(tmp_path):
     """docs/results/large-stitch-hierarchy{,-flat}: a section of its own, whose flat planner is the best of its
     -flat folder on validation (trained on the same pieces), paired on test."""
-    from bridgeplan.studies.reports import hierarchy
+    hierarchy = report("hierarchy")
 
     for seed in SEEDS:
         for eval_seed in (seed, 1000 + seed):
@@ -272,7 +274,7 @@ def test_hierarchy_report_has_a_stitching_section_with_its_own_flat_planners(tmp
 def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_path):
     """The dataset graph's rows (no training seed) in a stitch folder: a section of their own, judged on their one
     value; a graph with a low level counts its low level's training seeds."""
-    from bridgeplan.studies.reports import ogbench_planners as op
+    op = report("ogbench-planners")
 
     def row(seed, rate, low_seed=None):
         tasks = {str(i): {"success_rate": rate} for i in range(1, 6)}
@@ -304,6 +306,19 @@ def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_pa
                                "training seeds")
 
 
+def test_the_reports_read_the_oracles_rows_as_the_committed_files(tmp_path):
+    """The expert and the oracle rows of ``bridgeplan oracle`` (their score under ``score``, one JSON of ``rows``)
+    read as the committed files (``reference expert-on-tasks``'s flat rows, ``ogbench evaluate-oracle``'s JSON)."""
+    import json
+
+    headline, calibration = report("headline"), report("ogbench-calibration")
+    (tmp_path / headline.EXPERT).write_text(json.dumps({"rows": [
+        {"maze": "umaze", "multi_task": False, "seed": 0, "score_minari": 97.0},
+        {"maze": "umaze", "multi_task": False, "seed": 1, "score": {"minari": {"mean": 99.0, "se": 1.0}}}]}))
+    assert headline.expert_scores(tmp_path) == {("umaze", False): [97.0, 99.0]}
+    row = {"maze": "medium", "env_id": "pointmaze-medium-v0", "success_rate": 0.9}
+    assert calibration.oracle_row({**row, "code_version": "v"}) == {**row, "code_version": "v"}
+    assert calibration.oracle_row({"code_version": "v", "rows": [row]}) == {**row, "code_version": "v"}
 def _bench(device, latency, throughput, limits=None):
     machine = {"device": device, "torch": "2", "code_version": "0.1.0+test", "processor": "x86_64", "cpu": "CPU",
                "cpu_count": 2} | ({"gpu": "GPU X"} if device == "cuda" else {})
@@ -328,7 +343,7 @@ def test_gpu_report_sets_each_gpu_figure_beside_the_cpu_one(tmp_path):
     """Speed-ups are CPU over GPU time of the same (preset, method, batch, NFE); CPU figures come from the first bench
     in name order that has them, its quiet one-thread rows only; the batch-1 evaluation times a plan, it scores
     nothing; the README's block names the run's best fraction of the bf16 matmul."""
-    from bridgeplan.studies.reports import gpu
+    gpu = report("gpu")
 
     folder = tmp_path / "gpu"
     (folder / "cpu").mkdir(parents=True)

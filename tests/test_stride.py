@@ -8,7 +8,7 @@ import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.cli import main
-from bridgeplan.data import load_stream
+from bridgeplan.envs.maze2d.datasets import load_stream
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.priors import LinePrior, WarmPrior

@@ -13,7 +13,7 @@ from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.cli import main
 from bridgeplan.experiments.store import ResultsStore
 from bridgeplan.studies import load_studies, parse_study
-from bridgeplan.studies.commands import jobs, work_units
+from bridgeplan.studies.jobs import jobs, work_units
 from bridgeplan.studies.plan import QUICK_NOTE, Scale, describe_missing, missing
 from bridgeplan.studies.spec import Dataset, ExperimentSpec, Study, Training
 from tests.test_experiments import TINY_STUDY
@@ -135,7 +135,7 @@ def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, ca
 
 def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
     """The README's headline table sits between markers that `study report` rewrites and `--check` verifies."""
-    from bridgeplan.studies.reports import markers
+    from bridgeplan.studies.generators import markers
 
     root = _docs_copy(tmp_path)
     readme = root / "README.md"
@@ -159,7 +159,9 @@ def test_the_readme_headline_block_is_generated_and_checked(tmp_path, capsys):
 def test_the_headline_reads_the_stores_its_study_uses():
     """Each maze's headline rows come from studies headline.toml declares (so `study list` and the reports'
     dependencies say where they come from), and every store read exists: a renamed folder is not skipped quietly."""
-    from bridgeplan.studies.reports import headline
+    from tests.reports import report
+
+    headline = report("headline")
 
     studies = load_studies(REPO)
     used = {REPO / "docs" / "results" / studies[name].data_dir / "results.csv" for name in studies["headline"].uses}
@@ -200,7 +202,9 @@ BAD = [
     ("colour = 1\n", "colour: unknown key"),
     ("[training]\nstep = 3\n", "training.step: unknown key"),
     ("[training]\nsteps = -3\n", "training.steps: must be positive"),
-    ('[dataset]\nmaze = "maze9"\n', "dataset.maze: unknown maze"),
+    ('[dataset]\nmaze = "maze9"\n', "dataset.maze: unknown environment 'maze9'"),
+    ('[dataset]\nmaze = "umaze"\ngenerator = "ogbench"\n',
+     "dataset.generator: umaze is a Maze2D environment: its data is made by 'expert', not 'ogbench'"),
     ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "nfe99"\n', "experiments[0].grid: unknown grid"),
     ('[dataset]\nmaze = "umaze"\n[[experiments]]\ngrid = "nfe1"\nprocess = "vae"\n',
      "experiments[0]: unknown process 'vae'"),
@@ -238,12 +242,13 @@ BAD = [
 def test_a_bad_study_is_one_error_line_and_nothing_written(tmp_path, capsys, text, message):
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
+    shutil.copytree(REPO / "studies" / "reports", root / "studies" / "reports")  # the generators a report names
     (root / "studies" / "bad.toml").write_text(text)
     for command in (["list"], ["report", "--check"], ["run", "bad", "--dry-run"], ["run", "bad"]):
         assert main(["study", *command, "--root", str(root)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error: studies/bad.toml: ") and message in err[0], err
-    assert sorted(p.name for p in root.rglob("*")) == ["bad.toml", "studies"]
+    assert sorted(p.name for p in root.rglob("*") if "reports" not in p.parts) == ["bad.toml", "studies"]
 
 
 def test_a_tiny_study_dry_run_then_runs_at_the_quick_scale(tiny_dataset, tmp_path, capsys):
@@ -527,7 +532,7 @@ out = "tiny-hierarchy-flat/{{tasks}}-seed{{eval_seed}}.json"
 task_sets = ["single", "multi"]
 
 [[evaluations]]
-command = "hierarchy graph-eval"
+command = "graph"
 runs = ["low"]
 args = {{ nfe_low = 1, keep = 20 }}
 out = "tiny-hierarchy/graph/{{tasks}}-seed{{eval_seed}}.json"
@@ -549,7 +554,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     out = capsys.readouterr().out
     assert "  train high-s0: 2 steps (0 of 2 done)" in out and "  train low-s0: 2 steps (0 of 2 done)" in out
     assert "  hierarchy eval: 2 evaluation JSONs" in out and "  eval: 2 evaluation JSONs" in out
-    assert "  hierarchy graph-eval: 1 evaluation JSONs" in out
+    assert "  graph: 1 evaluation JSONs" in out
     # Units (seed, runs read): the hierarchy's (high, low), the flat eval's (high), the graph's (low); two workers
     # share the runs, each trained once under its lock.
     assert [(seed, [j.runs for j in unit]) for seed, unit in work_units(jobs(load_studies(root)["tiny"], root, root,
@@ -593,9 +598,10 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }', "evaluations[0].args: unrecognized"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { seed = 2 }', "evaluations[0].args.seed: set by"),
     ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
-    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"', "evaluations[0].command: ogbench graph-eval reads"),
-    ('command = "ogbench graph-eval"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
-    ('command = "ogbench graph-eval"\nruns = ["high", "low"]\nout = "x.json"', "graph-eval takes 0 or 1 run"),
+    ('command = "graph"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
+    ('command = "graph"\nruns = ["high", "low"]\nout = "x.json"', "graph takes 0 or 1 run"),
+    ('command = "oracle"\nruns = []\nout = "x.json"\nargs = { maze = "umaze" }\ntask_sets = ["multi", "triple"]',
+     "evaluations[0].task_sets: expected a list of single, multi"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nsplits = ["test", "validation"]',
      "evaluations[0].out: x.json is written twice (by evaluations[0] and [0]"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\n[[evaluations]]\ncommand = "eval"\nruns = ["low"]\n'
@@ -633,10 +639,10 @@ splits = ["test", "validation"]
 
 
 @pytest.mark.parametrize("evaluation, tasks", [("", "6,7,8,9,10"),
-                                               ('[evaluation]\nogbench_validation = "test-tasks-reseeded"\n', None)])
+                                               ('[evaluation]\nvalidation = "test-tasks-reseeded"\n', None)])
 def test_an_ogbench_validation_split_runs_the_validation_tasks_unless_pinned(tmp_path, evaluation, tasks):
     path = tmp_path / "s.toml"
-    path.write_text(OGBENCH_SPLITS.format(evaluation=evaluation, command="ogbench eval", args="nfe = 1"))
+    path.write_text(OGBENCH_SPLITS.format(evaluation=evaluation, command="eval", args="nfe = 1"))
     test, validation = jobs(parse_study(path), tmp_path / "results", tmp_path / "out", quick=False)
     assert "--tasks" not in test.argv and test.argv[test.argv.index("--seed") + 1] == "0"
     assert validation.argv[validation.argv.index("--seed") + 1] == "1000"
@@ -648,20 +654,20 @@ def test_an_ogbench_validation_split_runs_the_validation_tasks_unless_pinned(tmp
 
 def test_the_committed_ogbench_studies_pin_the_validation_draw_their_rows_were_made_with():
     studies = load_studies(REPO)
-    pinned = [s.name for s in studies.values()
-              if any(e.command.startswith("ogbench") and "validation" in e.splits for e in s.evaluations)]
+    pinned = [s.name for s in studies.values() if s.dataset and s.dataset.family.validation_tasks
+              and any("validation" in e.splits for e in s.evaluations)]
     assert len(pinned) == 7
-    assert all(studies[name].evaluation.ogbench_validation == "test-tasks-reseeded" for name in pinned)
+    assert all(studies[name].evaluation.validation == "test-tasks-reseeded" for name in pinned)
 
 
 def test_an_ogbench_command_without_tasks_has_no_validation_split(tmp_path, capsys):
     (tmp_path / "studies").mkdir()
-    text = OGBENCH_SPLITS.format(evaluation="", command="ogbench gcbc-eval", args="steps = 4")
+    text = OGBENCH_SPLITS.format(evaluation="", command="gcbc eval", args="steps = 4")
     (tmp_path / "studies" / "g.toml").write_text(text.replace('process = "flow"', 'trainer = "gcbc"\nmaze = "medium"')
                                                  .replace("horizon = 10\nstride = 4\n", ""))
     assert main(["study", "run", "g", "--dry-run", "--root", str(tmp_path)]) == 2
-    assert capsys.readouterr().err.strip() == ("error: studies/g.toml: evaluations[0].splits: ogbench gcbc-eval "
-                                               "evaluates OGBench's test tasks only: it has no validation split")
+    assert capsys.readouterr().err.strip() == ("error: studies/g.toml: evaluations[0].splits: gcbc eval evaluates "
+                                               "OGBench pointmaze's test tasks only: it has no validation split")
 
 
 TINY_CALIBRATION = """
@@ -687,23 +693,23 @@ log_every = 2
 device = "cpu"
 
 [[evaluations]]
-command = "ogbench gcbc-eval"
+command = "gcbc eval"
 runs = ["gcbc"]
 args = {{ steps = 4, episodes = 1 }}
 out = "cal/gcbc-step4.json"
 task_seed = 0
 
 [[evaluations]]
-command = "ogbench evaluate-oracle"
+command = "oracle"
 runs = []
-args = {{ maze = "medium", episodes = 1, tasks = "1" }}
+args = {{ maze = "pointmaze-medium-navigate-v0", episodes = 1, tasks = "1" }}
 out = "cal/oracle-medium.json"
 task_seed = 0
 
 [[evaluations]]
-command = "ogbench graph-eval"
+command = "graph"
 runs = []
-args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5 }}
+args = {{ episodes = 1, tasks = "1", controller = "pursuit", keep = 5 }}
 out = "cal/graph.json"
 task_seed = 0
 
@@ -715,9 +721,9 @@ stride = 4
 subgoal_every = 3
 
 [[evaluations]]
-command = "ogbench graph-eval"
+command = "graph"
 runs = ["low"]
-args = {{ episodes_per_task = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
+args = {{ episodes = 1, tasks = "1", controller = "pursuit", keep = 5, replan_every = 12, nfe_low = 1 }}
 out = "cal/graph-low.json"
 task_seed = 0
 
@@ -728,9 +734,9 @@ horizon = 10
 stride = 4
 
 [[evaluations]]
-command = "ogbench eval"
+command = "eval"
 runs = ["flow-learned"]
-args = {{ episodes_per_task = 1, tasks = "1", nfe = 1, no_floor = true }}
+args = {{ episodes = 1, tasks = "1", nfe = 1, no_floor = true }}
 out = "cal/flow-learned.json"
 task_seed = 0
 """
@@ -743,8 +749,8 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
 
     root = tmp_path / "repo"
     (root / "studies").mkdir(parents=True)
-    assert main(["ogbench", "generate", "pointmaze-medium-navigate-v0", "--episodes", "4", "--steps", "40",
-                 "--out", str(tmp_path), "--no-progress"]) == 0
+    assert main(["data", "generate", "--maze", "pointmaze-medium-navigate-v0", "--episodes", "4",
+                 "--episode-steps", "40", "--out", str(tmp_path), "--no-progress"]) == 0
     (root / "studies" / "cal.toml").write_text(
         TINY_CALIBRATION.format(dataset=tmp_path / "pointmaze-medium-navigate-v0.npz"))
     capsys.readouterr()
@@ -759,15 +765,16 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     assert load_checkpoint(root / "results" / "cal" / "runs" / prior / "checkpoint.pt")["step"] == 3
     gcbc = json.loads((root / "results" / "cal" / "cal" / "gcbc-step4.json").read_text())
     assert (gcbc["run"], gcbc["step"], gcbc["train_seed"], gcbc["episodes_per_task"]) == ("gcbc-s0", 4, 0, 1)
-    oracle = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())
+    (oracle,) = json.loads((root / "results" / "cal" / "cal" / "oracle-medium.json").read_text())["rows"]
     assert oracle["policy"] == "oracle" and oracle["maze"] == "medium" and oracle["episodes"] == 1
     graph = json.loads((root / "results" / "cal" / "cal" / "graph.json").read_text())
-    assert graph["kind"] == "graph" and graph["dataset"] == "pointmaze-medium-navigate-v0" and graph["episodes"] == 1
+    assert graph["kind"] == "graph" and graph["config"]["dataset"] == "pointmaze-medium-navigate-v0"
+    assert graph["episodes"] == 1
     assert graph["graph"]["keep"] == 5 and graph["config"]["dataset_identity"].startswith("pointmaze-medium-navigate")
     low = json.loads((root / "results" / "cal" / "cal" / "graph-low.json").read_text())
     assert low["run"].endswith("low-s0") and low["low"]["subgoal_every"] == 3 and low["nfe"] == 1
     assert main(["study", "run", "cal", "--no-progress", "--root", str(root)]) == 0
     assert "cal: 0 new results" in capsys.readouterr().out
-    assert main(["ogbench", "gcbc-eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
+    assert main(["gcbc", "eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
                  "--out", str(tmp_path / "x.json")]) == 2  # --out takes one evaluation
     assert "--out takes one evaluation" in capsys.readouterr().err

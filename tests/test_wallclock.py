@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import json
 
-from bridgeplan.studies.reports import GENERATORS
-from bridgeplan.studies.reports.wallclock import FOLDER, collect
+from tests.reports import GENERATORS, report
+
+wallclock = report("wallclock")
+FOLDER, collect = wallclock.FOLDER, wallclock.collect
 
 ARMS = {"A": {"batch_size": 32, "lr": 0.001, "precision": "fp32", "step": 9000},
         "B": {"batch_size": 256, "lr": 0.003, "precision": "bf16", "step": 3300}}
@@ -76,7 +78,7 @@ def write_store(folder, rows):
 
 
 def test_the_methods_section_pairs_every_common_nfe_of_the_two_stores(tmp_path):
-    from bridgeplan.studies.reports.wallclock import PAIRINGS, methods_lines
+    PAIRINGS, methods_lines = wallclock.PAIRINGS, wallclock.methods_lines
 
     BEFORE, AFTER = PAIRINGS[0].before, PAIRINGS[0].after
     before = {("ddpm", "gaussian"): [50.0, 52.0, 54.0], ("flow", "line"): [60.0, 60.0, 60.0]}

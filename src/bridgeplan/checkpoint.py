@@ -11,7 +11,7 @@ import torch
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes, atomic_write_text
-from bridgeplan.layout import checkpoint_path, config_path
+from bridgeplan.paths import checkpoint_path, config_path
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:

@@ -58,10 +58,11 @@ def _add_study_commands(sub) -> None:
 
 
 def _cmd_study_list(args) -> int:
-    from bridgeplan.studies import find_root, load_studies
-    from bridgeplan.studies.reports import GENERATORS
+    from bridgeplan.studies import find_root, generators, load_studies
 
-    studies = load_studies(find_root(args.root))
+    root = find_root(args.root)
+    reports = generators.load(root)
+    studies = load_studies(root)
     for s in studies.values():
         makes = [f"docs/results/{s.data_dir}/results.csv ({', '.join(dict.fromkeys(e.name for e in s.experiments))})"
                  ] if s.experiments else []
@@ -70,7 +71,7 @@ def _cmd_study_list(args) -> int:
         makes += [f"docs/results/{f}/ ({', '.join(commands)} JSONs)" for f in folders]
         makes += [f"uses {', '.join(s.uses)}"] if s.uses or not makes else []
         for r in s.reports:
-            feeds = GENERATORS[r.generator].feeds
+            feeds = reports[r.generator].feeds
             makes.append(f"docs/results/{r.output}" + (f" (feeds {', '.join(feeds)})" if feeds else ""))
         print(f"{s.name}\t{s.file}\t" + "; ".join(makes))
     return _report_broken(studies, [])
@@ -98,9 +99,10 @@ def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -
     """Regenerate (or, ``check``, verify) the reports, provenance files and generated blocks of the ``chosen``
     studies (every study when no ``names`` were given) from the committed rows; 2 when one differs."""
     from bridgeplan.files import atomic_write_text
+    from bridgeplan.studies import generators
     from bridgeplan.studies.export import provenance, provenance_path, stale_rows
-    from bridgeplan.studies.reports import GENERATORS
 
+    found = generators.load(root)
     results = root / "docs" / "results"
     texts = {}  # file (relative to root) -> (the studies that change it, text): nothing written unless all render
     for s in chosen:
@@ -108,7 +110,7 @@ def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -
         if record is not None:
             texts[provenance_path(s)] = ([s.name], record)
         for r in s.reports:
-            generator = GENERATORS[r.generator]
+            generator = found[r.generator]
             texts[f"docs/results/{r.output}"] = ([s.name], generator.render(results))
             for feed in generator.feeds:  # the tables the README and docs show between the generator's markers
                 names, current = texts.get(feed, ([], _read_or_empty(root / feed)))
@@ -141,7 +143,7 @@ def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -
             for line in stale_rows(s, root):
                 print(f"error: {line}", file=sys.stderr)
                 differ += 1
-    fed = [output for output in texts if any(output in GENERATORS[r.generator].feeds for s in chosen
+    fed = [output for output in texts if any(output in found[r.generator].feeds for s in chosen
                                              for r in s.reports)]
     provenances = sum(output.endswith("/study.json") for output in texts)
     reports = len(texts) - provenances - len(fed) - len(benches)
@@ -157,7 +159,7 @@ def _read_or_empty(path: Path) -> str:
 
 
 def _cmd_study_run(args) -> int:
-    from bridgeplan.studies import find_root, load_studies, parse_study, select
+    from bridgeplan.studies import find_root, generators, load_studies, parse_study, select
     from bridgeplan.studies.plan import (
         QUICK_NOTE,
         Scale,
@@ -174,8 +176,9 @@ def _cmd_study_run(args) -> int:
     studies = load_studies(root)
     if Path(args.file).is_file() and not any((root / s.file).resolve() == Path(args.file).resolve()
                                               for s in studies.values()):
-        study = parse_study(args.file)
-        check_reports(study, studies)
+        reports = generators.load(root)
+        study = parse_study(args.file, generators=reports)
+        check_reports(study, studies, reports)
     else:
         study = select(studies, [args.file], root)[0]
     scale = Scale("quick" if args.quick else "committed")
@@ -209,7 +212,7 @@ def _cmd_study_run(args) -> int:
 def _cmd_study_import(args) -> int:
     from bridgeplan.experiments.store import KEY as KEY_NAMES
     from bridgeplan.experiments.store import ResultsStore, key_of, read_csv_rows, read_eval_json_rows
-    from bridgeplan.layout import store_path
+    from bridgeplan.paths import store_path
     from bridgeplan.studies import find_root, load_studies, select
     from bridgeplan.studies.plan import Scale, missing, results_dir
 

@@ -6,6 +6,7 @@ planners. Each subcommand maps its flags onto a module's function; user mistakes
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -25,52 +26,61 @@ def positive(name: str, value: int) -> int:
 
 
 def _add_data_commands(sub) -> None:
-    p = sub.add_parser("data", help="generate, inspect offline datasets")
+    p = sub.add_parser("data", help="generate, inspect offline datasets (any environment family)")
     data = p.add_subparsers(dest="data_command", required=True)
-    g = data.add_parser("generate", help="a noisy expert stream in the Minari format (Minari's D4RL recipe)")
-    g.add_argument("--maze", required=True, help="open, umaze, medium or large")
-    g.add_argument("--steps", type=int, default=1_000_000, help="transitions (default 1 M)")
-    g.add_argument("--seed", type=int, default=123)
-    g.add_argument("--out", default=None,
-                   help="dataset directory (default datasets/<maze>-<steps>, or under "
-                        "$BRIDGEPLAN_DATASETS when set)")
-    g.add_argument("--workers", type=int, default=1,
-                   help="parallel processes, each generating its own independently seeded stream (default 1)")
+    g = data.add_parser("generate", help="a dataset by the environment's family's recipe: Maze2D's noisy expert "
+                                         "stream (Minari format, Minari's D4RL recipe), OGBench's (its npz format)")
+    g.add_argument("--maze", required=True, help="the environment: open, umaze, medium or large; or an OGBench "
+                                                 "dataset name (pointmaze-{medium,large,giant,teleport}-"
+                                                 "{navigate,stitch}-v0)")
+    g.add_argument("--steps", type=int, default=None, help="Maze2D: transitions (default 1 M)")
     g.add_argument("--piece-steps", type=int, default=None, metavar="N",
-                   help="independent pieces of N steps, each from a random start, instead of one stream per worker: "
-                        "a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
+                   help="Maze2D: independent pieces of N steps, each from a random start, instead of one stream per "
+                        "worker: a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
+    g.add_argument("--workers", type=int, default=1,
+                   help="Maze2D: parallel processes, each generating its own independently seeded stream (default 1)")
+    g.add_argument("--episodes", type=int, default=None, help="OGBench: training episodes (default: the recipe's)")
+    g.add_argument("--episode-steps", type=int, default=None, help="OGBench: steps per episode (default: the "
+                                                                   "recipe's)")
+    g.add_argument("--seed", type=int, default=None, help="default 123 (Maze2D), 0 (OGBench, as its scripts)")
+    g.add_argument("--out", default=None,
+                   help="dataset directory (Maze2D; default datasets/<maze>-<steps>) or folder of NAME.npz and "
+                        "NAME-val.npz (OGBench; default datasets/ogbench), under $BRIDGEPLAN_DATASETS when set")
     g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
     g.add_argument("--no-progress", action="store_true")
     g.set_defaults(func=_cmd_data_generate)
-    i = data.add_parser("info", help="summarize a dataset (Minari directory or id, or D4RL maze2d hdf5)")
+    i = data.add_parser("info", help="check and summarize a dataset (Minari directory or id, D4RL maze2d hdf5, "
+                                     "OGBench npz)")
     i.add_argument("path")
-    i.add_argument("--maze", default=None, help="the maze, if the dataset does not tell it")
+    i.add_argument("--maze", default=None, help="the environment it should be of (needed for an OGBench file; a "
+                                                "Minari dataset names its maze)")
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=_cmd_data_info)
 
 
 def _cmd_data_generate(args) -> int:
-    from bridgeplan.data.datasets import default_dataset_path, generate_dataset, load_stream
-    from bridgeplan.data.info import format_summary, summarize
-    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.envs import family_of
 
-    maze = get_maze(args.maze)
-    positive("--steps", args.steps)
-    positive("--workers", args.workers)
-    out = Path(args.out) if args.out else default_dataset_path(maze.name, args.steps, piece_steps=args.piece_steps)
-    generate_dataset(maze.name, args.steps, args.seed, out, force=args.force, progress=not args.no_progress,
-                     workers=args.workers, piece_steps=args.piece_steps)
-    print(format_summary(summarize(load_stream(out))))
+    family = family_of(args.maze)
+    for flag in ("steps", "workers", "episodes", "episode_steps"):
+        if getattr(args, flag) is not None:
+            positive("--" + flag.replace("_", "-"), getattr(args, flag))
+    out = family.generate_dataset(args.maze, Path(args.out) if args.out else None,
+                                  seed=family.data_seed if args.seed is None else args.seed,
+                                  steps=args.steps, piece_steps=args.piece_steps, episodes=args.episodes,
+                                  episode_steps=args.episode_steps, workers=args.workers, force=args.force,
+                                  progress=not args.no_progress)
+    print(family.dataset_info(str(out), args.maze)[1])
     print(f"wrote {out}")
     return 0
 
 
 def _cmd_data_info(args) -> int:
-    from bridgeplan.data.datasets import load_stream
-    from bridgeplan.data.info import format_summary, summarize
+    from bridgeplan.envs import family_of, family_of_dataset
 
-    info = summarize(load_stream(args.path, maze=args.maze))
-    print(json.dumps(info, indent=2) if args.json else format_summary(info))
+    family = family_of(args.maze) if args.maze else family_of_dataset(args.path)
+    info, text = family.dataset_info(args.path, args.maze)
+    print(json.dumps(info, indent=2) if args.json else text)
     return 0
 
 
@@ -85,33 +95,6 @@ def _add_reference_commands(sub) -> None:
     m.add_argument("--seed", type=int, default=123)
     m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
     m.set_defaults(func=_cmd_reference_measure)
-    e = ref.add_parser("expert-on-tasks", help="the expert's score on evaluation tasks themselves (what the reports "
-                                               "show beside the planners: docs/results/expert-on-eval-tasks.json)")
-    e.add_argument("--maze", action="append", default=None, help="a maze (repeatable; default umaze, medium, large)")
-    e.add_argument("--episodes", type=int, default=200)
-    e.add_argument("--seeds", default="0,1,2", help="task seeds (the test episodes of training seeds 0, 1, 2)")
-    e.add_argument("--out", required=True, help="the JSON file to write")
-    e.set_defaults(func=_cmd_reference_expert_on_tasks)
-
-
-def _cmd_reference_expert_on_tasks(args) -> int:
-    from bridgeplan.files import atomic_write_text, check_writable, code_version
-    from bridgeplan.maze.reference import expert_on_tasks
-
-    positive("--episodes", args.episodes)
-    try:
-        seeds = tuple(int(v) for v in args.seeds.split(","))
-    except ValueError:
-        raise BridgeplanError(f"--seeds takes comma-separated integers, got {args.seeds!r}") from None
-    check_writable(args.out, "JSON file")
-    rows = expert_on_tasks(args.maze or ("umaze", "medium", "large"), args.episodes, seeds)
-    for r in rows:
-        print(f"{r['maze']:<8} {'Multi2D' if r['multi_task'] else 'single-task':<12} seed {r['seed']}: "
-              f"{r['score_minari']:.1f} (Minari), success {r['success']:.2f}")
-    atomic_write_text(Path(args.out), json.dumps({"code_version": code_version(), "episodes": args.episodes,
-                                                  "rows": rows}, indent=2) + "\n")
-    print(f"wrote {args.out}")
-    return 0
 
 
 def _reference_table(ref: dict) -> str:
@@ -124,16 +107,16 @@ def _reference_table(ref: dict) -> str:
 
 
 def _cmd_reference_show(args) -> int:
-    from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.envs.maze2d.reference import load_reference_returns
 
     print(_reference_table(load_reference_returns()))
     return 0
 
 
 def _cmd_reference_measure(args) -> int:
+    from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
+    from bridgeplan.envs.maze2d.reference import measure_reference_returns
     from bridgeplan.files import atomic_write_text, check_writable
-    from bridgeplan.maze.layouts import MAZE_NAMES, get_maze
-    from bridgeplan.maze.reference import measure_reference_returns
 
     names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
     positive("--episodes", args.episodes)
@@ -286,24 +269,25 @@ def _cmd_train_prior(args) -> int:
     return 0
 
 
-def _int_tuple(text: str, flag: str) -> tuple[int, ...]:
+def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
     try:
         values = tuple(int(v) for v in text.split(","))
     except ValueError:
         raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
-    if not values or min(values) <= 0:
-        raise BridgeplanError(f"{flag} takes positive integers, got {text!r}")
+    if not values or min(values) < minimum:
+        kind = "positive integers" if minimum == 1 else f"integers >= {minimum}"
+        raise BridgeplanError(f"{flag} takes {kind}, got {text!r}")
     return values
 
 
 def _add_eval_commands(sub) -> None:
-    p = sub.add_parser("eval", help="evaluate a trained run over many episodes")
+    p = sub.add_parser("eval", help="evaluate a trained run (any environment family) on its environment's tasks",
+                       description="Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: "
+                                   "its 5-task protocol, the success rate. Beside the score: the straight line alone, "
+                                   "the cost and the decision latency.")
     p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
                                "(`bridgeplan planners list`)")
-    p.add_argument("--episodes", type=int, default=200)
     p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
     p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
     p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
     p.add_argument("--sampler", default=None,
@@ -313,11 +297,11 @@ def _add_eval_commands(sub) -> None:
     _correction_flags(p)
     p.add_argument("--compile", action="store_true",
                    help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
-    p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help="JSON path (default RUN/eval/<settings>.json)")
-    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
-    _execution_flags(p)
-    _threads_flag(p)
+    p.add_argument("--no-floor", action="store_true",
+                   help="skip the floors (the same episodes from the straight line alone, no network)")
+    _task_flags(p)
+    _execution_flags(p, "track")
+    _output_flags(p, "RUN/eval/<settings>.json")
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
@@ -330,9 +314,41 @@ def _add_eval_commands(sub) -> None:
     p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
     p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
     p.add_argument("--device", default="auto")
-    _execution_flags(p)
+    _execution_flags(p, "track")
     _threads_flag(p)
     p.set_defaults(func=_cmd_render)
+
+
+TASKS_HELP = ("OGBench: comma-separated task ids: 1-5 its test tasks (the default), 6-10 bridgeplan's validation tasks "
+              "(other cells; protocol.validation_tasks)")
+
+
+def _task_flags(p) -> None:
+    g = p.add_argument_group("tasks (the environment family's)")
+    g.add_argument("--episodes", type=int, default=None,
+                   help="episodes per task: Maze2D's episodes (its fixed goal, or Multi2D's random ones; default "
+                        "200), each of OGBench's tasks' (default 50, as OGBench)")
+    g.add_argument("--seed", type=int, default=0, help="the tasks' seed (and the planning generator's)")
+    g.add_argument("--multi-task", action="store_true", help="Maze2D: random goals too (Multi2D)")
+    g.add_argument("--tasks", default=None, help=TASKS_HELP)
+
+
+def _tasks(args, env: str):
+    from bridgeplan.evaluate import make_tasks
+
+    return make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
+
+
+def _task_ids(text: str | None) -> tuple[int, ...] | None:
+    return None if text is None else _int_tuple(text, "--tasks")
+
+
+def _output_flags(p, default_out: str) -> None:
+    p.add_argument("--device", default="auto")
+    p.add_argument("--out", default=None, help=f"JSON path (default {default_out})")
+    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
+    p.add_argument("--no-progress", action="store_true")
+    _threads_flag(p)
 
 
 def _correction_flags(p) -> None:
@@ -356,71 +372,88 @@ def _correction(args):
     return Correction.parse(args.correction, args.correction_form or "x0")
 
 
-def _execution_flags(p) -> None:
-    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode, as always)")
+def _execution_flags(p, controller: str, plans: bool = True) -> None:
+    """How plans are executed; ``plans``: also the flags of how a planner's plans are made (candidates, warm start,
+    arrival), which a hierarchy's and the dataset graph's decisions do not take."""
+    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode)")
     g.add_argument("--replan-every", type=int, default=None, metavar="K",
                    help="plan again from the current state every K environment steps (1..episode length)")
     g.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
                    help="also plan again, for the episodes concerned only, when the position is more than D from "
                         "where the plan put it (default: off)")
-    g.add_argument("--candidates", type=int, default=1, metavar="M",
-                   help="plans sampled per decision, in one batch; --select picks one (default 1)")
-    g.add_argument("--select", default="arrival",
-                   help="arrival (earliest within 0.45 of the goal; default), agreement (the candidate closest to "
-                        "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
-    g.add_argument("--prior", default=None,
-                   help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
-                        "replanning; the first plan uses the run's own prior)")
-    g.add_argument("--arrival", default=None,
-                   help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
-                        "0.45 of the goal, then hold the goal) or keep (truncate, and replans hold the goal from "
-                        "the step the previous plan arrived at); default truncate when replanning or with "
-                        "candidates, else end")
+    if plans:
+        g.add_argument("--candidates", type=int, default=1, metavar="M",
+                       help="plans sampled per decision, in one batch; --select picks one (default 1)")
+        g.add_argument("--select", default="arrival",
+                       help="arrival (earliest within the goal radius; default), agreement (the candidate closest to "
+                            "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
+        g.add_argument("--prior", default=None,
+                       help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
+                            "replanning; the first plan uses the run's own prior)")
+        g.add_argument("--arrival", default=None,
+                       help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
+                            "the goal radius, then hold the goal) or keep (truncate, and replans hold the goal from "
+                            "the step the previous plan arrived at); default: the family's (Maze2D truncate, OGBench "
+                            "end: its episodes end at the goal) when replanning or with candidates, else end")
     g = p.add_argument_group("controller (how a plan is executed)")
-    g.add_argument("--controller", default="track",
-                   help="track (Diffuser's: the planned states in time; default) or pursuit (the plan's path at the "
-                        "expert's pace: toward the first planned position --lookahead away)")
+    g.add_argument("--controller", default=controller,
+                   help=f"track (Diffuser's: the planned states in time) or pursuit (the plan's path at the expert's "
+                        f"pace: toward the first planned position --lookahead away); default {controller}")
     g.add_argument("--lookahead", type=float, default=None, metavar="R",
-                   help="pursuit: distance to the planned position driven toward (maze units; default 1.0)")
+                   help="pursuit: distance to the planned position driven toward (default: the family's, Maze2D 1.0, "
+                        "OGBench 2.0)")
 
 
-def _check_lookahead(args) -> None:
-    if args.lookahead is not None and args.controller != "pursuit":
-        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
-
-
-def _execution(args):
+def _execution(args, plans: bool = True):
     from bridgeplan.replan import Execution
 
+    if args.lookahead is not None and args.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    if not plans:
+        return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, controller=args.controller,
+                         lookahead=args.lookahead)
     if args.prior is not None and args.prior != "warm":
         raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
                               f"the run's own prior), got {args.prior!r}")
-    _check_lookahead(args)
-    lookahead = {} if args.lookahead is None else {"lookahead": args.lookahead}
     return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
                      select=args.select, warm=args.prior == "warm", arrival=args.arrival,
-                     controller=args.controller, **lookahead)
+                     controller=args.controller, lookahead=args.lookahead)
+
+
+def _out(args, folder: Path, name: str) -> Path:
+    """``--out``, else ``folder/name-<task settings>.json``."""
+    tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
+    episodes = "" if args.episodes is None else f"-ep{args.episodes}"
+    return Path(args.out) if args.out else folder / (f"{name}{episodes}-seed{args.seed}{tasks}"
+                                                     + ("-multi" if args.multi_task else "") + ".json")
+
+
+def _show(result, args, out: Path) -> int:
+    from bridgeplan.evaluate import format_table, write_and_show
+
+    d = result.to_dict()
+    write_and_show(d, out, args.json, format_table(d))
+    return 0
 
 
 def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import check_result_path, evaluate, format_table, write_and_show
-    from bridgeplan.layout import eval_dir
+    from bridgeplan.evaluate import check_result_path, evaluate_run
+    from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
     execution = _execution(args)
     correction = _correction(args)
     check_result_path(args.out, eval_dir(run_dir_of(Path(args.run))))
-    result = evaluate(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
-                      multi_task=args.multi_task, batch_size=args.batch_size, snapshot=args.snapshot,
-                      device=args.device, sampler=args.sampler, eta=args.eta, compile=args.compile,
-                      execution=execution, correction=correction).to_dict()
-    name = f"step{result['step']}-nfe{result['nfe']}-ep{args.episodes}-seed{args.seed}" + (
-        "-multi" if args.multi_task else "") + (f"-{args.sampler}{args.eta:g}" if args.sampler else "") + (
-        "-compiled" if args.compile else "") + (f"-{execution.tag()}" if execution.tag() else "") + (
-        f"-{correction.file_tag()}" if correction else "")
-    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.run))) / f"{name}.json"
-    write_and_show(result, out, args.json, format_table(result))
-    return 0
+    result = evaluate_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
+                          multi_task=args.multi_task, task_ids=_task_ids(args.tasks), batch_size=args.batch_size,
+                          snapshot=args.snapshot, device=args.device, sampler=args.sampler, eta=args.eta,
+                          compile=args.compile, execution=execution, correction=correction, floor=not args.no_floor)
+    d = result.to_dict()
+    name = "-".join(part for part in (
+        f"step{d['step']}-nfe{d['nfe']}", args.sampler and f"{args.sampler}{args.eta:g}",
+        args.compile and "compiled", execution.resolved(result.family, result.tasks.env).tag(),
+        correction and correction.file_tag()) if part)
+    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.run))), name))
 
 
 def _cmd_render(args) -> int:
@@ -438,12 +471,11 @@ def _cmd_render(args) -> int:
 
 
 def _add_hierarchy_commands(sub) -> None:
-    from bridgeplan.graph import MAZE2D_DEFAULTS, add_graph_flags
-
     p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
                                          "level (bridgeplan.hierarchy)")
     h = p.add_subparsers(dest="hierarchy_command", required=True)
-    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together",
+    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any "
+                                  "environment family",
                      description="The high level plans once per episode; the low level plans from the current "
                                  "state through the coarse plan's next states every --replan-every steps.")
     e.add_argument("high", help="the high level's run directory (a long --stride)")
@@ -451,106 +483,166 @@ def _add_hierarchy_commands(sub) -> None:
                                "the high level's stride)")
     e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
     e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
-    _hierarchy_flags(e, "the high level's stride", "the high level plans again from the current state every K "
-                                                    "steps (default: once per episode)")
+    _low_level_flags(e, "the high level plans again from the current state every K steps (default: once per "
+                        "episode)")
+    _task_flags(e)
+    _execution_flags(e, "pursuit", plans=False)
+    _output_flags(e, "LOW/eval/hierarchy-<settings>.json")
     e.set_defaults(func=_cmd_hierarchy_eval)
-    g = h.add_parser("graph-eval", help="the dataset graph (the low level's own training data; no network, no map) "
-                                        "as the high level of a low-level run (--subgoal-every)",
-                     description="The coarse plan is the cheapest path through the data's own states "
-                                 "(bridgeplan.graph), one state every J x stride steps; the low level plans through "
-                                 "it every --replan-every steps.")
-    g.add_argument("low", help="the low level's run directory (trained with --subgoal-every J)")
-    add_graph_flags(g, MAZE2D_DEFAULTS)
-    _hierarchy_flags(g, "its subgoal spacing, J x stride", "search the graph again from the current state every K "
-                                                            "steps (default: once per episode)")
-    g.set_defaults(func=_cmd_hierarchy_graph_eval)
 
 
-def _hierarchy_flags(p, replan_default: str, replan_high_help: str) -> None:
-    """The flags ``hierarchy eval`` and ``hierarchy graph-eval`` share: the low level, the tasks, the execution."""
+def _low_level_flags(p, replan_high_help: str) -> None:
     p.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
     p.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
-    p.add_argument("--episodes", type=int, default=200)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--multi-task", action="store_true", help="random goals too (Multi2D)")
-    p.add_argument("--replan-every", type=int, default=None, metavar="K",
-                   help=f"the low level plans again every K steps (default: {replan_default})")
-    p.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
-                   help="and when the position is more than D from its plan (default: off)")
     p.add_argument("--replan-high-every", type=int, default=None, metavar="K", help=replan_high_help)
-    p.add_argument("--controller", default="pursuit", help="pursuit (default) or track")
-    p.add_argument("--lookahead", type=float, default=None, metavar="R", help="pursuit's lookahead (default 1.0)")
-    p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help="JSON path (default LOW/eval/hierarchy-<settings>.json)")
-    _threads_flag(p)
-
-
-def _check_hierarchy_out(args) -> None:
-    from bridgeplan.evaluate import check_result_path
-    from bridgeplan.layout import eval_dir
-    from bridgeplan.runs import run_dir_of
-
-    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))
-
-
-def _run_hierarchy(args, hierarchy, high_info, low, maze: str, dataset: str, name: str,
-                   nfe_high: int | None = None) -> int:
-    """Evaluate ``hierarchy`` as ``args`` say, write its JSON (``--out``, else LOW/eval/NAME-<settings>.json)."""
-    from bridgeplan.evaluate import check_multi_task_data, make_tasks, write_result
-    from bridgeplan.hierarchy import evaluate_hierarchy
-    from bridgeplan.layout import eval_dir
-    from bridgeplan.replan import Execution
-    from bridgeplan.runs import run_dir_of
-
-    if args.multi_task:
-        check_multi_task_data(maze, dataset)
-    execution = Execution(replan_every=args.replan_every or hierarchy.spacing, tolerance=args.replan_tolerance,
-                          controller=args.controller,
-                          **({} if args.lookahead is None else {"lookahead": args.lookahead}))
-    tasks = make_tasks(maze, args.episodes, args.seed, args.multi_task)
-    result = evaluate_hierarchy(hierarchy, high_info, low, tasks, nfe_high, args.nfe_low, execution,
-                                args.replan_high_every)
-    name = (f"{name}-nfe{result['high']['nfe']}-step{low.step}-nfe{result['low']['nfe']}-ep{args.episodes}-seed"
-            f"{args.seed}" + ("-multi" if args.multi_task else "") + f"-{execution.tag()}"
-            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
-    out = Path(args.out) if args.out else eval_dir(run_dir_of(Path(args.low))) / f"{name}.json"
-    write_result(result, out)
-    minari = result["score"]["minari"]
-    line = result.get("floor_line")
-    print(f"{tasks.maze.name}: hierarchy {minari['mean']:.1f} ± {minari['se']:.1f} (Minari), success "
-          f"{result['success_rate']['mean']:.2f}; the coarse plans alone "
-          f"{result['high_alone']['score']['minari']['mean']:.1f}"
-          + (f"; the line alone {line['score']['minari']['mean']:.1f}" if line else "")
-          + f"; {result['calls_per_episode']:.0f} network calls per episode, decision p50 "
-          f"{result['decision_ms_batch1']['p50']:.1f} ms at batch 1")
-    print(f"wrote {out}")
-    return 0
 
 
 def _cmd_hierarchy_eval(args) -> int:
-    from bridgeplan.hierarchy import load_hierarchy
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, run_tasks
+    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import run_dir_of
 
-    positive("--episodes", args.episodes)
-    _check_lookahead(args)
-    _check_hierarchy_out(args)
+    if args.episodes is not None:
+        positive("--episodes", args.episodes)
+    execution = _execution(args, plans=False)
+    check_controller(execution.controller, execution.lookahead)
+    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))  # before anything is loaded
     hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
                                           args.device)
-    return _run_hierarchy(args, hierarchy, high, low, high.config.maze, high.config.dataset,
-                          f"hierarchy-{high.name}-step{high.step}", args.nfe_high)
+    if execution.replan_every is None:
+        execution = dataclasses.replace(execution, replan_every=hierarchy.spacing)
+    tasks = run_tasks(low, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
+    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution,
+                                args.replan_high_every, progress=not args.no_progress)
+    d = result.to_dict()
+    name = (f"hierarchy-{high.name}-step{high.step}-nfe{d['high']['nfe']}-step{low.step}-nfe{d['low']['nfe']}-"
+            f"{execution.resolved(result.family, tasks.env).tag()}"
+            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
+    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.low))), name))
 
 
-def _cmd_hierarchy_graph_eval(args) -> int:
-    from bridgeplan.graph import check_graph_settings, graph_settings
-    from bridgeplan.hierarchy import load_graph_hierarchy
+def _add_graph_command(sub) -> None:
+    g = sub.add_parser("graph", help="the dataset graph (the data's own states; no network, no map) on an "
+                                     "environment's tasks, alone or as a low level's high level",
+                       description="The data's states joined along their episodes and by short jumps between them "
+                                   "(bridgeplan.graph); alone, its shortest paths are executed as plans; with --low, "
+                                   "its path, one state every J x stride steps, is the subgoals a low level plans "
+                                   "through every --replan-every steps.")
+    g.add_argument("--maze", default=None, help="the environment (default: the low level's)")
+    g.add_argument("--dataset", default=None,
+                   help="the dataset the graph is made of (default: the low level's own training data)")
+    g.add_argument("--low", default=None, metavar="RUN",
+                   help="a low level (trained with --subgoal-every J) that plans through the graph's path (default: "
+                        "the path alone)")
+    _low_level_flags(g, "with --low: search the graph again from the current state every K steps (default: once per "
+                        "episode)")
+    s = g.add_argument_group("the graph (defaults: the environment family's)")
+    s.add_argument("--keep", type=int, default=None, help="every keep-th state of an episode is a node (10)")
+    s.add_argument("--radius", type=float, default=None,
+                   help="nodes of other episodes (or farther along one stream) within this distance are joined: below "
+                        "a wall's thickness (Maze2D 0.2, OGBench 0.5)")
+    s.add_argument("--neighbours", type=int, default=None, help="at most this many such joins per node (8)")
+    s.add_argument("--reach", type=float, default=None,
+                   help="the start and the goal join the nodes within this distance, else the nearest (Maze2D 0.5, "
+                        "OGBench 2.0)")
+    _task_flags(g)
+    _execution_flags(g, "pursuit", plans=False)
+    _output_flags(g, "LOW/eval/graph-<settings>.json, or results/graph/MAZE/graph-<settings>.json")
+    g.set_defaults(func=_cmd_graph)
 
-    positive("--episodes", args.episodes)
-    _check_lookahead(args)
-    settings = graph_settings(args)
-    check_graph_settings(**settings)  # before loading anything
-    _check_hierarchy_out(args)
-    hierarchy, settings, low = load_graph_hierarchy(Path(args.low), settings, args.low_snapshot, args.device)
-    return _run_hierarchy(args, hierarchy, settings, low, low.config.maze, low.config.dataset,
-                          f"hierarchy-graph-keep{args.keep}-r{args.radius:g}")
+
+def _cmd_graph(args) -> int:
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, make_tasks
+    from bridgeplan.graph import check_graph_settings
+    from bridgeplan.hierarchy import evaluate_graph
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import load_planner, resolve_run, run_dir_of
+
+    if args.low is not None:  # the run named first, before the flags and files that go with it
+        resolve_run(Path(args.low))
+    if args.episodes is not None:
+        positive("--episodes", args.episodes)
+    execution = _execution(args, plans=False)
+    check_controller(execution.controller, execution.lookahead)
+    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
+    check_graph_settings(**settings)
+    env, dataset = args.maze, args.dataset
+    if args.low is not None:
+        _, low = load_planner(Path(args.low), snapshot=args.low_snapshot, device="cpu")
+        env = env or low.config.maze
+        dataset = dataset or low.config.dataset
+    if env is None:
+        raise BridgeplanError("give the environment (--maze NAME) or a low level (--low RUN)")
+    if dataset is None:
+        raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
+    if not Path(dataset).exists():
+        raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
+    folder = eval_dir(run_dir_of(Path(args.low))) if args.low else Path("results") / "graph" / env
+    check_result_path(args.out, folder)
+    tasks = make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
+    result = evaluate_graph(tasks, dataset, settings, execution,
+                            Path(args.low) if args.low else None, args.nfe_low, args.replan_high_every,
+                            args.low_snapshot, args.device, progress=not args.no_progress)
+    d = result.to_dict()
+    g = d["graph"]
+    tag = execution.resolved(result.family, env).tag()
+    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if args.low else "") + (
+        f"-{tag}" if tag else "") + (f"-high{args.replan_high_every}" if args.replan_high_every else "")
+    return _show(result, args, _out(args, folder, name))
+
+
+def _add_oracle_command(sub) -> None:
+    o = sub.add_parser("oracle", help="the environment family's expert, noise-free, on its evaluation tasks (what "
+                                      "the reports show beside the planners)")
+    o.add_argument("maze", nargs="+", help="environments (Maze2D mazes, OGBench dataset names: the maze's tasks)")
+    o.add_argument("--seeds", default="0", help="comma-separated task seeds (default 0)")
+    o.add_argument("--task-sets", default="single",
+                   help="comma-separated: single (the family's tasks), multi (Maze2D: Multi2D's random goals)")
+    o.add_argument("--episodes", type=int, default=None, help="episodes per task (default: the family's)")
+    o.add_argument("--tasks", default=None, help=TASKS_HELP)
+    o.add_argument("--out", default=None, help="also write the rows to this JSON file")
+    o.add_argument("--json", action="store_true", help="print the JSON instead of a line per row")
+    o.add_argument("--no-progress", action="store_true")
+    _threads_flag(o)
+    o.set_defaults(func=_cmd_oracle)
+
+
+def _cmd_oracle(args) -> int:
+    from bridgeplan.envs import family_of
+    from bridgeplan.evaluate import make_tasks
+    from bridgeplan.files import atomic_write_text, check_writable, code_version
+
+    seeds = _int_tuple(args.seeds, "--seeds", minimum=0)
+    if args.out:
+        check_writable(args.out, "JSON file")
+    sets = args.task_sets.split(",")
+    rows = []
+    for env in args.maze:
+        family = family_of(env)
+        for task_set in sets:
+            if task_set not in family.task_sets:
+                raise BridgeplanError(f"--task-sets: {family.title} has {', '.join(family.task_sets)}, not "
+                                      f"{task_set!r}")
+            for seed in seeds:
+                tasks = make_tasks(env, args.episodes, seed, task_set == "multi", _task_ids(args.tasks))
+                agent = family.oracle(env)
+                agent_outcome = family.run(tasks, agent, progress=not args.no_progress)
+                rows.append({**tasks.fields(), "policy": "oracle", **family.score(tasks, agent_outcome)})
+                row = rows[-1]
+                rate = row["success_rate"]["mean"] if isinstance(row["success_rate"], dict) else row["success_rate"]
+                score = f"{row['score']['minari']['mean']:.1f} (Minari), " if "score" in row else ""
+                if not args.json:
+                    print(f"{env} {task_set} seed {seed}: {score}success {rate:.3f}")
+    text = json.dumps({"code_version": code_version(), "rows": rows}, indent=2)
+    if args.json:
+        print(text)
+    if args.out:
+        atomic_write_text(Path(args.out), text + "\n")
+        print(f"wrote {args.out}")
+    return 0
 
 
 def _add_report_command(sub) -> None:
@@ -564,7 +656,7 @@ def _add_report_command(sub) -> None:
 def _cmd_report(args) -> int:
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.files import check_writable
-    from bridgeplan.layout import report_dir, store_path
+    from bridgeplan.paths import report_dir, store_path
     from bridgeplan.report import write_report
 
     store = store_path(args.results)
@@ -657,13 +749,13 @@ DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge start
 
 def _cmd_demo(args) -> int:
     """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
+    from bridgeplan.envs.maze2d.grids import get_maze
+    from bridgeplan.envs.maze2d.reference import load_reference_returns
     from bridgeplan.experiments.grids import Experiment, RunSpec, Series
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.files import check_writable
-    from bridgeplan.layout import store_path
-    from bridgeplan.maze.layouts import get_maze
-    from bridgeplan.maze.reference import load_reference_returns
+    from bridgeplan.paths import store_path
     from bridgeplan.processes import DDPM, Bridge
     from bridgeplan.report import last_snapshot_table, write_report
 
@@ -687,10 +779,10 @@ def _cmd_demo(args) -> int:
     return 0
 
 
-def _add_ogbench_commands(sub) -> None:
-    from bridgeplan.ogbench_pointmaze.commands import add_ogbench_commands
+def _add_gcbc_commands(sub) -> None:
+    from bridgeplan.gcbc_commands import add_gcbc_commands
 
-    add_ogbench_commands(sub)
+    add_gcbc_commands(sub)
 
 
 def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argparse.ArgumentParser:
@@ -698,8 +790,8 @@ def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argpars
     parser = argparse.ArgumentParser(prog="bridgeplan", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (_add_data_commands, _add_reference_commands, _add_train_commands, _add_eval_commands,
-                _add_hierarchy_commands, _add_report_command, _add_bench_command, _add_demo_command,
-                _add_ogbench_commands, *more):
+                _add_hierarchy_commands, _add_graph_command, _add_oracle_command, _add_gcbc_commands,
+                _add_report_command, _add_bench_command, _add_demo_command, *more):
         add(sub)
     return parser
 

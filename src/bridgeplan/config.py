@@ -14,64 +14,29 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import get_maze
 from bridgeplan.nets.unet import UNetConfig
-from bridgeplan.ogbench_pointmaze import plans as pointmaze_plans
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
-from bridgeplan.trajectory import POINTMAZE_PREFIX, Layout, layout_for, span
+from bridgeplan.trajectory import Layout, span
 
-# Diffuser's Maze2D settings per maze: horizon and diffusion steps.
-_DIFFUSER_MAZE = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
-# cpu-small's plan shape per maze: (horizon, stride). Medium and large span Diffuser's 256 / 384 steps
-# less a few (249 / 377) with 32 / 48 planned states: ~3x the training steps per CPU second (docs/results).
-_CPU_SMALL_SHAPE = {"umaze": (128, 1), "medium": (32, 8), "large": (48, 8), "open": (128, 1)}
-# cpu-small's batch and learning rate where they are not 32 / 1e-3. At medium's and large's short plans the small
-# network's step is bound by per-operator overhead, so batch 256 makes several times the windows per second
-# (docs/results/throughput*/bench.md) and, with lr 1e-3 x sqrt 8 fixed beforehand, scores at least as well at
-# equal wall-clock, in fp32 and bf16 (docs/results/throughput-wallclock.md). umaze's 128 states gain much less
-# and OGBench's shapes are unmeasured on score: they keep 32 / 1e-3.
-_CPU_SMALL_BATCH = {"medium": (256, 3e-3), "large": (256, 3e-3)}
 PRESETS = ("diffuser", "cpu-small")
 
 
-def is_pointmaze(maze: str) -> bool:
-    """Whether ``maze`` names an OGBench pointmaze dataset (``pointmaze-medium-navigate-v0``) rather than a Maze2D
-    maze: the environment family, whose plan shapes, episodes and evaluation are its own."""
-    return maze.startswith(POINTMAZE_PREFIX)
-
-
-def maze_horizon(maze: str) -> int:
-    """The default planning horizon of ``maze`` (Diffuser's; an OGBench pointmaze dataset's ``diffuser`` one)."""
-    if is_pointmaze(maze):
-        return pointmaze_plans.plan_shape(maze, "diffuser")[0]
-    if maze not in _DIFFUSER_MAZE:
-        raise BridgeplanError(f"unknown maze {maze!r}: choose from {', '.join(_DIFFUSER_MAZE)} or an OGBench "
-                              f"dataset name ({POINTMAZE_PREFIX}...)")
-    return _DIFFUSER_MAZE[maze][0]
-
-
 def plan_shape(maze: str, preset: str) -> tuple[int, int]:
-    """``(horizon, stride)`` of ``preset``'s plans in ``maze``: Diffuser's horizon at stride 1 for ``diffuser``;
-    for ``cpu-small`` the same span planned every ``stride``-th step where that is what lets a CPU learn
-    the maze in minutes (measured in docs/results). OGBench pointmaze datasets have their own shapes, sized to
-    their evaluation tasks (:mod:`bridgeplan.ogbench_pointmaze.plans`)."""
-    if is_pointmaze(maze):
-        return pointmaze_plans.plan_shape(maze, preset)
-    horizon = maze_horizon(maze)
-    if preset == "diffuser":
-        return horizon, 1
-    if preset == "cpu-small":
-        return _CPU_SMALL_SHAPE[maze]
-    raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+    """``(horizon, stride)`` of ``preset``'s plans in environment ``maze``: its family's
+    (:meth:`~bridgeplan.envs.family.Family.plan_shape`)."""
+    if preset not in PRESETS:
+        raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+    return family_of(maze).plan_shape(maze, preset)
 
 
 def _check_horizon(maze: str, horizon: int, stride: int) -> None:
     if stride < 1:
         raise BridgeplanError(f"stride must be >= 1 (environment steps between planned states), got {stride}")
-    # a pointmaze plan must also fit its dataset's episodes (a stitch dataset's are 201 steps)
-    episode = pointmaze_plans.episode_steps(maze) if is_pointmaze(maze) else get_maze(maze).episode_steps
+    # a plan must also fit its dataset's episodes (an OGBench stitch dataset's are 201 steps)
+    episode = family_of(maze).longest_span(maze)
     if horizon < 2 or span(horizon, stride) > episode:
         at = f" at stride {stride}" if stride > 1 else ""
         raise BridgeplanError(f"horizon {horizon}{at} does not fit {maze}: a plan spans (horizon - 1) * stride + 1 "
@@ -88,7 +53,7 @@ class TrainConfig:
     pointmaze dataset's name (``pointmaze-medium-navigate-v0``: its maze, and the kind of data it holds)."""
     dataset: str = ""
     """Path to the dataset directory (``bridgeplan data generate``) or a legacy D4RL hdf5 file; for OGBench
-    pointmaze, the dataset's ``.npz`` file (``bridgeplan ogbench generate``, or an official one)."""
+    pointmaze, the dataset's ``.npz`` file (``bridgeplan data generate``, or an official one)."""
     horizon: int = 128
     """Planning horizon H (planned states); divisible by the U-Net's downsampling factor."""
     stride: int = 1
@@ -144,7 +109,7 @@ class TrainConfig:
     a high-level plan's (whose stride must be ``subgoal_every * stride``); 0: the start and the goal only."""
 
     def __post_init__(self):
-        maze_horizon(self.maze)
+        family_of(self.maze)
         _check_horizon(self.maze, self.horizon, self.stride)
         check_prior(self.process, self.prior)
         check_subgoals(self.horizon, self.subgoal_every, self.prior)
@@ -162,8 +127,8 @@ class TrainConfig:
 
     @property
     def layout(self) -> Layout:
-        """The columns of the run's transitions: its environment's (:func:`~bridgeplan.trajectory.layout_for`)."""
-        return layout_for(self.maze)
+        """The columns of the run's transitions: its environment family's."""
+        return family_of(self.maze).layout(self.maze)
 
     def run_name(self) -> str:
         """Directory name of the run, derived from what distinguishes it."""
@@ -255,7 +220,7 @@ class PriorTrainConfig:
 
     @property
     def layout(self) -> Layout:
-        return layout_for(self.maze)
+        return family_of(self.maze).layout(self.maze)
 
     def run_name(self) -> str:
         return f"{self.maze}-prior-learned-{_horizon_tag(self.horizon, self.stride)}-s{self.seed}"
@@ -278,11 +243,11 @@ def _horizon_tag(horizon: int, stride: int) -> str:
 def preset_config(maze: str, preset: str = "diffuser", **overrides: Any) -> TrainConfig:
     """Default training config for ``maze`` and ``preset``, with field ``overrides`` applied."""
     horizon, stride = plan_shape(maze, preset)
-    n_steps = pointmaze_plans.DIFFUSION_STEPS if is_pointmaze(maze) else _DIFFUSER_MAZE[maze][1]
+    family = family_of(maze)
     if preset == "diffuser":
-        base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=n_steps))
+        base = TrainConfig(maze=maze, preset=preset, horizon=horizon, process=DDPM(steps=family.diffusion_steps(maze)))
     else:
-        batch_size, lr = _CPU_SMALL_BATCH.get(maze, (32, 1e-3))
+        batch_size, lr = family.batch(maze, preset) or (32, 1e-3)
         base = TrainConfig(
             maze=maze, preset=preset, horizon=horizon, stride=stride,
             model=UNetConfig(dim=16, dim_mults=(1, 2, 4)),

@@ -20,7 +20,7 @@ re-implemented in PyTorch:
 The random stream differs from OGBench's (numpy's ``Generator`` here, seeded from ``seed`` and saved in
 every checkpoint so a resumed run continues the same stream); the distributions are the same.
 
-On disk (:mod:`bridgeplan.layout`): ``RUN/checkpoint.pt`` resumes everything, ``RUN/config.json`` is the
+On disk (:mod:`bridgeplan.paths`): ``RUN/checkpoint.pt`` resumes everything, ``RUN/config.json`` is the
 config beside it, ``RUN/snapshots/step_*.pt`` the policy's weights at every ``checkpoint_every`` steps (what
 evaluation loads), ``RUN/metrics.jsonl`` one line per ``log_every`` steps (loss, MSE, steps/s).
 """
@@ -45,9 +45,9 @@ from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import check_writable, code_version
-from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.locks import run_lock
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
+from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.train import make_optimizer
 
 KIND = "gcbc"
@@ -67,7 +67,7 @@ class GCBCConfig:
     """Path to the training npz in OGBench's format (``observations``, ``actions``, ``terminals``)."""
     maze: str = ""
     """The OGBench pointmaze the data is of (``medium``, ...): the file is checked to be one
-    (:func:`bridgeplan.ogbench_pointmaze.reading.check_dataset`) and evaluation defaults to it. Empty: any
+    (:func:`bridgeplan.envs.ogbench_pointmaze.reading.check_dataset`) and evaluation defaults to it. Empty: any
     OGBench-format file, unchecked."""
     lr: float = 3e-4
     """Adam's learning rate (OGBench: 3e-4)."""
@@ -118,7 +118,7 @@ class GoalDataset:
                  p_randomgoal: float = 0.0, geom_sample: bool = False, discount: float = 0.99, maze: str = ""):
         self.path = Path(path)
         if maze:
-            from bridgeplan.ogbench_pointmaze.reading import check_dataset
+            from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset
 
             check_dataset(self.path, maze)
         self.p_curgoal, self.p_trajgoal, self.p_randomgoal = p_curgoal, p_trajgoal, p_randomgoal
@@ -381,12 +381,12 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
 
 def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None = None, episodes: int = 0,
                   seed: int = 0, progress: bool = False) -> list[dict]:
-    """OGBench's evaluation protocol (:func:`bridgeplan.ogbench_pointmaze.protocol.evaluate_policy`: 5 tasks,
+    """OGBench's evaluation protocol (:func:`bridgeplan.envs.ogbench_pointmaze.protocol.evaluate_policy`: 5 tasks,
     50 episodes each by default) for a run's policy snapshots at ``steps`` (default: its latest checkpoint).
     Each result is also written to ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>.json``; returns them in order."""
+    from bridgeplan.envs.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
     from bridgeplan.files import atomic_write_text
-    from bridgeplan.layout import eval_dir
-    from bridgeplan.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
+    from bridgeplan.paths import eval_dir
 
     run_dir = Path(run_dir)
     episodes = episodes or EVAL_EPISODES_PER_TASK

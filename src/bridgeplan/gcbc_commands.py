@@ -1,4 +1,4 @@
-"""The ``bridgeplan ogbench gcbc-train`` and ``gcbc-eval`` commands (torch is imported only when one runs)."""
+"""The ``bridgeplan gcbc train`` and ``gcbc eval`` commands (torch is imported only when one runs)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,11 @@ from pathlib import Path
 from bridgeplan.errors import BridgeplanError
 
 
-def add_gcbc_commands(og) -> None:
-    """``bridgeplan ogbench gcbc-train`` and ``gcbc-eval`` on the ``ogbench`` group's subparsers ``og``."""
-    t = og.add_parser("gcbc-train", help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
+def add_gcbc_commands(sub) -> None:
+    """The ``bridgeplan gcbc`` group: ``train`` and ``eval``."""
+    p = sub.add_parser("gcbc", help="goal-conditioned behaviour cloning, OGBench's baseline on its own data")
+    og = p.add_subparsers(dest="gcbc_command", required=True)
+    t = og.add_parser("train", help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
                       description="Defaults: OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py): "
                                   "lr 3e-4, batch 1024, MLP 512x3, future-state goals, 1M steps.")
     t.add_argument("dataset", help="training npz in OGBench's format")
@@ -26,8 +28,8 @@ def add_gcbc_commands(og) -> None:
     t.add_argument("--resume", action="store_true")
     t.add_argument("--no-progress", action="store_true")
     t.set_defaults(func=_cmd_gcbc_train)
-    e = og.add_parser("gcbc-eval", help="a GCBC run on OGBench's 5-task evaluation protocol")
-    e.add_argument("run", help="a gcbc-train run directory")
+    e = og.add_parser("eval", help="a GCBC run on OGBench's 5-task evaluation protocol")
+    e.add_argument("run", help="a `gcbc train` run directory")
     e.add_argument("--maze", help="default: the maze the run was trained with")
     e.add_argument("--steps", help="comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
     e.add_argument("--episodes", type=int, default=0, help="episodes per task (default 50, as OGBench)")
@@ -42,7 +44,7 @@ def add_gcbc_commands(og) -> None:
 def _cmd_gcbc_train(args) -> int:
     from bridgeplan.checkpoint import load_checkpoint
     from bridgeplan.gcbc import GCBCConfig, train_gcbc
-    from bridgeplan.layout import checkpoint_path
+    from bridgeplan.paths import checkpoint_path
 
     given = {f: getattr(args, f) for f in ("maze", "steps", "minutes", "batch_size", "lr", "seed", "p_curgoal",
                                            "p_trajgoal", "p_randomgoal", "discount", "checkpoint_every",

@@ -19,23 +19,23 @@ never saw such a path. But the pieces cross one another. Search on the replay bu
   most ``step`` apart across jumps and to the start and the goal (at rest); one state per step, the goal
   repeated to a fixed length.
 
-The settings per environment family: OGBench's kinematic point (:data:`DEFAULTS`: 4-unit cells, a step of
-:data:`STEP`, many short episodes) and Maze2D (:data:`MAZE2D_DEFAULTS`, :func:`for_stream`: 1-unit cells, the
-data's median step, one continuous stream whose loops are closed by jumps within it).
+The settings are the environment family's (``Family.graph_pace``, :func:`for_stream`): OGBench's kinematic point
+(4-unit cells, its full step, many short episodes), Maze2D (1-unit cells, the data's median step, one continuous
+stream whose loops are closed by jumps within it).
 
-Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into a policy's decisions
-(``ogbench_pointmaze.planning.PlanningPolicy.decisions``), ``bridgeplan ogbench graph-eval`` scores it on the
-protocol: what the data's connectivity alone allows, the floor a stitching planner must beat.
+Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into decisions, and ``bridgeplan
+graph`` scores them on the environment's tasks: what the data's connectivity alone allows, the floor a stitching
+planner must beat.
 
 ``bridgeplan.hierarchy.GraphHierarchy`` makes the graph a hierarchy's high level: its path, one state every ``J``
 steps of the data (J = the low level's subgoal spacing), is the coarse plan a low level trained with
 ``--subgoal-every`` plans through, from the coarse plan itself as its prior (``--prior
-coarse``): the thesis's informative prior, here made of the data's own states (``ogbench graph-eval --low RUN``;
-on Maze2D ``hierarchy graph-eval LOW``).
+coarse``): the thesis's informative prior, here made of the data's own states (``bridgeplan graph --low RUN``).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -45,34 +45,29 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.ogbench_pointmaze.controllers import GAIN
-from bridgeplan.trajectory import KINEMATIC_POINT, MAZE2D, Layout
+from bridgeplan.trajectory import Layout
 
 if TYPE_CHECKING:
     from bridgeplan.data.stream import Stream
 
-STEP = GAIN
-"""Distance OGBench's point moves in one step at full speed along an axis (0.2): its jumps' cost is length / STEP."""
-DEFAULT_REACH = 2.0
-DEFAULTS = {"keep": 10, "radius": 0.5, "neighbours": 8, "reach": DEFAULT_REACH}
-"""OGBench pointmaze's settings (4-unit cells)."""
+SETTINGS = ("keep", "radius", "neighbours", "reach")
+"""What builds a graph; each family has its values (``Family.graph_pace``)."""
 GOALS_KEPT = 256
 """Goals whose search :meth:`DatasetGraph.to_goal` keeps (a Multi2D evaluation's 200 goals; ~1 MB each)."""
-MAZE2D_DEFAULTS = {"keep": 10, "radius": 0.2, "neighbours": 8, "reach": 0.5}
-"""Maze2D's (1-unit cells, ~0.04 per step: a jump of at most ~5 steps)."""
 
 
-def check_graph_settings(keep: int, radius: float, neighbours: int, reach: float) -> None:
-    """Bad settings raise BridgeplanError (the CLI's one-line ``error:``)."""
-    if keep < 1:
+def check_graph_settings(keep: int | None, radius: float | None, neighbours: int | None,
+                         reach: float | None) -> None:
+    """Bad settings raise BridgeplanError (the CLI's one-line ``error:``); None: the family's, not checked here."""
+    if keep is not None and keep < 1:
         raise BridgeplanError(f"--keep must be >= 1 (every keep-th state is a node), got {keep}")
-    if not np.isfinite(radius) or radius <= 0:
+    if radius is not None and (not np.isfinite(radius) or radius <= 0):
         raise BridgeplanError(f"--radius must be a distance > 0 (no joins between episodes: no graph to search), "
                               f"got {radius}")
-    if neighbours < 1:
+    if neighbours is not None and neighbours < 1:
         raise BridgeplanError(f"--neighbours must be >= 1 (no joins between episodes: no graph to search), got "
                               f"{neighbours}")
-    if not np.isfinite(reach) or reach <= 0:
+    if reach is not None and (not np.isfinite(reach) or reach <= 0):
         raise BridgeplanError(f"--reach must be a positive distance, got {reach}")
 
 
@@ -92,9 +87,9 @@ class DatasetGraph:
     """``[V, V]`` sparse symmetric matrix of edge costs (steps)."""
     tree: cKDTree
     """Over the nodes' positions."""
-    step: float = STEP
+    step: float
     """The data's pace: distance per step, what a jump (or a line) of a given length costs in steps."""
-    reach: float = DEFAULT_REACH
+    reach: float
     jumps: int = 0
     """Edges between nodes not consecutive in one episode."""
     queries: list[tuple[int, bool, int]] = field(default_factory=list)
@@ -104,10 +99,8 @@ class DatasetGraph:
     """:meth:`to_goal`'s searches, by goal."""
 
     @classmethod
-    def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int = DEFAULTS["keep"],
-              radius: float = DEFAULTS["radius"], neighbours: int = DEFAULTS["neighbours"],
-              reach: float = DEFAULT_REACH, layout: Layout = KINEMATIC_POINT, step: float = STEP,
-              within_episodes: bool = False) -> DatasetGraph:
+    def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int, radius: float, neighbours: int,
+              reach: float, layout: Layout, step: float, within_episodes: bool = False) -> DatasetGraph:
         """The graph of ``observations [T, obs_dim]`` (``layout``'s states) whose episodes begin at rows ``starts``
         (ascending, 0 first). ``within_episodes``: jumps may also join two nodes of one episode that are not
         consecutive (a long continuous stream that passes a place again)."""
@@ -253,23 +246,15 @@ class DatasetGraph:
         return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
 
 
-def data_step(stream: Stream) -> float:
-    """The median distance the data's position moves in one step, within its segments: its pace."""
-    xy = stream.layout.state_positions(stream.states)
-    moves = [np.linalg.norm(np.diff(xy[lo:hi], axis=0), axis=1) for lo, hi in stream.segment_bounds() if hi - lo > 1]
-    if not moves:
-        raise BridgeplanError("the dataset has no two consecutive states: no pace to measure")
-    return float(np.median(np.concatenate(moves)))
-
-
-def for_stream(stream: Stream, settings: dict | None = None) -> DatasetGraph:
-    """The graph of a dataset, with its family's settings (``settings`` over them): OGBench's pointmaze
-    (:data:`DEFAULTS`, the point's full step, episodes apart) or Maze2D (:data:`MAZE2D_DEFAULTS`, the data's median
-    step, loops closed within its continuous segments)."""
-    if stream.layout == MAZE2D:
-        return DatasetGraph.build(stream.states, stream.segment_starts, **{**MAZE2D_DEFAULTS, **(settings or {})},
-                                  layout=MAZE2D, step=data_step(stream), within_episodes=True)
-    return DatasetGraph.build(stream.states, stream.segment_starts, **{**DEFAULTS, **(settings or {})})
+def for_stream(stream: Stream, family, settings: dict | None = None) -> tuple[DatasetGraph, dict]:
+    """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's)
+    and pace (``Family.graph_pace``); returns it and the settings it was built with."""
+    defaults, step, within = family.graph_pace(stream)
+    settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
+    check_graph_settings(**settings)
+    graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout, step=step,
+                               within_episodes=within)
+    return graph, settings
 
 
 def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
@@ -281,31 +266,30 @@ def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
 
 @dataclass
 class GraphSource:
-    """The graph's paths as a policy's decisions (``PlanningPolicy.decisions``): each decision plans from the
-    episodes' current positions to their goals, paths ``length`` positions long."""
+    """The graph's paths as decisions (``replan.DecisionSource``): each decision plans from the episodes' current
+    states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took."""
 
     graph: DatasetGraph
     length: int
+    plan_seconds: float = 0.0
+    plans_sampled: int = 0
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
-        return np.stack([fixed_length(self.graph.path(s, g), self.length)
-                         for s, g in zip(np.asarray(states, np.float64), np.asarray(goals, np.float64))])
+        t0 = time.perf_counter()
+        paths = np.stack([fixed_length(self.graph.path(s, g), self.length)
+                          for s, g in zip(np.asarray(states, np.float64), np.asarray(goals, np.float64))])
+        self.plan_seconds += time.perf_counter() - t0
+        self.plans_sampled += len(states)
+        return paths
 
 
-def add_graph_flags(parser, defaults: dict) -> None:
-    """The flags that build a graph (``ogbench graph-eval``, ``hierarchy graph-eval``), defaults its family's."""
-    parser.add_argument("--keep", type=int, default=defaults["keep"],
-                        help=f"every keep-th state of an episode is a node (default {defaults['keep']})")
-    parser.add_argument("--radius", type=float, default=defaults["radius"],
-                        help=f"nodes of other episodes (or farther along one stream) within this distance are joined: "
-                             f"below a wall's thickness (default {defaults['radius']:g})")
-    parser.add_argument("--neighbours", type=int, default=defaults["neighbours"],
-                        help=f"at most this many such joins per node (default {defaults['neighbours']})")
-    parser.add_argument("--reach", type=float, default=defaults["reach"],
-                        help=f"the start and the goal join the nodes within this distance, else the nearest "
-                             f"(default {defaults['reach']:g})")
+@dataclass
+class GraphDecisions:
+    """The graph's decisions for :func:`bridgeplan.evaluate.evaluate` (no network: any device)."""
 
+    graph: DatasetGraph
+    length: int
+    device: object = "cpu"
 
-def graph_settings(args) -> dict:
-    """The settings :func:`add_graph_flags` parsed."""
-    return {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
+    def source(self, n: int, generator=None) -> GraphSource:
+        return GraphSource(self.graph, self.length)

@@ -8,7 +8,7 @@ current state through the next ``m = (H - 1) / j`` states of the coarse plan; it
 (``coarse``: the line through the subgoals, which a bridge or flow refines). The levels fit when a low-level
 subgoal step is one high-level step: ``low.subgoal_every * low.stride == high.stride``.
 
-Executed closed loop (:class:`HierarchySource` is the ``plan_fn`` of ``maze.rollout.ClosedLoopController``):
+Executed closed loop (:class:`HierarchySource` is the decision source of ``replan.PlanExecutor``, in any family):
 the high level plans at an episode's first step (and again from the current state every ``replan_high_every``
 steps, if given: on large that is what pays, docs/results/hierarchy.md), and its plan holds the goal from its
 first arrival on (a plan conditioned to end at the goal fills its whole span, however short the way: a high
@@ -19,6 +19,7 @@ last, so progress never runs back), the goal at rest repeating once the coarse p
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,16 +29,20 @@ import numpy as np
 import torch
 
 from bridgeplan import config as cfg
+from bridgeplan.envs import Family, family_of
+from bridgeplan.envs.controllers import check_controller
+from bridgeplan.envs.family import Tasks
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.evaluate import Tasks, batch1_latency, environment_of, prior_only, score_returns
+from bridgeplan.evaluate import EvalResult, evaluate, execute_plans, prior_floor
 from bridgeplan.graph import DatasetGraph, fixed_length
-from bridgeplan.maze.controllers import check_controller
-from bridgeplan.maze.layouts import GOAL_RADIUS
-from bridgeplan.maze.rollout import check_replanning, execute_closed_loop, execute_plans
 from bridgeplan.planner import Planner
-from bridgeplan.replan import Execution, percentiles_ms, truncate_at_arrival
-from bridgeplan.runs import RunInfo, load_planner, require_family
+from bridgeplan.replan import Execution, check_replanning, truncate_at_arrival
+from bridgeplan.runs import RunInfo, load_planner
 from bridgeplan.trajectory import densify, span
+
+COARSE_ARRIVAL = 0.45
+"""How close to the goal a coarse plan has arrived (it holds the goal from there on): Maze2D's goal radius, in every
+family, as the committed hierarchies were made."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +80,7 @@ class Hierarchy:
         prior and sampler took."""
         plan = self.high.plan(starts, goals, nfe, generator)
         traj = self.high.normalizer.unnormalize(plan.sampled.double().cpu().numpy())
-        traj, _ = truncate_at_arrival(traj, goals, self.high.layout)
+        traj, _ = truncate_at_arrival(traj, goals, self.high.layout, COARSE_ARRIVAL)
         return self.high.layout.states(traj), plan.prior_seconds + plan.sample_seconds
 
     def subgoals(self, coarse: np.ndarray, progress: np.ndarray) -> np.ndarray:
@@ -85,10 +90,16 @@ class Hierarchy:
         """The high level's entry in the hierarchy's JSON."""
         return level_dict(self.high, info, nfe)
 
-    def line_floor(self, tasks: Tasks, execution: Execution) -> dict:
-        """``floor_line``: the straight line over the high level's span, executed as the hierarchy is."""
-        return {"floor_line": prior_only(self.high, tasks, "line", Execution(controller=execution.controller,
-                                                                             lookahead=execution.lookahead))}
+    def label(self, info: RunInfo) -> str:
+        """The high level's part of the hierarchy's name in tables."""
+        return f"hierarchy {info.config.label()} H{self.high.horizon}k{self.high.stride}"
+
+    def line_floor(self, family: Family, tasks: Tasks, execution: Execution) -> dict:
+        """``floor_line``: the straight line over the high level's span, executed open loop by the hierarchy's
+        controller."""
+        open_loop = Execution(controller=execution.controller, lookahead=execution.lookahead,
+                              arrival_default=execution.arrival_default)
+        return {"floor_line": prior_floor(self.high, family, tasks, open_loop, "line")}
 
 
 @dataclass
@@ -153,7 +164,10 @@ class GraphHierarchy:
                 "horizon": self.coarse_length, "stride": self.spacing, "subgoal_every": None,
                 "graph": {**settings, **self.graph.summary()}}
 
-    def line_floor(self, tasks, execution) -> dict:
+    def label(self, settings: dict) -> str:
+        return "dataset graph"
+
+    def line_floor(self, family, tasks, execution) -> dict:
         """None: the graph has no span for a straight line to fill."""
         return {}
 
@@ -187,7 +201,7 @@ def check_levels(high: Planner, low: Planner) -> None:
 
 @dataclass
 class HierarchySource:
-    """The ``plan_fn`` of the closed-loop controller over a :class:`Hierarchy`, for a batch of ``n`` episodes.
+    """The decisions of a :class:`Hierarchy`, for a batch of ``n`` episodes.
     (Or over any high level with its interface: ``low``, ``spacing``, ``subgoals_per_plan``, ``progress_rule``,
     ``resolve_high_nfe``, ``coarse_plans``, ``subgoals``, ``high_entry``, ``line_floor``; e.g.
     :class:`GraphHierarchy`, the dataset graph's paths.)
@@ -210,16 +224,17 @@ class HierarchySource:
     """``[n, H_high, obs_dim]`` each episode's coarse plan (None before the first decision)."""
     first_coarse: np.ndarray | None = None
     """The coarse plans of the first decision (``coarse`` before any replan of the high level)."""
+    first_goals: np.ndarray | None = None
+    """The goals of the first decision."""
     coarse_at: np.ndarray | None = None
     """``[n]`` the step each episode's coarse plan was made at."""
     progress: np.ndarray | None = None
     """``[n]`` the coarse index each episode has reached."""
     calls: np.ndarray = field(init=False)
-    decision_seconds: list[float] = field(default_factory=list)
-    decision_batch: list[int] = field(default_factory=list)
     high_seconds: float = 0.0
     low_seconds: float = 0.0
     low_plans: int = 0
+    high_plans: int = 0
 
     def __post_init__(self):
         low = self.hierarchy.low.process
@@ -228,20 +243,29 @@ class HierarchySource:
         low.validate_nfe(self.nfe_low)
         self.calls = np.zeros(self.n, dtype=np.int64)
 
+    @property
+    def plan_seconds(self) -> float:
+        return self.high_seconds + self.low_seconds
+
+    @property
+    def plans_sampled(self) -> int:
+        return self.low_plans
+
     def reset(self) -> None:
         """Forget the coarse plans (a new episode); counters and timings are kept."""
-        self.coarse = self.first_coarse = self.coarse_at = self.progress = None
+        self.coarse = self.first_coarse = self.first_goals = self.coarse_at = self.progress = None
 
     def plan_coarse(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> None:
         """New coarse plans for ``episodes`` from their ``states``; their progress starts again at 0."""
         coarse, seconds = self.hierarchy.coarse_plans(states, goals, self.nfe_high, self.generator)
         if self.coarse is None:
-            self.coarse, self.first_coarse = coarse, coarse.copy()
+            self.coarse, self.first_coarse, self.first_goals = coarse, coarse.copy(), np.array(goals, np.float64)
             self.progress = np.zeros(self.n, dtype=np.int64)
             self.coarse_at = np.zeros(self.n, dtype=np.int64)
         self.coarse[episodes], self.progress[episodes], self.coarse_at[episodes] = coarse, 0, t
         self.calls[episodes] += self.nfe_high
         self.high_seconds += seconds
+        self.high_plans += len(episodes)
 
     def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
         """Move each episode's progress along its coarse plan, by the hierarchy's ``progress_rule``: ``nearest``,
@@ -267,7 +291,6 @@ class HierarchySource:
         return progress
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
-        t0 = time.perf_counter()
         h = self.hierarchy
         if self.coarse is None:
             if len(episodes) != self.n:
@@ -283,8 +306,6 @@ class HierarchySource:
         self.calls[episodes] += self.nfe_low
         self.low_seconds += plan.prior_seconds + plan.sample_seconds
         self.low_plans += len(episodes)
-        self.decision_seconds.append(time.perf_counter() - t0)
-        self.decision_batch.append(len(episodes))
         return plan.states
 
 
@@ -308,13 +329,12 @@ def check_high_replanning(every: int | None, episode_steps: int) -> None:
 
 def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = None, low_snapshot: int | None = None,
                    device: str = "auto") -> tuple[Hierarchy, RunInfo, RunInfo]:
-    """Two Maze2D runs as a :class:`Hierarchy` (EMA weights of their latest checkpoints or of the snapshots)."""
+    """Two runs of one environment as a :class:`Hierarchy` (EMA weights of their latest checkpoints or of the
+    snapshots)."""
     high, high_info = load_planner(Path(high_run), snapshot=high_snapshot, device=device)
     low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
-    for info in (high_info, low_info):
-        require_family(info, "maze2d")
     if high_info.config.maze != low_info.config.maze:
-        raise BridgeplanError(f"the levels were trained in different mazes ({high_info.config.maze} and "
+        raise BridgeplanError(f"the levels were trained on different environments ({high_info.config.maze} and "
                               f"{low_info.config.maze})")
     return Hierarchy(high, low), high_info, low_info
 
@@ -327,81 +347,150 @@ def level_dict(planner: Planner, info: RunInfo, nfe: int) -> dict:
             "subgoal_every": planner.subgoal_every, "config": info.portable_config}
 
 
-def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, maze, layout) -> dict:
-    """What limits the coarse plans ``dense [N, S, obs_dim]`` (densified, physical; measured with the maze's map,
-    which no planner reads): ``in_walls``, the share of their positions inside walls or outside the maze, and
-    ``arrival_step``, the mean step at which they first come within 0.45 of the goal (S - 1 when never)."""
+def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, free, layout) -> dict:
+    """What limits the coarse plans ``dense [N, S, obs_dim]`` (densified, physical; measured with the environment's
+    wall map ``free``, which no planner reads): ``in_walls``, the share of their positions inside walls or outside
+    the maze, and ``arrival_step``, the mean step at which they first come within :data:`COARSE_ARRIVAL` of the goal
+    (S - 1 when never)."""
     positions = layout.state_positions(dense)
-    inside = ~maze.is_free_xy(positions.reshape(-1, 2)).reshape(positions.shape[:2])
-    near = np.linalg.norm(positions - goals[:, None], axis=2) <= GOAL_RADIUS
+    inside = ~free(positions.reshape(-1, 2)).reshape(positions.shape[:2])
+    near = np.linalg.norm(positions - goals[:, None], axis=2) <= COARSE_ARRIVAL
     arrival = np.where(near.any(axis=1), near.argmax(axis=1), dense.shape[1] - 1)
     return {"in_walls": float(inside.mean()), "crossing_walls": float(inside.any(axis=1).mean()),
             "arrival_step": float(arrival.mean())}
 
 
-def load_graph_hierarchy(low_run: Path, settings: dict | None = None, low_snapshot: int | None = None,
-                         device: str = "auto"):
-    """The dataset graph over a Maze2D low level's own training data as its high level
-    (:class:`GraphHierarchy`, ``graph.for_stream``'s Maze2D settings under ``settings``); returns the hierarchy,
-    the high level's JSON entry (the graph's settings and size, the data's identity) and the low level's info."""
-    from bridgeplan.data.datasets import load_stream
-    from bridgeplan.graph import MAZE2D_DEFAULTS, for_stream
-    from bridgeplan.maze.layouts import get_maze
+@dataclass
+class HierarchyDecisions:
+    """A hierarchy's decisions (:class:`HierarchySource`) for :func:`bridgeplan.evaluate.evaluate`."""
+
+    hierarchy: Hierarchy | GraphHierarchy
+    nfe_high: int | None
+    nfe_low: int | None
+    replan_high_every: int | None = None
+
+    @property
+    def device(self) -> torch.device:
+        return self.hierarchy.low.device
+
+    def source(self, n: int, generator: torch.Generator) -> HierarchySource:
+        return HierarchySource(self.hierarchy, self.nfe_high, self.nfe_low, generator, n, self.replan_high_every)
+
+
+def evaluate_hierarchy(hierarchy: Hierarchy | GraphHierarchy, high_info: RunInfo | dict, low_info: RunInfo,
+                       tasks: Tasks, nfe_high: int | None = None, nfe_low: int | None = None,
+                       execution: Execution | None = None, replan_high_every: int | None = None,
+                       progress: bool = False) -> EvalResult:
+    """Score ``hierarchy`` on ``tasks`` (of its environment's family): the JSON of ``bridgeplan hierarchy eval`` (and
+    of ``bridgeplan graph --low``). ``hierarchy``: two planners, or the dataset graph over a low level
+    (:class:`GraphHierarchy`, whose ``high_info`` is the graph's settings).
+
+    ``execution``: the low level's replanning and controller (default: every coarse step, pursued);
+    ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the
+    hierarchy's score: ``high_alone``, the first coarse plans densified and executed open loop by the same
+    controller (what the low level adds), ``coarse_plans`` (how they lie against the walls) and, for a planner as
+    the high level, ``floor_line``, the straight line over its span so executed.
+    """
+    family = family_of(tasks.env)
+    low = hierarchy.low
+    execution = (execution or Execution(replan_every=hierarchy.spacing, controller="pursuit")).resolved(family,
+                                                                                                         tasks.env)
+    check_execution(execution, tasks.episode_steps)
+    check_high_replanning(replan_high_every, tasks.episode_steps)
+    decisions = HierarchyDecisions(hierarchy, nfe_high, nfe_low, replan_high_every)
+    probe = decisions.source(1, torch.Generator(device=low.device))  # the NFE defaults, checked before any episode
+    nfe_high, nfe_low = probe.nfe_high, probe.nfe_low
+    graph = isinstance(hierarchy, GraphHierarchy)
+    entries = {"kind": "graph" if graph else "hierarchy",
+               "run": f"{hierarchy.high_entry(high_info, nfe_high)['run']} + {low_info.name}", "step": low_info.step,
+               "method": f"{hierarchy.label(high_info)} -> {low_info.config.label()} H{low.horizon}k{low.stride}",
+               "prior": low.prior.name, "nfe": nfe_low, "horizon": low.horizon, "stride": low.stride,
+               "plan_span": span(low.horizon, low.stride)}
+    seen = {}  # the high level's entry after the evaluation's episodes (the graph's queries: not the lone episode's)
+    result, episodes = evaluate(decisions, family, tasks, execution, entries,
+                                hierarchy.line_floor(family, tasks, execution),
+                                after_run=lambda _: seen.update(high=hierarchy.high_entry(high_info, nfe_high)),
+                                progress=progress)
+    sources = episodes.executor.sources
+    dense = densify(np.concatenate([s.first_coarse for s in sources]), hierarchy.spacing)
+    goals = np.concatenate([s.first_goals for s in sources])
+    alone = execute_plans(tasks, dense, Execution(controller=execution.controller, lookahead=execution.lookahead))
+    result.execution["replan_high_every"] = replan_high_every
+    result.extra.update({
+        "high": seen["high"], "low": level_dict(low, low_info, nfe_low), "replan_high_every": replan_high_every,
+        "high_alone": family.floor_score(tasks, alone),
+        "coarse_plans": coarse_diagnostics(dense, goals, family.free(tasks.env), low.layout),
+        "high_ms_per_plan": 1000.0 * sum(s.high_seconds for s in sources) / max(sum(s.high_plans for s in sources), 1),
+        "low_ms_per_plan": 1000.0 * sum(s.low_seconds for s in sources) / max(sum(s.low_plans for s in sources), 1)})
+    result.config = low_info.portable_config
+    return result
+
+
+def graph_hierarchy(low_run: Path, dataset: str | None = None, settings: dict | None = None,
+                    low_snapshot: int | None = None, device: str = "auto", episode_steps: int | None = None,
+                    env: str | None = None):
+    """The dataset graph (over ``dataset``, default the low level's own training data) as the high level of a low
+    level (:class:`GraphHierarchy`, the graph of :func:`bridgeplan.graph.for_stream` with ``settings`` over its
+    family's); returns the hierarchy, the high level's JSON entry (the graph's settings, the data's identity, the
+    build's seconds) and the low level's info; ``env``: the environment it must be of."""
+    from bridgeplan.graph import for_stream
 
     low, low_info = load_planner(Path(low_run), snapshot=low_snapshot, device=device)
-    require_family(low_info, "maze2d")
-    settings = {**MAZE2D_DEFAULTS, **(settings or {})}
-    stream = load_stream(low_info.config.dataset)
+    if env is not None and low_info.config.maze != env:
+        raise BridgeplanError(f"the low level was trained on {low_info.config.maze}, not {env}: the graph and the "
+                              f"low level are of one environment")
+    env = low_info.config.maze
+    family = family_of(env)
+    stream = family.load_stream(dataset or low_info.config.dataset, env)
     t0 = time.perf_counter()
-    hierarchy = GraphHierarchy(for_stream(stream, settings), low, get_maze(low_info.config.maze).episode_steps)
-    settings["build_seconds"] = time.perf_counter() - t0
-    settings["dataset_identity"] = stream.identity()
+    graph, settings = for_stream(stream, family, settings)
+    hierarchy = GraphHierarchy(graph, low, episode_steps or family.longest_span(env))
+    settings = {**settings, "build_seconds": time.perf_counter() - t0, "dataset_identity": stream.identity()}
     return hierarchy, settings, low_info
 
 
-def evaluate_hierarchy(hierarchy: Hierarchy, high_info: RunInfo | dict, low_info: RunInfo, tasks: Tasks,
-                       nfe_high: int | None = None, nfe_low: int | None = None,
-                       execution: Execution | None = None, replan_high_every: int | None = None) -> dict:
-    """Score ``hierarchy`` on ``tasks``; returns the JSON that ``bridgeplan hierarchy eval`` (and ``graph-eval``)
-    writes. ``hierarchy``: two planners, or the dataset graph over a low level (:class:`GraphHierarchy`, whose
-    ``high_info`` is its settings, :func:`load_graph_hierarchy`).
+def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
+                   low_run: Path | None = None, nfe_low: int | None = None, replan_high_every: int | None = None,
+                   low_snapshot: int | None = None, device: str = "auto", progress: bool = False) -> EvalResult:
+    """The dataset graph over ``dataset`` (of ``tasks``' environment; ``bridgeplan.graph``, built with ``settings``
+    over its family's) on ``tasks``: the JSON of ``bridgeplan graph``, with the graph's settings, size and what its
+    queries found (``graph``) and the data's identity (``config``).
 
-    ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the
-    hierarchy's score: ``high_alone``, the first coarse plans densified and executed open loop by the
-    same controller (what the low level adds), and, for a planner as the high level, ``floor_line``, the straight
-    line over its span so executed. Decisions are timed in the evaluation's batches and, at batch 1, over the first
-    episode run again alone after one untimed decision.
-    """
-    low = hierarchy.low
-    maze, n = tasks.maze, tasks.episodes
-    execution = execution or Execution(replan_every=hierarchy.spacing, controller="pursuit")
-    check_execution(execution, maze.episode_steps)
-    starts, goals = tasks.starts_xy, tasks.goals_xy
-    check_high_replanning(replan_high_every, maze.episode_steps)
-    source = HierarchySource(hierarchy, nfe_high, nfe_low, tasks.generator(low.device), n, replan_high_every)
-    nfe_high, nfe_low = source.nfe_high, source.nfe_low
-    result = execute_closed_loop(maze, starts, goals, source, execution.replan_every, execution.tolerance,
-                                 follower=execution.follower(n))
-    dense = densify(source.first_coarse, hierarchy.spacing)
-    alone = execute_plans(maze, starts, goals, dense, follower=execution.follower(n))
-    high = hierarchy.high_entry(high_info, nfe_high)  # the graph's: its queries so far, not the lone episode's
-    single = HierarchySource(hierarchy, nfe_high, nfe_low, torch.Generator(device=low.device)
-                             .manual_seed(tasks.seed + 1), 1, replan_high_every)
-    per_batch = percentiles_ms(source.decision_seconds)
-    per_batch["mean_batch"] = float(np.mean(source.decision_batch))
-    return {
-        "kind": "hierarchy", "maze": maze.name, "episodes": n, "seed": tasks.seed, "multi_task": tasks.multi_task,
-        "episode_steps": maze.episode_steps,
-        "high": high, "low": level_dict(low, low_info, nfe_low),
-        **score_returns(maze.name, result.returns, result.success),
-        "high_alone": score_returns(maze.name, alone.returns, alone.success),
-        "coarse_plans": coarse_diagnostics(dense, goals, maze, low.layout), **hierarchy.line_floor(tasks, execution),
-        "execution": {**execution.to_dict(low.prior.name), "replan_high_every": replan_high_every},
-        "plans_per_episode": {"mean": float(result.plans_made.mean()), "min": int(result.plans_made.min()),
-                              "max": int(result.plans_made.max())},
-        "calls_per_episode": float(source.calls.mean()),
-        "high_ms_per_plan": 1000.0 * source.high_seconds / n,
-        "low_ms_per_plan": 1000.0 * source.low_seconds / max(source.low_plans, 1),
-        "decision_ms_batch1": batch1_latency(single, tasks, execution), "decision_ms_per_batch": per_batch,
-        "environment": environment_of(low),
-    }
+    Alone, its paths are executed as plans (replanned from the current state every ``execution.replan_every`` steps
+    if given). With ``low_run`` (a planner of that environment trained with ``--subgoal-every``), the graph is a
+    hierarchy's high level (:class:`GraphHierarchy`, :func:`evaluate_hierarchy`): the low level plans through its
+    path's next states every ``execution.replan_every`` steps (default: its subgoal spacing), the path searched
+    again every ``replan_high_every`` steps if given."""
+
+    env, family = tasks.env, family_of(tasks.env)
+    if low_run is None:
+        if nfe_low is not None or replan_high_every is not None:
+            raise BridgeplanError("--nfe-low and --replan-high-every are the low level's: give --low RUN")
+        from bridgeplan.graph import GraphDecisions, for_stream
+
+        stream = family.load_stream(dataset, env)
+        t0 = time.perf_counter()
+        graph, settings = for_stream(stream, family, settings)
+        build_seconds = time.perf_counter() - t0
+        execution = (execution or Execution()).resolved(family, env)
+        length = tasks.episode_steps + 1
+        entries = {"kind": "graph", "run": f"graph over {env}", "step": 0, "method": "dataset graph", "nfe": 0,
+                   "horizon": length, "stride": 1, "plan_span": tasks.episode_steps}
+        seen = {}
+        result, _ = evaluate(GraphDecisions(graph, length), family, tasks, execution, entries,
+                             after_run=lambda _: seen.update(graph=graph.summary()), progress=progress)
+        result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": build_seconds}
+        result.config = {"dataset": env, "dataset_identity": stream.identity(), "graph": settings}
+        return result
+    hierarchy, high, low_info = graph_hierarchy(low_run, dataset, settings, low_snapshot, device, tasks.episode_steps,
+                                                env)
+    if execution is not None and execution.replan_every is None:  # the low level replans every subgoal step
+        execution = dataclasses.replace(execution, replan_every=hierarchy.spacing)
+    result = evaluate_hierarchy(hierarchy, high, low_info, tasks, None, nfe_low, execution, replan_high_every,
+                                progress)
+    graph = result.extra["high"]["graph"]
+    result.extra["graph"] = {k: v for k, v in graph.items() if k != "dataset_identity"}
+    settings = {k: graph[k] for k in ("keep", "radius", "neighbours", "reach")}
+    result.config = {"dataset": env, "dataset_identity": graph["dataset_identity"], "graph": settings,
+                     "low": low_info.portable_config}
+    return result

@@ -6,7 +6,7 @@ in, an action out, replanning inside.
     policy.reset()
     action = policy(obs)
 
-It is the evaluation's closed loop (``maze.rollout.ClosedLoopController`` over ``replan.PlanSource``) for one
+It is the evaluation's closed loop (``replan.PlanExecutor`` over ``replan.PlanSource``) for one
 episode at a time: it plans from ``obs["observation"]`` (x, y, vx, vy) to ``obs["desired_goal"]`` (x, y) at
 the first step after :meth:`PlannerPolicy.reset`, again every ``replan_every`` steps (and/or when the
 position drifts more than ``tolerance`` from the plan, or when ``desired_goal`` changes), and tracks the
@@ -21,11 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bridgeplan.envs import maze2d
+from bridgeplan.envs.maze2d.grids import Maze, get_maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD
-from bridgeplan.maze.layouts import Maze, get_maze
-from bridgeplan.maze.rollout import ClosedLoopController
-from bridgeplan.replan import Execution, PlanSource
+from bridgeplan.replan import Execution, PlanExecutor, PlanSource
 from bridgeplan.trajectory import MAZE2D
 
 
@@ -41,14 +40,14 @@ class PlannerPolicy:
 
     def __init__(self, source, maze: Maze, execution: Execution):
         self.source, self.maze, self.execution = source, maze, execution
-        self.controller = ClosedLoopController(source, 1, execution.replan_every, execution.tolerance,
-                                               execution.follower(1))
+        self.executor = PlanExecutor(lambda n: source, lambda n: maze2d.FAMILY.follower(
+            maze.name, n, execution.controller, execution.lookahead), execution.replan_every, execution.tolerance)
         self.reset()
 
     @classmethod
     def from_run(cls, run: str | Path, nfe: int = 1, replan_every: int | None = 8, tolerance: float | None = None,
                  candidates: int = 1, select: str = "arrival", warm: bool = False, arrival: str | None = None,
-                 controller: str = "track", lookahead: float = DEFAULT_LOOKAHEAD, device: str = "auto", seed: int = 0,
+                 controller: str = "track", lookahead: float | None = None, device: str = "auto", seed: int = 0,
                  snapshot: int | None = None) -> PlannerPolicy:
         """Load a trained run (EMA weights; ``snapshot``: that training step's) as a policy.
 
@@ -63,17 +62,18 @@ class PlannerPolicy:
         planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
         maze = get_maze(info.config.maze)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
-                              warm=warm, arrival=arrival, controller=controller, lookahead=lookahead)
+                              warm=warm, arrival=arrival, controller=controller,
+                              lookahead=lookahead).resolved(maze2d.FAMILY, maze.name)
         planner.process.validate_nfe(nfe)
         execution.validate(planner.process, maze.episode_steps)
         source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed), 1,
-                            maze)
+                            maze2d.FAMILY.goal_radius, maze.is_free_xy)
         return cls(source, maze, execution)
 
     @classmethod
     def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
                        nfe_low: int | None = None, replan_every: int | None = None, tolerance: float | None = None,
-                       controller: str = "pursuit", lookahead: float = DEFAULT_LOOKAHEAD, device: str = "auto",
+                       controller: str = "pursuit", lookahead: float | None = None, device: str = "auto",
                        seed: int = 0, replan_high_every: int | None = None) -> PlannerPolicy:
         """A hierarchy as a policy (:mod:`bridgeplan.hierarchy`): the high level's coarse plan at an episode's
         first step, the low level's plan through it every ``replan_every`` steps (default: the high level's
@@ -88,15 +88,15 @@ class PlannerPolicy:
 
     @classmethod
     def from_graph(cls, low_run: str | Path, nfe_low: int | None = None, replan_every: int | None = None,
-                   tolerance: float | None = None, controller: str = "pursuit", lookahead: float = DEFAULT_LOOKAHEAD,
+                   tolerance: float | None = None, controller: str = "pursuit", lookahead: float | None = None,
                    device: str = "auto", seed: int = 0, replan_high_every: int | None = None,
                    graph: dict | None = None) -> PlannerPolicy:
         """The dataset graph over a low level's own training data as its high level (``bridgeplan.graph``; settings
         ``graph`` over Maze2D's), the low level through its path every ``replan_every`` steps (default: its subgoal
-        spacing), as ``bridgeplan hierarchy graph-eval`` executes them."""
-        from bridgeplan.hierarchy import load_graph_hierarchy
+        spacing), as ``bridgeplan graph --low`` executes them."""
+        from bridgeplan.hierarchy import graph_hierarchy
 
-        hierarchy, _, low = load_graph_hierarchy(Path(low_run), graph, device=device)
+        hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, device=device)
         return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
             replan_every=replan_every or hierarchy.spacing, tolerance=tolerance, controller=controller,
             lookahead=lookahead), seed, replan_high_every)
@@ -108,6 +108,7 @@ class PlannerPolicy:
         from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning
 
         maze = get_maze(maze_name)
+        execution = execution.resolved(maze2d.FAMILY, maze.name)
         check_execution(execution, maze.episode_steps)
         check_high_replanning(replan_high_every, maze.episode_steps)
         source = HierarchySource(hierarchy, nfe_high, nfe_low,
@@ -116,14 +117,18 @@ class PlannerPolicy:
 
     def reset(self) -> None:
         """Start a new episode: the next call plans afresh."""
-        self.controller.reset()
+        self.executor.begin(1)
         self.source.reset()
-        self.steps = 0
         self.goal: np.ndarray | None = None
 
     @property
+    def steps(self) -> int:
+        """Steps since the last reset."""
+        return self.executor.t
+
+    @property
     def plans_made(self) -> int:
-        return int(self.controller.plans_made[0])
+        return int(self.executor.made[-1][0])
 
     def __call__(self, obs: dict) -> np.ndarray:
         """The action ``[2]`` (float32, in [-1, 1]) for a PointMaze observation dict."""
@@ -135,13 +140,10 @@ class PlannerPolicy:
         except (KeyError, TypeError, ValueError) as e:
             raise BridgeplanError("a PointMaze observation dict with 'observation' (x, y, vx, vy) and "
                                   f"'desired_goal' (x, y) is needed, got {type(obs).__name__}: {e}") from None
-        due = None
         if self.goal is not None and not np.array_equal(goal, self.goal):
-            due = np.ones(1, dtype=bool)  # the goal moved: plan for the new one now, from scratch
+            self.executor.replan(np.zeros(1, dtype=np.int64))  # the goal moved: plan for the new one now, from scratch
             self.source.reset()
         self.goal = goal
-        action = self.controller.act(self.steps, state, goal, due=due)
-        self.steps += 1
-        return action[0].astype(np.float32)
+        return self.executor.act(state, goal)[0].astype(np.float32)
 
     act = __call__

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes
 
 
@@ -87,45 +88,46 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     then shows each episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
-    from bridgeplan.evaluate import check_multi_task_run, make_tasks
-    from bridgeplan.layout import render_dir
-    from bridgeplan.maze.rollout import execute_plans
-    from bridgeplan.runs import load_planner, load_windows, require_family
+    from bridgeplan.envs import family_of
+    from bridgeplan.evaluate import PlannerDecisions, generator, run_episodes, run_tasks
+    from bridgeplan.paths import render_dir
+    from bridgeplan.replan import Execution
+    from bridgeplan.runs import load_planner, load_windows
     from bridgeplan.trajectory import window_conditions
 
     run = Path(run)
     planner, info = load_planner(run, device=device)
-    require_family(info, "maze2d")
     config = info.config
+    family = family_of(config.maze)
+    if not family.renders:
+        raise BridgeplanError(f"{run} is a {family.title} planner: render draws Maze2D's episodes (evaluate it with "
+                              f"`bridgeplan eval`)")
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
-    if multi_task:
-        check_multi_task_run(info)
-    tasks = make_tasks(config.maze, episodes, seed, multi_task)
-    gen = tasks.generator(planner.device)
+    tasks = run_tasks(info, episodes, seed, multi_task)
     maze = tasks.maze
-    from bridgeplan.maze.rollout import execute_closed_loop
-    from bridgeplan.replan import Execution, PlanSource
+    execution = (execution or Execution()).resolved(family, config.maze)
+    execution.validate(planner.process, tasks.episode_steps)
+    decisions = PlannerDecisions(planner, nfe, execution, family, config.maze)
+    first: list[np.ndarray] = []
 
-    execution = execution or Execution()
-    execution.validate(planner.process, tasks.maze.episode_steps)
-    if execution.plans_once:
-        plan_states = planner.plan(tasks.start_states, tasks.goals_xy, nfe, gen).states
-        result = execute_plans(maze, tasks.starts_xy, tasks.goals_xy, plan_states,
-                               follower=execution.follower(episodes))
-    else:
-        first: list[np.ndarray] = []
-        source = PlanSource(planner, execution, nfe, gen, episodes, maze)
+    class FirstPlans:  # the decisions, keeping each episode's first plan
+        device = planner.device
 
-        def plan_fn(states, goals, idx, t):
-            planned = source(states, goals, idx, t)
-            if t == 0:
-                first.append(planned)
-            return planned
+        def source(self, n, gen):
+            source = decisions.source(n, gen)
 
-        result = execute_closed_loop(maze, tasks.starts_xy, tasks.goals_xy, plan_fn, execution.replan_every,
-                                     execution.tolerance, follower=execution.follower(episodes))
-        plan_states = first[0]
+            def decide(states, goals, idx, t):
+                planned = source(states, goals, idx, t)
+                if t == 0:
+                    first.append(planned)
+                return planned
+
+            return decide
+
+    result = run_episodes(FirstPlans(), family, tasks, execution).outcome
+    plan_states = first[0]
+    gen = generator(planner.device, seed)
     tag = f"-{execution.tag()}" if execution.tag() else ""
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
     title = (f"{maze.name}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} step={info.step}, "
@@ -159,7 +161,7 @@ def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, ev
     """Replay executed states in MuJoCo's renderer (headless: MUJOCO_GL=egl) and save an animated GIF."""
     from PIL import Image
 
-    from bridgeplan.maze.sim import make_gym_env
+    from bridgeplan.envs.maze2d.sim import make_gym_env
     from bridgeplan.trajectory import MAZE2D
 
     env = make_gym_env(maze, render_mode="rgb_array", width=320, height=320)

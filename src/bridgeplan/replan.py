@@ -1,14 +1,15 @@
 """How plans are made and chosen when executing: replanning, warm starts, arrival time, candidates.
 
-:class:`Execution` holds the settings (the ``eval``/``render`` flags); :class:`PlanSource` turns a
-:class:`~bridgeplan.planner.Planner` into the ``plan_fn`` that ``maze.rollout.ClosedLoopController`` calls
-whenever episodes are due to plan. Each call is one decision for every due episode, made in one batch:
+:class:`Execution` holds the settings (the ``eval``/``render`` flags); :class:`PlanExecutor` runs a family's
+episodes on decisions (an agent of :meth:`bridgeplan.envs.family.Family.run`: it plans again when an episode is due,
+and its controllers execute the newest plans); :class:`PlanSource` turns a :class:`~bridgeplan.planner.Planner`
+into those decisions. Each call is one decision for every due episode, made in one batch:
 
 1. **Prior.** The run's own prior for the first plan; with ``warm``, replans start from
    :class:`~bridgeplan.priors.WarmPrior` (the episode's previous plan, shifted by the elapsed steps).
 2. **Candidates.** ``candidates`` (M) plans per episode, sampled in the same batch (N x M plans).
-3. **Arrival.** ``arrival="truncate"``: each plan is cut at its first state within ``GOAL_RADIUS`` (0.45)
-   of the goal, and holds the goal (zero velocity) from there on; ``"end"``: the plan as sampled, which
+3. **Arrival.** ``arrival="truncate"``: each plan is cut at its first state within the family's goal radius
+   (Maze2D: 0.45) of the goal, and holds the goal (zero velocity) from there on; ``"end"``: the plan as sampled, which
    arrives at ``t = H - 1`` (the goal is inpainted there); ``"keep"``: truncated as well, and a replan is
    conditioned to arrive by the step at which the episode's first plan came within 0.45 of the goal (the
    goal inpainted, held, from the planned index of that step on).
@@ -41,21 +42,30 @@ a trial, because a plan too short for the path cuts through walls. Results: docs
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import torch
 
+from bridgeplan.envs.controllers import Follower, check_controller
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import DEFAULT_LOOKAHEAD, Follower, check_controller
-from bridgeplan.maze.layouts import GOAL_RADIUS, Maze
-from bridgeplan.maze.rollout import check_replanning
 from bridgeplan.priors import WarmPrior
 from bridgeplan.trajectory import Layout
 
 SELECTIONS = ("arrival", "agreement", "walls")
 ARRIVALS = ("end", "truncate", "keep")
+
+
+def check_replanning(replan_every: int | None, tolerance: float | None, episode_steps: int) -> None:
+    """``replan_every`` in 1..episode_steps (or None: no periodic replanning), ``tolerance`` >= 0 (or None)."""
+    if replan_every is not None and not 1 <= replan_every <= episode_steps:
+        raise BridgeplanError(f"--replan-every must be in 1..{episode_steps} (the episode length), "
+                              f"got {replan_every}")
+    if tolerance is not None and not tolerance >= 0:
+        raise BridgeplanError(f"--replan-tolerance must be >= 0 (a distance in position), got {tolerance}")
 
 
 @dataclass(frozen=True)
@@ -67,9 +77,9 @@ class Execution:
     ``candidates`` (M): plans sampled per decision; ``select`` picks one (:data:`SELECTIONS`).
     ``warm``: replans start from the previous plan (:class:`~bridgeplan.priors.WarmPrior`) instead of the
     run's prior; needs a process with a prior and replanning. ``arrival``: ``end``, ``truncate`` or ``keep``
-    (see the module); None: ``truncate`` when replanning or sampling candidates, else ``end``.
+    (see the module); None: :attr:`arrival_default` when replanning or sampling candidates, else ``end``.
     ``controller``: ``track`` (Diffuser's) or ``pursuit`` (the plan's path at the expert's pace, toward the
-    first planned position ``lookahead`` away; :mod:`bridgeplan.maze.controllers`).
+    first planned position ``lookahead`` away; :mod:`bridgeplan.envs.controllers`; None: the family's lookahead).
     """
 
     replan_every: int | None = None
@@ -79,7 +89,15 @@ class Execution:
     warm: bool = False
     arrival: str | None = None
     controller: str = "track"
-    lookahead: float = DEFAULT_LOOKAHEAD
+    lookahead: float | None = None
+    arrival_default: str = "truncate"
+    """The arrival rule of replans and candidates when ``arrival`` is None: the family's
+    (``Family.default_arrival``, set by :meth:`resolved`); not part of the settings' name."""
+
+    def resolved(self, family, env: str) -> Execution:
+        """These settings in ``env`` of ``family``: its pursuit lookahead unless one is given, its arrival rule."""
+        lookahead = family.body(env).default_lookahead if self.lookahead is None else self.lookahead
+        return dataclasses.replace(self, lookahead=float(lookahead), arrival_default=family.default_arrival)
 
     @property
     def replans(self) -> bool:
@@ -89,11 +107,7 @@ class Execution:
     def arrival_rule(self) -> str:
         if self.arrival is not None:
             return self.arrival
-        return "truncate" if self.replans or self.candidates > 1 else "end"
-
-    def follower(self, n: int) -> Follower:
-        """The controllers that execute the plans of ``n`` episodes."""
-        return Follower(n, self.controller, self.lookahead)
+        return self.arrival_default if self.replans or self.candidates > 1 else "end"
 
     @property
     def plans_once(self) -> bool:
@@ -113,7 +127,7 @@ class Execution:
         if self.arrival == "keep" and not self.replans:
             raise BridgeplanError("--arrival keep holds replans to the first plan's arrival step: give "
                                   "--replan-every K or --replan-tolerance D")
-        if self.warm and not process.uses_prior:
+        if self.warm and process is not None and not process.uses_prior:
             raise BridgeplanError(f"--prior warm needs a process that starts from a prior; {process.display_name} "
                                   f"starts from Gaussian noise")
         if self.warm and not self.replans:
@@ -147,7 +161,7 @@ class Execution:
 
 
 def truncate_at_arrival(traj: np.ndarray, goals: np.ndarray, layout: Layout,
-                        radius: float = GOAL_RADIUS) -> tuple[np.ndarray, np.ndarray]:
+                        radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Cut each plan ``traj [N, H, D]`` (physical, in ``layout``) at its first state within ``radius`` of its
     goal ``goals [N, 2]`` and hold the goal from the next step on (zero velocity, zero action).
 
@@ -164,7 +178,7 @@ def truncate_at_arrival(traj: np.ndarray, goals: np.ndarray, layout: Layout,
     return traj, arrival
 
 
-def arrival_index(traj: np.ndarray, goals: np.ndarray, layout: Layout, radius: float = GOAL_RADIUS) -> np.ndarray:
+def arrival_index(traj: np.ndarray, goals: np.ndarray, layout: Layout, radius: float) -> np.ndarray:
     """``[N]`` the first index at which plan ``traj [N, H, D]`` (in ``layout``) is within ``radius`` of its goal
     (else H-1)."""
     traj = np.asarray(traj, dtype=np.float64)
@@ -173,21 +187,22 @@ def arrival_index(traj: np.ndarray, goals: np.ndarray, layout: Layout, radius: f
     return np.where(inside.any(axis=1), inside.argmax(axis=1), traj.shape[1] - 1)
 
 
-def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, layout: Layout,
-                      maze: Maze | None = None) -> np.ndarray:
+def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, layout: Layout, radius: float,
+                      free: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """The index ``[N]`` of the chosen candidate among ``traj [N, M, H, D]`` (in ``layout``; goals ``[N, 2]``).
 
-    ``arrival``: the earliest first state within 0.45 of the goal (ties: the first candidate).
+    ``arrival``: the earliest first state within ``radius`` of the goal (ties: the first candidate).
     ``agreement``: the candidate with the smallest mean position distance to the other candidates
     (the medoid; ties: the first). ``walls``: the fewest planned positions inside walls or outside the maze
-    (``maze`` needed), ties broken by earliest arrival. All use only the plans, the goal and, for ``walls``,
-    the wall map.
+    (``free``, the family's wall map, needed), ties broken by earliest arrival. All use only the plans, the goal
+    and, for ``walls``, the wall map.
     """
     traj = np.asarray(traj, dtype=np.float64)
     n, m, horizon, _ = traj.shape
     if m == 1:
         return np.zeros(n, dtype=np.int64)
-    arrival = arrival_index(traj.reshape(n * m, horizon, -1), np.repeat(goals, m, axis=0), layout).reshape(n, m)
+    arrival = arrival_index(traj.reshape(n * m, horizon, -1), np.repeat(goals, m, axis=0), layout,
+                            radius).reshape(n, m)
     if how == "arrival":
         return arrival.argmin(axis=1)
     pos = layout.positions(traj)
@@ -195,9 +210,9 @@ def select_candidates(traj: np.ndarray, goals: np.ndarray, how: str, layout: Lay
         dist = np.linalg.norm(pos[:, :, None] - pos[:, None, :], axis=-1).mean(axis=-1)  # [n, m, m]
         return dist.sum(axis=2).argmin(axis=1)
     if how == "walls":
-        if maze is None:
-            raise BridgeplanError("--select walls needs the maze")
-        in_walls = (~maze.is_free_xy(pos)).sum(axis=2)  # [n, m]
+        if free is None:
+            raise BridgeplanError("--select walls needs the environment's wall map, and its family has none")
+        in_walls = (~free(pos)).sum(axis=2)  # [n, m]
         return _lexmin(in_walls, arrival)
     raise BridgeplanError(f"unknown --select {how!r}: choose from {', '.join(SELECTIONS)}")
 
@@ -210,11 +225,12 @@ def _lexmin(first: np.ndarray, second: np.ndarray) -> np.ndarray:
 
 @dataclass
 class PlanSource:
-    """The ``plan_fn`` of the closed-loop controller over a planner (see the module): warm start, candidates,
-    arrival and selection, for a batch of ``n`` episodes; counts the decisions and times them.
+    """A planner's decisions (see the module): warm start, candidates, arrival and selection, for a batch of ``n``
+    episodes; counts the plans and their network calls and times them.
 
-    ``decision_seconds`` holds the wall time of every call (prior, network, truncation and selection of all
-    the episodes due at that step) and ``decision_batch`` how many episodes it decided for.
+    ``radius`` and ``free`` are the family's goal radius and wall map (arrival and ``walls`` selection);
+    ``prior_only`` plans from the prior's sample alone (a floor); ``measure_residuals``: collect each plan's
+    ``Planner.residuals`` in :attr:`residuals`.
     """
 
     planner: object
@@ -222,17 +238,27 @@ class PlanSource:
     nfe: int
     generator: torch.Generator
     n: int
-    maze: Maze | None = None
+    radius: float | None = None
+    free: Callable[[np.ndarray], np.ndarray] | None = None
     batch_size: int | None = None
+    prior_only: bool = False
+    measure_residuals: bool = False
+    residuals: dict[str, list] = field(default_factory=dict)
     previous: np.ndarray | None = None
     previous_at: np.ndarray | None = None
     deadline: np.ndarray | None = None
-    """``[n]`` the step at which each episode's first plan came within 0.45 of the goal (``keep``)."""
-    decision_seconds: list[float] = field(default_factory=list)
-    decision_batch: list[int] = field(default_factory=list)
+    """``[n]`` the step at which each episode's first plan came within the goal radius (``keep``)."""
+    calls: np.ndarray = field(init=False)
+    """``[n]`` network calls made for each episode (NFE per decision; a decision's candidates share a batch)."""
+    plan_seconds: float = 0.0
     prior_seconds: float = 0.0
-    sample_seconds: float = 0.0
     plans_sampled: int = 0
+
+    def __post_init__(self):
+        self.calls = np.zeros(self.n, dtype=np.int64)
+        if self.execution.arrival_rule != "end" and self.radius is None:
+            raise BridgeplanError(f"--arrival {self.execution.arrival_rule} cuts plans at the goal, and this "
+                                  f"environment's family has no goal radius")
 
     def reset(self) -> None:
         """Forget the previous plans (a new episode); counters and timings are kept."""
@@ -241,7 +267,6 @@ class PlanSource:
         self.deadline = None
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
-        t0 = time.perf_counter()
         ex, m = self.execution, self.execution.candidates
         planner = self.planner
         replan = self.previous is not None
@@ -263,27 +288,134 @@ class PlanSource:
                 sub = planner.with_prior(WarmPrior(planner.normalizer, planner.layout, prev[lo:lo + batch],
                                                    elapsed[lo:lo + batch], planner.stride))
             plan = sub.plan(starts[lo:lo + batch], goals_m[lo:lo + batch], self.nfe, self.generator,
-                            arrival=None if arrival is None else arrival[lo:lo + batch])
+                            prior_only=self.prior_only, arrival=None if arrival is None else arrival[lo:lo + batch])
             parts.append(np.concatenate([plan.actions, plan.states], axis=2))
             self.prior_seconds += plan.prior_seconds
-            self.sample_seconds += plan.sample_seconds
+            self.plan_seconds += plan.prior_seconds + plan.sample_seconds
+            if self.measure_residuals:
+                for key, values in planner.residuals(plan).items():
+                    self.residuals.setdefault(key, []).append(values)
         traj = np.concatenate(parts)
         self.plans_sampled += total
+        self.calls[episodes] += self.nfe
         if ex.arrival_rule in ("truncate", "keep"):
-            traj, _ = truncate_at_arrival(traj, goals_m, planner.layout)
+            traj, _ = truncate_at_arrival(traj, goals_m, planner.layout, self.radius)
         horizon = traj.shape[1]
         traj = traj.reshape(len(states), m, horizon, -1)
-        pick = select_candidates(traj, goals, ex.select, planner.layout, self.maze)
+        pick = select_candidates(traj, goals, ex.select, planner.layout, self.radius or 0.0, self.free)
         chosen = traj[np.arange(len(states)), pick]
         if self.previous is None:
             self.previous = np.zeros((self.n, horizon, chosen.shape[2]))
             self.previous_at = np.zeros(self.n, dtype=np.int64)
-            self.deadline = t + arrival_index(chosen, goals, planner.layout)
+            if ex.arrival_rule == "keep":
+                self.deadline = t + arrival_index(chosen, goals, planner.layout, self.radius)
         self.previous[episodes] = chosen
         self.previous_at[episodes] = t
-        self.decision_seconds.append(time.perf_counter() - t0)
-        self.decision_batch.append(len(states))
         return planner.layout.states(chosen)
+
+
+DecisionSource = Callable[[np.ndarray, np.ndarray, np.ndarray, int], np.ndarray]
+"""``(states [n, obs_dim], goals [n, goal_dim], episodes [n], t) -> planned states [n, S, obs_dim]``: new plans for
+the batch's episodes ``episodes`` from their current states at step ``t`` (:class:`PlanSource`, a hierarchy's
+``HierarchySource``, the dataset graph's ``GraphSource``); one with ``reset()`` forgets an episode's plans."""
+
+
+class PlanExecutor:
+    """Decisions executed by controllers: the :class:`~bridgeplan.envs.family.Agent` every evaluation runs.
+
+    For each batch of ``n`` episodes (:meth:`begin`) it makes a fresh decision source ``decisions(n)`` and controllers
+    ``follower(n)``; at an episode's first step it plans for every episode, then again for the episodes whose plan is
+    ``replan_every`` steps old or whose position is more than ``tolerance`` from its plan (``Follower.drift``), all of
+    them in one call, ended episodes never. The controllers execute the newest plan of each episode, indexed from the
+    step it was made at (past its end they hold its last position).
+
+    ``warm_up(states, goals, episodes, t)``, when given, is called once before the very first decision, untimed
+    (a compile, or a decision that is thrown away). Counted: the plans made per episode (:attr:`plans_made`, in episode
+    order over the batches), every decision's wall time and how many episodes it planned for, every step's.
+    """
+
+    def __init__(self, decisions: Callable[[int], DecisionSource], follower: Callable[[int], Follower],
+                 replan_every: int | None = None, tolerance: float | None = None,
+                 warm_up: Callable | None = None):
+        self.decisions, self.make_follower = decisions, follower
+        self.replan_every, self.tolerance, self.warm_up = replan_every, tolerance, warm_up
+        self.sources: list = []
+        self.made: list[np.ndarray] = []
+        self.decision_seconds: list[float] = []
+        self.decision_batch: list[int] = []
+        self.step_seconds: list[float] = []
+        self.warm_up_seconds = 0.0
+        self.n = 0
+
+    @property
+    def plans_made(self) -> np.ndarray:
+        """``[episodes]`` plans made for each episode so far (the first one included)."""
+        return np.concatenate(self.made) if self.made else np.zeros(0, dtype=np.int64)
+
+    def replan(self, rows: np.ndarray) -> None:
+        """Rows ``rows`` plan at the next step, whatever their plans' age (their goal changed)."""
+        self.forced[rows] = True
+
+    def begin(self, n: int) -> None:
+        self.n = int(n)
+        self.forced = np.zeros(self.n, dtype=bool)
+        self.source = self.decisions(self.n)
+        self.sources.append(self.source)
+        self.follower = self.make_follower(self.n)
+        self.plans: np.ndarray | None = None
+        self.made_at = np.zeros(self.n, dtype=np.int64)
+        self.made.append(np.zeros(self.n, dtype=np.int64))
+        self.active = np.ones(self.n, dtype=bool)
+        self.t = 0
+
+    def end(self, rows: np.ndarray) -> None:
+        self.active[rows] = False
+
+    def due(self, states: np.ndarray) -> np.ndarray:
+        """``[n]`` bool: the episodes that plan at this step."""
+        if self.plans is None:
+            return np.ones(self.n, dtype=bool)
+        age = self.t - self.made_at
+        due = np.zeros(self.n, dtype=bool)
+        if self.replan_every is not None:
+            due |= age >= self.replan_every
+        if self.tolerance is not None:
+            due |= self.follower.drift(states, self.plans, age) > self.tolerance
+        return (due | self.forced) & self.active
+
+    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        t0 = time.perf_counter()
+        states, goals = np.asarray(states, np.float64), np.asarray(goals, np.float64)
+        if len(states) != self.n:
+            raise BridgeplanError(f"the agent was called on {len(states)} episodes, its batch has {self.n} (begin was "
+                                  f"not called)")
+        due = self.due(states)
+        if due.any():
+            idx = np.flatnonzero(due)
+            if self.warm_up is not None:
+                w0 = time.perf_counter()
+                self.warm_up(states[idx], goals[idx], idx, self.t)
+                self.warm_up_seconds = time.perf_counter() - w0
+                self.warm_up = None
+                t0 = time.perf_counter()
+            d0 = time.perf_counter()
+            new = np.asarray(self.source(states[idx], goals[idx], idx, self.t), np.float64)
+            self.decision_seconds.append(time.perf_counter() - d0)
+            self.decision_batch.append(len(idx))
+            if self.plans is None:
+                if len(idx) != self.n:
+                    raise BridgeplanError("the first plan must be made for every episode")
+                self.plans = new.copy()
+            else:  # a plan's length is fixed, so replans fit the same array
+                self.plans[idx] = new
+            self.made_at[idx] = self.t
+            self.made[-1][idx] += 1
+            self.forced[idx] = False
+            self.follower.new_plans(idx)
+        actions = self.follower.actions(states, self.plans, self.t - self.made_at)
+        self.t += 1
+        self.step_seconds.append(time.perf_counter() - t0)
+        return actions
 
 
 def percentiles_ms(seconds: list[float]) -> dict:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from bridgeplan import config as cfg
-from bridgeplan import layout
+from bridgeplan import paths
 from bridgeplan.experiments.grids import EXPERIMENTS
 from bridgeplan.experiments.store import ResultsStore
 from bridgeplan.files import atomic_write_text
@@ -131,8 +131,8 @@ def write_report(results_dir: Path, out_dir: Path | None = None, titles: dict[st
     """PNG per experiment plus ``report.md`` with the tables; returns the Markdown path. ``titles``: experiments'
     titles (a study's), beside the thesis grids' own."""
     results_dir = Path(results_dir)
-    out_dir = Path(out_dir) if out_dir else layout.report_dir(results_dir)
-    store = ResultsStore(layout.store_path(results_dir))
+    out_dir = Path(out_dir) if out_dir else paths.report_dir(results_dir)
+    store = ResultsStore(paths.store_path(results_dir))
     lines = ["# bridgeplan results", "",
              "Normalized scores (Minari convention unless marked d4rl): mean ± standard error over the "
              "stated episodes, made by `bridgeplan report` from the results store.", ""]

@@ -14,11 +14,12 @@ import torch
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.device import resolve_device
+from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.layout import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.nets.prior_mlp import PriorMLP
 from bridgeplan.nets.unet import TemporalUNet
 from bridgeplan.normalizer import Normalizer
+from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.trajectory import Layout
@@ -26,27 +27,18 @@ from bridgeplan.trajectory import Layout
 
 def windows_of(stream, horizon: int, stride: int = 1):
     """Training windows of ``stream`` and the normalizer fitted to it (Diffuser: the whole dataset)."""
-    from bridgeplan.data import WindowDataset
+    from bridgeplan.data.windows import WindowDataset
 
     normalizer = Normalizer.fit(stream.transitions())
     return WindowDataset(stream, horizon, normalizer, stride), normalizer
 
 
 def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
-    """:func:`windows_of` the dataset at ``dataset``, checked to be from ``maze`` (an OGBench pointmaze dataset
-    name reads an OGBench ``.npz`` file, checked to be of that name's maze)."""
-    from bridgeplan.data import load_stream
-
+    """:func:`windows_of` the dataset at ``dataset``, read and checked to be of environment ``maze`` by its
+    family."""
     if not dataset:
         raise BridgeplanError("no dataset given: pass --dataset (see `bridgeplan data generate`)")
-    if cfg.is_pointmaze(maze):
-        from bridgeplan.ogbench_pointmaze.reading import load_stream as load_ogbench_stream
-
-        return windows_of(load_ogbench_stream(dataset, maze), horizon, stride)
-    stream = load_stream(dataset)
-    if stream.maze != maze:
-        raise BridgeplanError(f"dataset {dataset} is from maze {stream.maze!r}, not {maze!r}")
-    return windows_of(stream, horizon, stride)
+    return windows_of(family_of(maze).load_stream(dataset, maze), horizon, stride)
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
@@ -156,25 +148,6 @@ def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", s
         planner = planner.with_sampler(sampler, eta)
     return planner, RunInfo(run_dir, config, state["config"], state["step"], state["elapsed_seconds"],
                             bool(state.get("dataset_covers_every_cell", False)), state.get("dataset", ""))
-
-
-FAMILIES = {"maze2d": ("Maze2D", "bridgeplan eval"), "ogbench": ("OGBench pointmaze", "bridgeplan ogbench eval")}
-"""The environment families a run can be trained on: their names and the command that evaluates their runs."""
-
-
-def family_of(config: cfg.TrainConfig) -> str:
-    """``ogbench`` for a run trained on an OGBench pointmaze dataset, else ``maze2d``."""
-    return "ogbench" if cfg.is_pointmaze(config.maze) else "maze2d"
-
-
-def require_family(info: RunInfo, family: str) -> None:
-    """A :class:`BridgeplanError` unless ``info``'s run was trained on ``family`` (:data:`FAMILIES`): a planner
-    is evaluated in the environment family it learned (its layout, tasks and protocol are that family's)."""
-    ours = family_of(info.config)
-    if ours != family:
-        name, command = FAMILIES[ours]
-        raise BridgeplanError(f"{info.path} is a {name} planner (trained on {info.config.maze}), not a "
-                              f"{FAMILIES[family][0]} one: evaluate it with `{command}`")
 
 
 def resolve_run(run: str | Path) -> Path:

@@ -27,8 +27,8 @@ from bridgeplan.data.windows import hold_tails
 from bridgeplan.device import configure_threads, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import check_writable, code_version
-from bridgeplan.layout import checkpoint_path, config_path, snapshot_path, snapshot_steps
 from bridgeplan.locks import LOCK_NAME, run_lock
+from bridgeplan.paths import checkpoint_path, config_path, snapshot_path, snapshot_steps
 from bridgeplan.priors import train_prior_loss
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
 from bridgeplan.trajectory import window_conditions

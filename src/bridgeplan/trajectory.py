@@ -3,7 +3,8 @@
 A trajectory is a tensor ``[batch, horizon, transition_dim]`` whose columns are ``(actions, state)``: the
 environment's :class:`Layout` says how many of each and which state columns are the position and the
 velocity. Maze2D's (:data:`MAZE2D`) is Diffuser's ``(ax, ay, x, y, vx, vy)``; OGBench pointmaze's kinematic
-point (:data:`KINEMATIC_POINT`) is ``(ax, ay, x, y)``; :func:`layout_for` names the one of an environment.
+point (:data:`KINEMATIC_POINT`) is ``(ax, ay, x, y)``; an environment's family names its own
+(:meth:`bridgeplan.envs.family.Family.layout`).
 Goal reaching is inpainting: ``conditions`` maps a time index to the state (normalized) that the trajectory
 must have there, ``{0: start, horizon - 1: goal}``, each ``[batch, obs_dim]``; a row of NaN leaves that
 trajectory free at that index (conditions that hold for some episodes of a batch only).
@@ -17,7 +18,6 @@ import numpy as np
 import torch
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.layouts import MAZE_NAMES
 
 Conditions = dict[int, torch.Tensor]
 
@@ -100,21 +100,6 @@ MAZE2D = Layout("maze2d", act_dim=2, obs_dim=4, position=0, velocity=2)
 """Maze2D (gymnasium-robotics PointMaze): actions are forces, the state ``(x, y, vx, vy)``."""
 KINEMATIC_POINT = Layout("kinematic point", act_dim=2, obs_dim=2, position=0, velocity=None)
 """OGBench pointmaze: actions are position steps (scaled by the environment's gain), the state ``(x, y)``."""
-
-POINTMAZE_PREFIX = "pointmaze-"
-"""OGBench's pointmaze dataset names start with it (``pointmaze-medium-navigate-v0``)."""
-
-
-def layout_for(environment: str) -> Layout:
-    """The layout of ``environment``'s transitions: a Maze2D maze name (``umaze``, ...) or an OGBench pointmaze
-    dataset name (``pointmaze-...``)."""
-    if environment in MAZE_NAMES:
-        return MAZE2D
-    if environment.startswith(POINTMAZE_PREFIX):
-        return KINEMATIC_POINT
-    raise BridgeplanError(f"unknown environment {environment!r}: a Maze2D maze ({', '.join(MAZE_NAMES)}) or an "
-                          f"OGBench dataset name starting with {POINTMAZE_PREFIX!r}")
-
 
 def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
     """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor); rows of

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridgeplan.config import method_label
+from bridgeplan.envs.controllers import CONTROLLERS
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.maze.controllers import CONTROLLERS
 from bridgeplan.processes import PROCESSES, make_process
 from bridgeplan.processes.base import Process
 from bridgeplan.replan import Execution
@@ -153,6 +153,6 @@ def execution_from_dict(d: dict | None) -> Execution:
                                   else d["arrival"], controller=controller)
     if d.get("select"):
         kwargs["select"] = d["select"]
-    if controller != "track" and d.get("lookahead") is not None:
-        kwargs["lookahead"] = float(d["lookahead"])
+    if controller != "track":  # a JSON without it was pursued at Maze2D's lookahead then, 1
+        kwargs["lookahead"] = float(d["lookahead"]) if d.get("lookahead") is not None else 1.0
     return Execution(**kwargs)

@@ -21,7 +21,7 @@ from bridgeplan.config import PRESETS
 from bridgeplan.device import resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text
-from bridgeplan.layout import snapshot_path, snapshot_steps
+from bridgeplan.paths import snapshot_path, snapshot_steps
 
 
 @dataclass(frozen=True)

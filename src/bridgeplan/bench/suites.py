@@ -39,9 +39,9 @@ def diffusion_steps(nfes) -> int:
 
 def small_windows(horizon: int, stride: int = 1):
     """Windows of a small freshly generated umaze stream, and their normalizer (as training fits it)."""
-    from bridgeplan.data.datasets import stream_from_generated
-    from bridgeplan.data.generate import generate_stream
-    from bridgeplan.maze.layouts import get_maze
+    from bridgeplan.envs.maze2d.datasets import stream_from_generated
+    from bridgeplan.envs.maze2d.generate import generate_stream
+    from bridgeplan.envs.maze2d.grids import get_maze
 
     steps = 20 * horizon * stride
     stream = stream_from_generated("umaze", [generate_stream(get_maze("umaze"), steps, seed=0)])
@@ -222,12 +222,12 @@ def compile_speedup(preset: str, batch_sizes, rounds: int, dev: torch.device) ->
 
 def eval_throughput(run: str, device: str) -> dict:
     """Wall time of ``bridgeplan eval RUN --episodes 200 --nfe 1``, loading, planning, rollouts and floors."""
-    from bridgeplan.evaluate import evaluate
+    from bridgeplan.evaluate import evaluate_run
 
     t0 = time.perf_counter()
-    result = evaluate(Path(run), episodes=200, nfe=1, device=device)
+    result = evaluate_run(Path(run), episodes=200, nfe=1, device=device)
     return {"run": Path(run).name, "episodes": 200, "nfe": 1, "seconds": time.perf_counter() - t0,
-            "plan_ms_per_plan": result.plan_ms_per_plan, "score_minari": result.score("minari")}
+            "plan_ms_per_plan": result.cost["plan_ms_per_plan"], "score_minari": result.scores["score"]["minari"]}
 
 
 def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection_seed: int = 1,
@@ -239,7 +239,9 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
     setting is then scored on other, test tasks (``test_seed``): ``best`` reports that test score,
     never the selection's own. Each snapshot is loaded once; the floors are computed once per run.
     """
+    from bridgeplan.envs import family_of
     from bridgeplan.evaluate import evaluate_planner, floors, make_tasks
+    from bridgeplan.replan import Execution
     from bridgeplan.runs import load_planner
 
     evals, best = [], []
@@ -248,7 +250,9 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
             planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
             tasks = {split: make_tasks(info.config.maze, episodes, seed)
                      for split, seed in (("validation", selection_seed), ("test", test_seed))}
-            run_floors = {split: floors(planner, t) for split, t in tasks.items()}
+            family = family_of(info.config.maze)
+            run_floors = {split: floors(planner, family, t, Execution().resolved(family, info.config.maze))
+                          for split, t in tasks.items()}
             method = planner.process.label(planner.prior.name)
             scored = {}
             for sampler in planner.process.usable_samplers() or (None,):
@@ -260,18 +264,19 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
                         scored[(sampler, nfe, split)] = r
                         evals.append({"method": method, "run": info.name, "step": info.step, "split": split,
                                       "train_minutes": info.elapsed_seconds / 60, "nfe": nfe,
-                                      "sampler": sampler or "-", "score_minari": r.score("minari"),
-                                      "score_d4rl": r.score("d4rl"), "success_rate": r.scores["success_rate"]["mean"],
-                                      "plan_ms_per_plan": r.plan_ms_per_plan,
+                                      "sampler": sampler or "-", "score_minari": r.scores["score"]["minari"],
+                                      "score_d4rl": r.scores["score"]["d4rl"],
+                                      "success_rate": r.scores["success_rate"]["mean"],
+                                      "plan_ms_per_plan": r.cost["plan_ms_per_plan"],
                                       "floor_line_minari": r.floors["floor_line"]["score"]["minari"]})
             for k in budgets:
                 within = [key for key in scored if key[2] == "validation" and key[1] <= k]
-                sampler, nfe, _ = max(within, key=lambda key: scored[key].score("minari")["mean"])
+                sampler, nfe, _ = max(within, key=lambda key: scored[key].scores["score"]["minari"]["mean"])
                 test = scored[(sampler, nfe, "test")]
                 best.append({"method": method, "run": info.name, "budget": k, "nfe": nfe, "sampler": sampler or "-",
                              "step": info.step, "train_minutes": info.elapsed_seconds / 60,
-                             "validation_score_minari": scored[(sampler, nfe, "validation")].score("minari"),
-                             "score_minari": test.score("minari")})
+                             "validation_score_minari": scored[(sampler, nfe, "validation")].scores["score"]["minari"],
+                             "score_minari": test.scores["score"]["minari"]})
     return {"episodes": episodes, "selection_seed": selection_seed, "test_seed": test_seed,
             "evaluations": evals, "best": best}
 

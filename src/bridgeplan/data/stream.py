@@ -10,18 +10,19 @@ datasets, official Minari ``D4RL/pointmaze`` ones, legacy D4RL ``maze2d-*.hdf5``
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.trajectory import Layout, layout_for
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.trajectory import Layout
 
 
 @dataclass
 class Stream:
     maze: str
-    """Maze name (open, umaze, medium, large): it names the environment, and so the layout."""
+    """The environment's name (a Maze2D maze, an OGBench dataset name): results name the data by it."""
     states: np.ndarray
     """``[T, obs_dim]`` the state before each action (Maze2D: x, y, vx, vy in gymnasium-robotics coordinates),
     float64."""
@@ -37,7 +38,9 @@ class Stream:
     """Where the data came from (a path, or a description)."""
     data_version: int | None = None
     """Version of bridgeplan's generator that made the data
-    (:data:`bridgeplan.data.generate.DATA_VERSION`); None for data bridgeplan did not generate."""
+    (:data:`bridgeplan.envs.maze2d.generate.DATA_VERSION`); None for data bridgeplan did not generate."""
+    layout: Layout = field(kw_only=True)
+    """The columns of its transitions (its environment family's)."""
 
     def __post_init__(self):
         self.segment_starts = np.asarray(self.segment_starts, dtype=np.int64)
@@ -51,10 +54,6 @@ class Stream:
                                  or self.segment_starts[-1] >= len(self.states)):
             raise ValueError(f"bad segment starts {self.segment_starts[:10]} for {len(self.states)} "
                              f"transitions")
-
-    @property
-    def layout(self) -> Layout:
-        return layout_for(self.maze)
 
     def identity(self) -> str:
         """What the data is, as results name it (no path of the machine): its source's name, maze, size, generator
@@ -78,6 +77,14 @@ class Stream:
     def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """``[(states [T_k, obs_dim], actions [T_k, act_dim]), ...]`` (views) of the continuous segments."""
         return [(self.states[lo:hi], self.actions[lo:hi]) for lo, hi in self.segment_bounds()]
+
+    def pace(self) -> float:
+        """The median distance the data's position moves in one step, within its segments."""
+        xy = self.layout.state_positions(self.states)
+        moves = [np.linalg.norm(np.diff(xy[lo:hi], axis=0), axis=1) for lo, hi in self.segment_bounds() if hi - lo > 1]
+        if not moves:
+            raise BridgeplanError("the dataset has no two consecutive states: no pace to measure")
+        return float(np.median(np.concatenate(moves)))
 
     def transitions(self) -> np.ndarray:
         """``[T, transition_dim]`` in the trajectory layout: actions, then state."""

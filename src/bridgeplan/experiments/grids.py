@@ -164,7 +164,8 @@ def controller_series(run: RunSpec, multi_task: bool) -> list[Series]:
     at NFE 1 with pursuit (lookahead 1; processes with a prior from the warm prior)."""
     task = " Multi2D" if multi_task else ""
     open_loop = [Execution()] + [Execution(controller="pursuit", lookahead=r) for r in LOOKAHEADS]
-    replanned = Execution(replan_every=REPLAN_EVERY, warm=run.process.uses_prior, controller="pursuit")
+    replanned = Execution(replan_every=REPLAN_EVERY, warm=run.process.uses_prior, controller="pursuit",
+                          lookahead=1.0)
     return ([Series(f"{run.label()} NFE {k} {ex.tag() or 'track'}{task}", run, k, ex, multi_task)
              for k in sorted({1, run.process.max_nfe}) for ex in open_loop]
             + [Series(f"{run.label()} NFE 1 {replanned.tag()}{task}", run, 1, replanned, multi_task)])

@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridgeplan import config as cfg
-from bridgeplan import layout
+from bridgeplan import paths
 from bridgeplan.checkpoint import load_checkpoint
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
-from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore
+from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
 
 
@@ -68,7 +68,7 @@ def _prior_config(s: SweepSettings, seed: int, planner: cfg.TrainConfig) -> cfg.
 
 def _trained_step(run_dir: Path) -> int:
     """Optimizer steps a run has done (-1: not started)."""
-    ckpt = layout.checkpoint_path(run_dir)
+    ckpt = paths.checkpoint_path(run_dir)
     return load_checkpoint(ckpt)["step"] if ckpt.exists() else -1
 
 
@@ -92,6 +92,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     once per task set and controller for the job.
     """
     from bridgeplan.device import configure_threads
+    from bridgeplan.envs import family_of
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
     from bridgeplan.runs import load_planner
     from bridgeplan.train import train
@@ -100,11 +101,11 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     if settings.only_runs is not None and config.run_name() not in settings.only_runs:
         return []
     configure_threads(threads or config.threads)
-    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
+    run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
     train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []
-    store = ResultsStore(layout.store_path(settings.results_dir))
+    store = ResultsStore(paths.store_path(settings.results_dir))
     suffix = VALIDATION_SUFFIX if settings.validation else ""
     split = "validation" if settings.validation else "test"
     wanted = [(exp.name + suffix, series) for exp in experiments for series in exp.series if series.run == spec]
@@ -113,7 +114,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     tasks = {multi: make_tasks(settings.maze, settings.episodes, task_seed, multi) for multi in (False, True)}
     job_floors = {}  # per task set and controller, once for the job (same prior, same tasks at every snapshot)
     rows = []
-    steps = [s for s in layout.snapshot_steps(run_dir) if s <= config.steps]
+    steps = [s for s in paths.snapshot_steps(run_dir) if s <= config.steps]
     for step in steps:
         todo = []
         for name, series in wanted:
@@ -133,14 +134,15 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                 store.link(key, name)
                 continue
             task_set = tasks[series.multi_task]
-            ex = series.execution
+            family = family_of(settings.maze)
+            ex = series.execution.resolved(family, settings.maze)
             floors_key = (series.multi_task, ex.controller, ex.lookahead)
             if floors_key not in job_floors:
-                job_floors[floors_key] = floors(planner, task_set, ex)
+                job_floors[floors_key] = floors(planner, family, task_set, ex)
             sampled = planner if series.sampler is None else planner.with_sampler(series.sampler)
             sampled = sampled.with_correction(series.correction)
-            row = evaluate_planner(sampled, task_set, series.nfe, run=info, execution=series.execution,
-                                   precomputed_floors=job_floors[floors_key]).to_row(split)
+            row = row_from_eval_json(evaluate_planner(sampled, task_set, series.nfe, run=info, execution=ex,
+                                                      precomputed_floors=job_floors[floors_key]).to_dict(), split)
             if store.add(row, [name]):  # a concurrent sweep may have added it meanwhile
                 rows.append(row)
     return rows
@@ -152,11 +154,11 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
 
     if settings.dataset:
         return settings
-    from bridgeplan.data import generate_dataset
+    from bridgeplan.envs import family_of
 
-    path = (layout.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
+    path = (paths.data_dir(settings.results_dir) / f"{settings.maze}-{settings.dataset_steps}").resolve()
     if not path.exists():
-        generate_dataset(settings.maze, settings.dataset_steps, seed=123, out=path)
+        family_of(settings.maze).generate_dataset(settings.maze, path, seed=123, steps=settings.dataset_steps)
     return dataclasses.replace(settings, dataset=str(path))
 
 
@@ -174,7 +176,7 @@ def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: s
     for exp in experiments:
         exp.validate()
     check_backend(backend)
-    ResultsStore(layout.store_path(settings.results_dir))  # refuse a newer schema before any work
+    ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
     if workers < 1:
         raise BridgeplanError(f"workers must be >= 1, got {workers}")
     ray = None
@@ -232,6 +234,6 @@ def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, 
     from bridgeplan.train import train_prior
 
     config = _prior_config(settings, seed, planner)
-    run_dir = layout.runs_dir(settings.results_dir) / config.run_name()
+    run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
     train_to(train_prior, config, run_dir, progress)
     return str(run_dir)

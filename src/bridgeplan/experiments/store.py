@@ -197,7 +197,8 @@ def _upgraded(old: dict) -> dict:
 
 
 class ResultsStore:
-    """The store file (``layout.store_path(results_dir)``); rows come from ``EvalResult.to_row``."""
+    """The store file (``paths.store_path(results_dir)``); rows come from evaluations' JSON
+    (:func:`row_from_eval_json`)."""
 
     def __init__(self, path: Path):
         self.path = Path(path)

@@ -4,8 +4,8 @@ that run it and regenerate its reports.
 - :mod:`~bridgeplan.studies.spec`: the file format, parsed into frozen dataclasses (:class:`Study`);
 - :mod:`~bridgeplan.studies.plan`: the study as sweeps of the experiments runner, what is missing from its
   store and what that costs, the quick scale;
-- :mod:`~bridgeplan.studies.reports`: the generators of the committed reports (findings.md, prior-curves.md,
-  controllers.md) from the committed results under docs/results.
+- :mod:`~bridgeplan.studies.generators`: what a report generator is, and loading a repository's own
+  (``studies/reports/`` at its root: the generators of its committed reports from its results under docs/results).
 
 The repository root (``--root``; default: the git top-level of the current directory, else the current
 directory) holds ``studies/`` and ``docs/results/``.
@@ -17,6 +17,7 @@ import subprocess
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.studies import generators
 from bridgeplan.studies.plan import check_reports, check_study
 from bridgeplan.studies.spec import Study, StudyError, read_study
 
@@ -38,10 +39,11 @@ def find_root(root: str | Path | None = None) -> Path:
     return root
 
 
-def parse_study(path: Path | str, shown: Path | str | None = None) -> Study:
-    """The study in ``path``, read (:func:`~bridgeplan.studies.spec.read_study`) and checked on its own: its grids,
-    preset and runs against its maze (:func:`~bridgeplan.studies.plan.check_study`)."""
-    study = read_study(path, shown)
+def parse_study(path: Path | str, shown: Path | str | None = None, generators: dict | None = None) -> Study:
+    """The study in ``path``, read (:func:`~bridgeplan.studies.spec.read_study`; its reports' ``generators``, a
+    repository's) and checked on its own: its grids, preset and runs against its maze
+    (:func:`~bridgeplan.studies.plan.check_study`)."""
+    study = read_study(path, shown, generators or {})
     check_study(study)
     return study
 
@@ -62,9 +64,10 @@ class Studies(dict):
 def load_studies(root: Path) -> Studies:
     """Every study of ``root/studies``, parsed and checked against each other (``uses``, reports' methods)."""
     studies = Studies()
+    reports = generators.load(root)
     for path in sorted((Path(root) / "studies").glob("*.toml")):
         try:
-            study = parse_study(path, shown=path.relative_to(root))
+            study = parse_study(path, shown=path.relative_to(root), generators=reports)
             if study.name in studies:
                 raise StudyError(study.file, "name", f"{study.name!r} is also the name of {studies[study.name].file}")
         except BridgeplanError as e:
@@ -75,7 +78,7 @@ def load_studies(root: Path) -> Studies:
         errors = {}
         for study in studies.values():
             try:
-                check_reports(study, studies)
+                check_reports(study, studies, reports)
             except BridgeplanError as e:
                 errors[study.name] = e
         if not errors:

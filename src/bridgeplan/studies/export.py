@@ -69,7 +69,7 @@ def stale_rows(study: Study, root: Path) -> list[str]:
     its grids (docs/results/DATA/results.csv) and the JSONs of its one-run planner evaluations."""
     from bridgeplan import config as cfg
     from bridgeplan.experiments.runner import _train_config
-    from bridgeplan.studies.commands import jobs, train_config
+    from bridgeplan.studies.jobs import jobs, train_config
     from bridgeplan.studies.plan import sweeps
 
     recorded: dict[str, dict] = {}  # run name -> its config as a row records it
@@ -113,7 +113,7 @@ def exportable(chain: list[Study], root: Path, store_dir) -> list[Study]:
 def _pairs(study: Study, root: Path, store_dir: Path) -> list[tuple[Path, Path]]:
     """What :func:`export` copies or writes: (source, target) pairs, the targets' folders writable; an error when the
     study has nothing to export."""
-    from bridgeplan import layout
+    from bridgeplan import paths
     from bridgeplan.experiments.store import stored_keys
     from bridgeplan.files import check_writable
 
@@ -121,7 +121,7 @@ def _pairs(study: Study, root: Path, store_dir: Path) -> list[tuple[Path, Path]]
         raise BridgeplanError(f"study {study.name} trains and evaluates nothing of its own: nothing to export")
     if not study.experiments:
         return _json_pairs(study, store_dir, Path(root) / "docs" / "results")
-    store = layout.store_path(store_dir)
+    store = paths.store_path(store_dir)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run {study.file}` (or "
                               f"`study import`) first")
@@ -163,7 +163,7 @@ def _json_pairs(study: Study, source: Path, target: Path) -> list[tuple[Path, Pa
     """(the JSON under ``source``, where it goes under ``target``) for each evaluation JSON of the study that
     exists, every target folder checked writable; an error when none exists."""
     from bridgeplan.files import check_writable
-    from bridgeplan.studies.commands import jobs
+    from bridgeplan.studies.jobs import jobs
 
     found = [job.path for job in jobs(study, source, source, quick=False) if job.path.exists()]
     if not found:

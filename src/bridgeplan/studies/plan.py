@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.commands import jobs, needed_runs, run_commands, train_config
+from bridgeplan.studies.jobs import jobs, needed_runs, run_commands, train_config
 from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError, committed_csv
 
 TRAIN_STEPS_PER_SECOND = 18.6
@@ -51,11 +51,13 @@ class Scale:
         steps = max(1, t.steps // 10)
         training = dataclasses.replace(t, steps=steps, checkpoint_every=max(1, steps // 2), stages=(),
                                        prior_steps=max(1, t.prior_steps // 10), seeds=t.seeds[:2])
-        evaluation = dataclasses.replace(study.evaluation, episodes=min(study.evaluation.episodes, 20))
+        episodes = (study.evaluation.episodes if study.dataset is None else
+                    min(study.episodes, study.dataset.family.quick_episodes))
+        evaluation = dataclasses.replace(study.evaluation, episodes=episodes)
         experiments = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.experiments)
         evaluations = tuple(dataclasses.replace(e, seeds=e.seeds[:2]) if e.seeds else e for e in study.evaluations)
         dataset = study.dataset
-        if dataset is not None and not dataset.path and dataset.generator == "expert":  # OGBench's: the recipe's
+        if dataset is not None and not dataset.path and dataset.family.sized_data:  # else the recipe's size
             n = min(dataset.steps, 100_000)
             dataset = dataclasses.replace(dataset, steps=n, path=f"results/quick/datasets/{dataset.maze}-{n}-v"
                                                                  f"{dataset.version}")
@@ -101,7 +103,7 @@ def build_experiment(study: Study, index: int):
             for s in exp.series:
                 m = methods[s.method]
                 run = RunSpec(make_process(m.process, steps=steps, **dict(m.params)), m.prior)
-                execution = Execution(**dict(s.execution))
+                execution = Execution(**dict(s.execution)).resolved(study.dataset.family, study.dataset.maze)
                 for nfe in s.nfe:
                     for multi in s.multi_task:
                         for correction in s.correction:
@@ -143,7 +145,7 @@ def sweeps(study: Study, root: Path, scale: Scale = Scale()) -> list[Sweep]:
             settings = SweepSettings(
                 maze=study.dataset.maze, dataset=str((Path(root) / study.dataset.directory()).resolve()),
                 dataset_steps=study.dataset.steps, preset=t.preset, train_steps=t.steps, prior_steps=t.prior_steps,
-                checkpoint_every=t.checkpoint_every, episodes=study.evaluation.episodes,
+                checkpoint_every=t.checkpoint_every, episodes=study.episodes,
                 seeds=exp.seeds or t.seeds, results_dir=str(results_dir(study, root, scale)), overrides=overrides,
                 validation=split == "validation")
             out.append(Sweep(experiment, settings, t.all_stages()))
@@ -190,11 +192,10 @@ def trained_methods(study: Study) -> set:
     return out
 
 
-def check_reports(study: Study, studies: dict[str, Study]) -> None:
+def check_reports(study: Study, studies: dict[str, Study], generators: dict) -> None:
     """Its ``uses`` name known studies that parse, with no cycle through them (itself included), and each report's
     generator reads only methods that the study or the studies it uses train."""
     from bridgeplan.analysis.keys import label
-    from bridgeplan.studies.reports import GENERATORS
 
     broken = getattr(studies, "broken", {})
     for i, name in enumerate(study.uses):
@@ -211,7 +212,7 @@ def check_reports(study: Study, studies: dict[str, Study]) -> None:
     for name in study.uses:
         trained |= trained_methods(studies[name])
     for i, report in enumerate(study.reports):
-        missing = [k for k in GENERATORS[report.generator].reads() if k not in trained]
+        missing = [k for k in generators[report.generator].reads() if k not in trained]
         if missing:
             raise StudyError(study.file, f"reports[{i}].generator",
                              f"{report.generator} reads {label(missing[0])} (N={missing[0].steps}), which neither "
@@ -236,9 +237,9 @@ def _cycle(study: Study, studies: dict[str, Study]) -> list[str]:
 # --- what is missing ---------------------------------------------------------------------------------------------
 
 def _planned_snapshots(run_dir: Path, stages) -> list[int]:
-    from bridgeplan import layout
+    from bridgeplan import paths
 
-    steps = set(layout.snapshot_steps(run_dir)) if run_dir.exists() else set()
+    steps = set(paths.snapshot_steps(run_dir)) if run_dir.exists() else set()
     start = 0
     for total, every in stages:
         steps |= {s for s in range(start + 1, total + 1) if s % every == 0 or s == total}
@@ -310,7 +311,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     """What ``study run`` would train and evaluate: evaluations absent from the store, and the runs they need that are
     short of their steps (a run whose evaluations are all stored, imported say, is not trained)."""
     from bridgeplan import config as cfg
-    from bridgeplan import layout
+    from bridgeplan import paths
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET
     from bridgeplan.experiments.runner import _prior_config, _train_config, _trained_step
     from bridgeplan.experiments.store import VALIDATION_SUFFIX, stored_keys
@@ -321,11 +322,11 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
     corrections: Counter = Counter()
     wanted: dict[str, set[tuple]] = {}
     declared: dict[str, set[tuple]] = {}
-    keys, members = stored_keys(layout.store_path(results_dir(study, root, scale)))
+    keys, members = stored_keys(paths.store_path(results_dir(study, root, scale)))
     seen = set()
     for sweep in plan:
         s, experiment = sweep.settings, sweep.experiment
-        runs = layout.runs_dir(s.results_dir)
+        runs = paths.runs_dir(s.results_dir)
         planner = cfg.preset_config(s.maze, s.preset, **s.overrides)
         suffix = VALIDATION_SUFFIX if s.validation else ""
         name = experiment.name + suffix
@@ -364,7 +365,7 @@ def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
         for run, n, done in needed_runs(scaled, results, {(r, j.seed) for j in jsons for r in j.runs}):
             trains.setdefault(run, (n, done))
     todo = tuple((run, n, done) for run, (n, done) in sorted(trains.items()) if done < n)
-    return Missing(todo, evaluations, scaled.evaluation.episodes, corrections, wanted, declared, jsons)
+    return Missing(todo, evaluations, scaled.episodes if scaled.dataset else 0, corrections, wanted, declared, jsons)
 
 
 def committed_not_imported(study: Study, root: Path, m: Missing) -> str | None:
@@ -404,7 +405,7 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
             lines.extend(f"    {tag or 'uncorrected'}: {n} evaluations" for tag, n in by_correction)
     by_command: dict[str, list] = {}
     for job in m.jsons:
-        by_command.setdefault(" ".join(job.argv[:1 if job.argv[0] == "eval" else 2]), []).append(job)
+        by_command.setdefault(job.command, []).append(job)
     for command, todo in by_command.items():
         lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}")
     if scale.committed and (note := committed_not_imported(study, root, m)):
@@ -436,7 +437,7 @@ def quick_table(study: Study, root: Path) -> list[str]:
     from bridgeplan.analysis.stats import mean_se
     from bridgeplan.analysis.tables import fmt_mean_se, table
     from bridgeplan.experiments.store import ResultsStore
-    from bridgeplan.layout import store_path
+    from bridgeplan.paths import store_path
 
     store = store_path(results_dir(study, root, Scale("quick")))
     if not study.experiments or not store.exists():
@@ -482,25 +483,20 @@ def _hours(seconds: float) -> str:
 # --- running -----------------------------------------------------------------------------------------------------
 
 def ensure_dataset(study: Study, root: Path, progress: bool = True) -> Path:
-    """The study's dataset directory, generated (seed and steps as declared) when absent; its data version is
-    checked against the generator's."""
-    from bridgeplan.data.generate import DATA_VERSION
+    """The study's dataset, generated by its family's recipe (seed and steps as declared) when absent; its data
+    version is checked against the generator's, where the family's data has versions."""
+    from bridgeplan.envs import family_of
 
     d = study.dataset
+    family = family_of(d.maze)
     path = (Path(root) / d.directory()).resolve()
-    if d.generator == "ogbench":
-        if not path.exists():
-            from bridgeplan.ogbench_pointmaze.generate import generate_dataset as generate_ogbench
-
-            generate_ogbench(d.maze, path.parent, seed=d.seed, progress=progress)
-        return path
-    if d.version != DATA_VERSION:
+    if family.data_version is not None and d.version != family.data_version:
         raise StudyError(study.file, "dataset.version", f"data version {d.version}, but this bridgeplan generates "
-                                                        f"version {DATA_VERSION}")
+                                                        f"version {family.data_version}")
     if not path.exists():
-        from bridgeplan.data import generate_dataset
-
-        generate_dataset(d.maze, d.steps, seed=d.seed, out=path, progress=progress, piece_steps=d.piece_steps or None)
+        family.generate_dataset(d.maze, path, seed=d.seed, steps=d.steps if family.sized_data else None,
+                                piece_steps=d.piece_steps or None,
+                                progress=progress)
     return path
 
 
@@ -558,10 +554,10 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     workers = workers or study.evaluation.workers
     added, only = 0, None
     if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
-        from bridgeplan import layout
+        from bridgeplan import paths
         from bridgeplan.experiments.store import ResultsStore, stored_keys
 
-        path = layout.store_path(results_dir(study, root, scale))
+        path = paths.store_path(results_dir(study, root, scale))
         keys, _ = stored_keys(path)
         links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
         if links:

@@ -11,11 +11,12 @@ from pathlib import Path
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint
+from bridgeplan.envs import family_of
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.evaluate import check_multi_task_data
+from bridgeplan.evaluate import make_tasks
 from bridgeplan.experiments.runner import _train_config
 from bridgeplan.files import atomic_write_text
-from bridgeplan.layout import runs_dir, snapshot_path
+from bridgeplan.paths import runs_dir, snapshot_path
 from bridgeplan.runs import build_model
 from bridgeplan.shipped import MANIFEST, STUDY, ShippedPlanner, manifest, sha256
 from bridgeplan.studies import load_studies, select
@@ -66,7 +67,8 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None,
         rows_csv = Path("docs") / "results" / study.data_dir / "results.csv"
         _check_rows(root / rows_csv, config.run_name(), state["step"])
         if any(s.multi_task for e in study.experiments for s in e.series):
-            check_multi_task_data(study.dataset.maze, state["config"]["dataset"])  # raises if a cell is unvisited
+            family_of(study.dataset.maze).check_run_data(make_tasks(study.dataset.maze, 1, multi_task=True),
+                                                         state["config"]["dataset"])  # raises if a cell is unvisited
         loaded = cfg.from_dict(cfg.TrainConfig, state["config"])
         model = build_model(loaded)
         model.load_state_dict(state["ema"])  # the weights fit the config

@@ -16,7 +16,7 @@ Example (the keys and their defaults: the dataclasses below)::
     steps = 1_000_000                    # transitions `bridgeplan data generate` makes
     seed = 123
     # piece_steps = 200                  # as independent pieces of 200 steps (a stitching dataset)
-    version = 2                          # the generator's data version (bridgeplan.data.generate.DATA_VERSION)
+    version = 2                          # the generator's data version (bridgeplan.envs.maze2d.generate.DATA_VERSION)
     # generator = "ogbench"              # OGBench's recipe instead; maze = "pointmaze-medium-navigate-v0"
 
     [training]
@@ -54,18 +54,16 @@ Example (the keys and their defaults: the dataclasses below)::
                 correction_form = "x0" }]  # consistency corrections (CDDB) of x0 (default) or deep form
 
     [runs.high-ddpm-k12]                 # a named run, for evaluations that are one command each
-    process = "ddpm"                     # (bridgeplan.studies.commands: eval, hierarchy eval, ogbench eval,
+    process = "ddpm"                     # (bridgeplan.studies.jobs: eval, hierarchy eval, graph,
     horizon = 32                         #  each writing one JSON, exported to docs/results; prior = "learned"
     stride = 12                          #  trains its prior first, for prior_steps)
 
-    [runs.gcbc]                          # trainer = "gcbc": `ogbench gcbc-train`'s run (GCBCConfig fields)
+    [runs.gcbc]                          # trainer = "gcbc": `gcbc train`'s run (GCBCConfig fields)
     trainer = "gcbc"
     maze = "medium"
 
     [[evaluations]]
-    command = "eval"                     # or hierarchy eval, hierarchy graph-eval, ogbench eval, ogbench
-                                         # hierarchy-eval, ogbench evaluate-oracle, ogbench gcbc-eval, ogbench
-                                         # graph-eval
+    command = "eval"                     # or hierarchy eval, graph, oracle, gcbc eval (any environment's)
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -73,7 +71,7 @@ Example (the keys and their defaults: the dataclasses below)::
     task_sets = ["single", "multi"]
 
     [[reports]]
-    generator = "findings"               # bridgeplan.studies.reports.GENERATORS
+    generator = "findings"               # the repository's studies/reports (bridgeplan.studies.generators)
     output = "findings.md"               # relative to docs/results
 
 Any other key, an unknown grid, process, parameter, method, sampler or generator, or a report whose generator
@@ -110,25 +108,28 @@ class Dataset:
     steps: int = 1_000_000
     """Transitions of the generated dataset (`bridgeplan data generate --steps`)."""
     seed: int = 123
-    generator: str = "expert"
-    """``expert``: the noisy expert stream of `bridgeplan data generate` (Minari's D4RL recipe); ``ogbench``: OGBench's
-    recipe (`bridgeplan ogbench generate`; ``maze`` is then the dataset's name, e.g.
-    ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
+    generator: str = ""
+    """The maze's family's recipe (``Family.generator``; '' says so too): ``expert``, Maze2D's noisy expert stream
+    (`bridgeplan data generate`, Minari's D4RL recipe); ``ogbench``, OGBench's recipe (``maze`` is then the
+    dataset's name, e.g. ``pointmaze-medium-navigate-v0``, its size the recipe's)."""
     version: int = 2
-    """The data version the expert generator must have (``bridgeplan.data.generate.DATA_VERSION``)."""
+    """The data version the generator must have, where the family's data has versions
+    (``bridgeplan.envs.maze2d.generate.DATA_VERSION``)."""
     piece_steps: int = 0
     """The expert's data as independent pieces of this many steps (`data generate --piece-steps`; 0: one stream)."""
     path: str = ""
-    """Dataset directory (or file), relative to the repository root; default ``datasets/<maze>-<steps>-v<version>``,
-    or ``datasets/ogbench/<name>.npz`` (generated there when absent, as the campaigns did)."""
+    """Dataset directory (or file), relative to the repository root; default the family's
+    (``Family.default_dataset``: ``datasets/<maze>-<steps>-v<version>``, ``datasets/ogbench/<name>.npz``), generated
+    there when absent, as the campaigns did."""
+
+    @property
+    def family(self):
+        from bridgeplan.envs import family_of
+
+        return family_of(self.maze)
 
     def directory(self) -> str:
-        if self.path:
-            return self.path
-        if self.generator == "ogbench":
-            return f"datasets/ogbench/{self.maze}.npz"
-        pieces = f"-pieces{self.piece_steps}" if self.piece_steps else ""
-        return f"datasets/{self.maze}-{self.steps}{pieces}-v{self.version}"
+        return self.path or self.family.default_dataset(self.maze, self.steps, self.piece_steps, self.version)
 
 
 @dataclass(frozen=True)
@@ -150,19 +151,21 @@ class Training:
         return (*self.stages, (self.steps, self.checkpoint_every))
 
 
-OGBENCH_VALIDATIONS = ("other-tasks", "test-tasks-reseeded")
+VALIDATIONS = ("other-tasks", "test-tasks-reseeded")
 
 
 @dataclass(frozen=True)
 class Evaluation:
-    episodes: int = 200
+    episodes: int | None = None
+    """Episodes per task (None: the environment family's, Maze2D 200 in all, OGBench 50 per task)."""
     workers: int = 1
     """Parallel jobs of the local backend (cores divided among them)."""
-    ogbench_validation: str = "other-tasks"
-    """What an OGBench command's validation split evaluates: ``other-tasks``, bridgeplan's five validation tasks
-    (``protocol.validation_tasks``: other cells than the test tasks'); ``test-tasks-reseeded``, the test tasks
-    themselves with other noise (the training seed + 1000), the draw the studies made before it, which they pin so
-    that their committed rows keep reproducing."""
+    validation: str = "other-tasks"
+    """What the validation split evaluates in a family with validation tasks of its own (``Family.validation_tasks``:
+    OGBench's, ``protocol.validation_tasks``, other cells than the test tasks'): ``other-tasks``, those;
+    ``test-tasks-reseeded``, the test tasks themselves with other noise (the training seed + 1000), the draw the
+    studies made before them, which they pin so that their committed rows keep reproducing. A family without them
+    draws its validation episodes by the seed alone."""
 
 
 @dataclass(frozen=True)
@@ -228,14 +231,19 @@ class Study:
     methods: tuple[Method, ...] = ()
     experiments: tuple[ExperimentSpec, ...] = ()
     runs: tuple[NamedRun, ...] = ()
-    """Named runs for :attr:`evaluations` (``studies.commands``)."""
+    """Named runs for :attr:`evaluations` (``studies.jobs``)."""
     evaluations: tuple[CommandEvaluation, ...] = ()
-    """Evaluation JSONs, one command each (``studies.commands``)."""
+    """Evaluation JSONs, one command each (``studies.jobs``)."""
     reports: tuple[ReportSpec, ...] = ()
 
     @property
     def data_dir(self) -> str:
         return self.data or self.name
+
+    @property
+    def episodes(self) -> int:
+        """Episodes per task of its evaluations: its [evaluation]'s, else its environment family's."""
+        return self.evaluation.episodes or self.dataset.family.episodes
 
 
 # --- parsing ----------------------------------------------------------------------------------------------------
@@ -279,7 +287,8 @@ def _dataclass_fields(cls, value: dict, file, key: str) -> dict:
     for f in dataclasses.fields(cls):
         if f.name in value:
             default = f.default if f.default is not dataclasses.MISSING else None
-            kind = type(default) if isinstance(default, (int, float, str, bool)) else str
+            kind = (type(default) if isinstance(default, (int, float, str, bool)) else
+                    int if str(f.type).startswith("int") else str)
             out[f.name] = _typed(file, f"{key}.{f.name}", value[f.name], kind, positive=kind in (int,) and
                                  f.name in ("steps", "episodes", "workers", "checkpoint_every", "prior_steps",
                                             "diffusion_steps", "piece_steps"))
@@ -419,28 +428,24 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
     return ExperimentSpec(**values)
 
 
-# --- evaluations of one command each (bridgeplan.studies.commands runs them) -----------------------------------
+# --- evaluations of one command each (bridgeplan.studies.jobs runs them) -----------------------------------
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"),
-            "hierarchy graph-eval": ("hierarchy", "graph-eval"), "ogbench eval": ("ogbench", "eval"),
-            "ogbench hierarchy-eval": ("ogbench", "hierarchy-eval"),
-            "ogbench evaluate-oracle": ("ogbench", "evaluate-oracle"), "ogbench gcbc-eval": ("ogbench", "gcbc-eval"),
-            "ogbench graph-eval": ("ogbench", "graph-eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "hierarchy graph-eval": 1, "ogbench eval": 1, "ogbench hierarchy-eval": 2,
-          "ogbench evaluate-oracle": 0, "ogbench gcbc-eval": 1, "ogbench graph-eval": 0}
-"""How many runs each command takes (a hierarchy: the high level, then the low one; over the dataset graph, the
-low one; the oracle none)."""
-RUN_FLAGS = {"ogbench graph-eval": ("--low",)}
+COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "graph": ("graph",),
+            "oracle": ("oracle",), "gcbc eval": ("gcbc", "eval")}
+LEVELS = {"eval": 1, "hierarchy eval": 2, "graph": 0, "oracle": 0, "gcbc eval": 1}
+"""How many runs each command takes (a hierarchy: the high level, then the low one; the dataset graph none, or its
+low level as a flag; the oracle none)."""
+RUN_FLAGS = {"graph": ("--low",)}
 """Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
-POSITIONAL = {"ogbench evaluate-oracle": ("maze",)}
+POSITIONAL = {"oracle": ("maze",)}
 """The ``args`` a command takes as positional arguments, after its runs."""
-TAKES_TASKS = {"ogbench eval", "ogbench hierarchy-eval", "ogbench graph-eval", "ogbench evaluate-oracle"}
-"""OGBench commands that take ``--tasks`` (so a validation split can give them the validation tasks)."""
-READS_THE_DATASET = {"ogbench graph-eval"}
-"""Commands that read the study's dataset itself: the runner gives them its name and file (``NAME --dataset
-FILE``); their study's dataset must be OGBench's."""
+TAKES_TASKS = {"eval", "hierarchy eval", "graph", "oracle"}
+"""Commands that take ``--tasks`` (so a validation split can give them a family's validation tasks)."""
+READS_THE_DATASET = {"graph"}
+"""Commands that read the study's dataset itself: the runner gives them its name and file (``--maze NAME --dataset
+FILE``)."""
 TRAINERS = ("planner", "gcbc")
-"""What trains a named run: ``bridgeplan train`` (a planner), or ``ogbench gcbc-train`` (GCBC, the calibration
+"""What trains a named run: ``bridgeplan train`` (a planner), or ``bridgeplan gcbc train`` (GCBC, the calibration
 baseline)."""
 SET_BY_THE_RUNNER = {"seed", "out", "multi_task", "threads", "json", "no_progress", "dataset"}
 TASK_SETS = ("single", "multi")
@@ -532,8 +537,6 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         task_sets = tuple(e.get("task_sets", ["single"]))
         if not task_sets or any(t not in TASK_SETS for t in task_sets):
             raise StudyError(file, f"{key}.task_sets", f"expected a list of single, multi, got {e.get('task_sets')!r}")
-        if "multi" in task_sets and command.startswith("ogbench"):
-            raise StudyError(file, f"{key}.task_sets", "OGBench's protocol has its 5 tasks, no Multi2D")
         evaluation = CommandEvaluation(command, tuple(levels), _typed(file, f"{key}.out", e["out"], str),
                                        tuple(sorted(args.items())), splits, task_sets,
                                        _ints(file, f"{key}.seeds", e["seeds"]) if "seeds" in e else None,
@@ -562,10 +565,10 @@ def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
 def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...],
                  dataset: str | None = None) -> list[str]:
     """``bridgeplan``'s arguments for ``command`` on ``runs`` (positional, or as :data:`RUN_FLAGS` say) with
-    ``args``: its positional ones (the study's ``dataset`` name first, for a command that reads it), then flags."""
+    ``args``: its positional ones, then flags (the study's ``dataset`` name first, for a command that reads it)."""
     positional = POSITIONAL.get(command, ())
     flags = RUN_FLAGS.get(command)
-    return [*COMMANDS[command], *([] if flags else runs), *([dataset] if dataset is not None else []),
+    return [*COMMANDS[command], *([] if flags else runs), *(["--maze", dataset] if dataset is not None else []),
             *(str(v) for k, v in args if k in positional),
             *_flags(tuple((k, v) for k, v in args if k not in positional)),
             *(a for flag, run in zip(flags or (), runs) for a in (flag, run))]
@@ -592,11 +595,10 @@ def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
         raise StudyError(file, f"{key}.args", message.split("error: ", 1)[-1]) from None
 
 
-def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
+def read_study(path: Path | str, shown: Path | str | None = None, generators: dict | None = None) -> Study:
     """The study in ``path`` (TOML), its format checked (``bridgeplan.studies.parse_study`` checks the rest);
     :class:`StudyError` names the file (as ``shown``, default ``path``) and the key of the first problem."""
-    from bridgeplan.studies.reports import GENERATORS
-
+    generators = generators or {}
     try:
         data = Path(path).read_bytes()
     except OSError as e:
@@ -627,23 +629,20 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     if "dataset" in raw:
         d = _table(path, "dataset", raw["dataset"], {f.name for f in dataclasses.fields(Dataset)}, ("maze",))
         dataset = Dataset(**_dataclass_fields(Dataset, d, path, "dataset"))
-        from bridgeplan.maze.layouts import get_maze
-        from bridgeplan.ogbench_pointmaze.names import parse_dataset_name
-
-        if dataset.generator not in ("expert", "ogbench"):
-            raise StudyError(path, "dataset.generator", f"unknown generator {dataset.generator!r} (choose from expert, "
-                                                        f"ogbench)")
         try:
-            (get_maze if dataset.generator == "expert" else parse_dataset_name)(dataset.maze)
+            family = dataset.family
         except BridgeplanError as e:
             raise StudyError(path, "dataset.maze", str(e)) from None
+        if dataset.generator not in ("", family.generator):
+            raise StudyError(path, "dataset.generator", f"{dataset.maze} is a {family.title} environment: its data "
+                                                        f"is made by {family.generator!r}, not {dataset.generator!r}")
     training = _training(path, raw.get("training", {}))
     fields = {f.name for f in dataclasses.fields(Evaluation)}
     evaluation = Evaluation(**_dataclass_fields(
         Evaluation, _table(path, "evaluation", raw.get("evaluation", {}), fields), path, "evaluation"))
-    if evaluation.ogbench_validation not in OGBENCH_VALIDATIONS:
-        raise StudyError(path, "evaluation.ogbench_validation", f"expected one of {', '.join(OGBENCH_VALIDATIONS)}, "
-                                                                f"got {evaluation.ogbench_validation!r}")
+    if evaluation.validation not in VALIDATIONS:
+        raise StudyError(path, "evaluation.validation", f"expected one of {', '.join(VALIDATIONS)}, "
+                                                        f"got {evaluation.validation!r}")
     methods = {}
     for mname, m in _table(path, "methods", raw.get("methods", {}), set(raw.get("methods", {}))).items():
         key = f"methods.{mname}"
@@ -661,10 +660,11 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
     for i, r in enumerate(raw.get("reports", [])):
         key = f"reports[{i}]"
         r = _table(path, key, r, {"generator", "output"}, ("generator",))
-        if r["generator"] not in GENERATORS:
+        if r["generator"] not in generators:
             raise StudyError(path, f"{key}.generator",
-                             f"unknown generator {r['generator']!r} (choose from {', '.join(GENERATORS)})")
-        output = _typed(path, f"{key}.output", r.get("output", GENERATORS[r["generator"]].output), str)
+                             f"unknown generator {r['generator']!r} (the repository's studies/reports has: "
+                             f"{', '.join(generators) or 'none'})")
+        output = _typed(path, f"{key}.output", r.get("output", generators[r["generator"]].output), str)
         reports.append(ReportSpec(r["generator"], output))
     study = Study(name=name, file=path, title=_typed(path, "title", raw.get("title", ""), str),
                   data=_typed(path, "data", raw.get("data", ""), str), uses=tuple(uses), dataset=dataset,
@@ -675,17 +675,19 @@ def read_study(path: Path | str, shown: Path | str | None = None) -> Study:
                                          "(with a [dataset]), or [[reports]] of the studies it uses")
     if (experiments or evaluations) and dataset is None:
         raise StudyError(path, "dataset", "required: the study trains runs (it has experiments or evaluations)")
-    if experiments and dataset.generator != "expert":
-        raise StudyError(path, "experiments", "the thesis's grids and declared series run on Maze2D (an expert "
-                                              "dataset); an OGBench study declares [runs.NAME] and [[evaluations]]")
+    if experiments and not dataset.family.sweeps:
+        raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
+                                              f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
-        if ("validation" in e.splits and e.command.startswith("ogbench") and e.command not in TAKES_TASKS
-                and evaluation.ogbench_validation == "other-tasks"):
-            raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates OGBench's test tasks only: it "
-                                                               f"has no validation split")
-        if e.command in READS_THE_DATASET and dataset.generator != "ogbench":
-            raise StudyError(path, f"evaluations[{i}].command", f"{e.command} reads the study's dataset: it must be "
-                                                                f"OGBench's (generator = \"ogbench\")")
+        if ("validation" in e.splits and dataset.family.validation_tasks and e.command not in TAKES_TASKS
+                and evaluation.validation == "other-tasks"):
+            raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates {dataset.family.title}'s test "
+                                                               f"tasks only: it has no validation split")
+        missing = set(e.task_sets) - set(dataset.family.task_sets)
+        if missing:
+            raise StudyError(path, f"evaluations[{i}].task_sets", f"{dataset.family.title} has the task sets "
+                                                                  f"{', '.join(dataset.family.task_sets)}, not "
+                                                                  f"{', '.join(sorted(missing))}")
     return study
 
 

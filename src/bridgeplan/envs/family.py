@@ -1,0 +1,223 @@
+"""The interface every environment family gives (:class:`Family`); the registry is :mod:`bridgeplan.envs`.
+
+A family is one kind of environment with its own names, data and evaluation: Maze2D's point mass
+(:mod:`bridgeplan.envs.maze2d`), OGBench's kinematic point (:mod:`bridgeplan.envs.ogbench_pointmaze`). An
+*environment name* (what ``TrainConfig.maze`` and a study's ``[dataset] maze`` hold) belongs to exactly one family:
+a Maze2D maze (``umaze``), an OGBench dataset (``pointmaze-medium-navigate-v0``). Everything outside ``envs/``
+asks the family of a name (:func:`bridgeplan.envs.family_of`) instead of testing the name.
+
+Evaluation is the same in every family (:func:`bridgeplan.evaluate.evaluate`): the family draws its
+:class:`Tasks`, runs their episodes with an :class:`Agent` (:meth:`Family.run`: a batched simulator, or an adapter
+over the real environment) and scores what happened (:meth:`Family.score`); an agent decides from states and goals
+alone, whoever made its plans.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Protocol
+
+import numpy as np
+
+from bridgeplan.envs.controllers import Body, Follower
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.trajectory import Layout
+
+
+class Agent(Protocol):
+    """What a family's episodes are run with (:meth:`Family.run`), a batch of episodes at a time."""
+
+    def begin(self, n: int) -> None:
+        """A batch of ``n`` new episodes starts (row ``i`` is the same episode until the batch ends)."""
+
+    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Actions ``[n, act_dim]`` for the batch's ``states [n, obs_dim]`` and goals ``[n, goal_dim]``, once per step
+        (an ended episode's row is ignored)."""
+
+    def end(self, rows: np.ndarray) -> None:
+        """Rows ``rows`` of the batch have ended (the environment ended them at their goal)."""
+
+
+@dataclass(frozen=True)
+class Tasks:
+    """Seeded evaluation episodes of one environment, as its family draws them (:meth:`Family.tasks`)."""
+
+    env: str
+    episodes: int
+    """Episodes in all."""
+    seed: int
+    episode_steps: int
+    """The most steps an episode runs."""
+
+    def fields(self) -> dict:
+        """How results name these tasks (the family's own keys)."""
+        raise NotImplementedError
+
+    def first(self) -> Tasks:
+        """The first episode alone (what the batch-1 decision latency runs again)."""
+        raise NotImplementedError
+
+
+class Family:
+    """One environment family. Subclasses set the attributes and implement the methods; every method that takes
+    an environment name ``env`` may assume :meth:`owns` is true of it and raises a one-line BridgeplanError for a
+    name of the family it does not know."""
+
+    name: str
+    """How commands, results and errors name the family (``maze2d``)."""
+    title: str
+    """How prose names it (``Maze2D``)."""
+    generator: str
+    """The name study files give this family's dataset generator (``[dataset] generator``)."""
+    data_version: int | None = None
+    """The version of this family's dataset generator that a study's ``[dataset] version`` must equal (None: the
+    family's datasets carry no version)."""
+    data_seed: int = 0
+    """The seed its datasets are made with unless one is given."""
+    sized_data: bool = False
+    """Whether its generated dataset's size is a choice (a study's ``[dataset] steps``, lowered at the quick scale)
+    rather than its recipe's."""
+    sweeps: bool = False
+    """Whether the experiments runner's grids and declared series (rows of normalized scores in a results store)
+    run in it; else a study of it declares runs and evaluations of one command each."""
+    renders: bool = False
+    """Whether ``bridgeplan render`` draws its episodes."""
+    episodes: int
+    """Episodes per task an evaluation runs unless told (Maze2D: its single task set; OGBench: each of its tasks)."""
+    quick_episodes: int
+    """Episodes per task at a study's quick scale."""
+    validation_tasks: tuple[int, ...] = ()
+    """Task ids of its own validation tasks, apart from its test tasks (a study's validation split evaluates them);
+    none: a validation split draws other episodes of the same tasks by its seed alone."""
+    task_sets: tuple[str, ...] = ("single",)
+    """``single``: the family's tasks; ``multi``: Multi2D's random goals too, where the family has them."""
+    goal_radius: float | None = None
+    """How close to the goal a plan has arrived (its arrival rule cuts it there); None: the family has no such rule."""
+    default_arrival: str = "end"
+    """What arrival rule replans and candidates get unless told (:class:`~bridgeplan.replan.Execution`): ``end`` where
+    the environment itself ends an episode at the goal (nothing needs to hold it), ``truncate`` where an episode goes
+    on past it."""
+    floor_replans: bool = False
+    """Whether a planner's floor (the straight line alone) is executed as the planner is, replans included (else
+    open loop, one line per episode)."""
+
+    def owns(self, env: str) -> bool:
+        """Whether ``env`` is a name of this family (known or not: :meth:`check` says which are known)."""
+        raise NotImplementedError
+
+    def names(self) -> str:
+        """The family's environment names, as an error message lists them."""
+        raise NotImplementedError
+
+    def check(self, env: str) -> str:
+        """``env`` if this family knows it, else a BridgeplanError listing :meth:`names`."""
+        raise NotImplementedError
+
+    def layout(self, env: str) -> Layout:
+        """The columns of a transition in ``env`` (actions, state; which of the state is the position)."""
+        raise NotImplementedError
+
+    # --- plans -------------------------------------------------------------------------------------------------
+
+    def plan_shape(self, env: str, preset: str) -> tuple[int, int]:
+        """``(horizon, stride)`` of ``preset``'s plans in ``env`` (``diffuser`` or ``cpu-small``)."""
+        raise NotImplementedError
+
+    def diffusion_steps(self, env: str) -> int:
+        """The ``diffuser`` preset's diffusion steps in ``env`` (Diffuser's per maze)."""
+        raise NotImplementedError
+
+    def batch(self, env: str, preset: str) -> tuple[int, float] | None:
+        """``(batch_size, lr)`` of ``preset`` in ``env`` where they differ from the preset's own; None elsewhere."""
+        return None
+
+    def longest_span(self, env: str) -> int:
+        """The most environment steps a plan may span in ``env``: an evaluation episode, or a dataset episode if
+        shorter (a training window lies inside one)."""
+        raise NotImplementedError
+
+    # --- data --------------------------------------------------------------------------------------------------
+
+    def load_stream(self, dataset: str, env: str):
+        """The dataset at ``dataset`` as a :class:`~bridgeplan.data.stream.Stream`, checked to be of ``env``."""
+        raise NotImplementedError
+
+    def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
+        """Where a study's dataset of ``env`` lies by default, relative to the repository root."""
+        raise NotImplementedError
+
+    def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
+                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+        """Make ``env``'s dataset by the family's recipe at ``out`` (None: its default place); returns the path
+        that :meth:`load_stream` reads. Options the recipe has no use for are refused."""
+        raise NotImplementedError
+
+    def reads(self, path: str) -> bool:
+        """Whether ``path`` (a file, a folder, an id) is in this family's dataset format (which environment it is of
+        is :meth:`load_stream`'s to check)."""
+        raise NotImplementedError
+
+    def dataset_info(self, path: str, env: str | None) -> tuple[dict, str]:
+        """A dataset file's summary (JSON-ready) and its text, checked to be of ``env`` where given."""
+        raise NotImplementedError
+
+    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+        """The dataset graph's settings for this family (``keep``, ``radius``, ``neighbours``, ``reach``), the
+        data's step (distance per environment step) and whether a jump may join two nodes of one episode (a
+        continuous stream that passes a place again): :func:`bridgeplan.graph.for_stream`."""
+        raise NotImplementedError
+
+    # --- evaluation --------------------------------------------------------------------------------------------
+
+    def body(self, env: str) -> Body:
+        """The body its controllers steer (:mod:`bridgeplan.envs.controllers`)."""
+        raise NotImplementedError
+
+    def follower(self, env: str, n: int, controller: str = "track", lookahead: float | None = None) -> Follower:
+        """``n`` controllers of kind ``controller`` for ``env``'s body."""
+        return Follower(n, self.body(env), controller, lookahead)
+
+    def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
+              task_ids: tuple[int, ...] | None = None) -> Tasks:
+        """Seeded evaluation episodes: ``episodes`` per task (default :attr:`episodes`), Multi2D's random goals
+        where the family has them, ``task_ids`` of a task suite where it has one."""
+        raise NotImplementedError
+
+    def run(self, tasks: Tasks, agent: Agent, progress: bool = False):
+        """Run every episode of ``tasks`` with ``agent``; returns what :meth:`score` reads."""
+        raise NotImplementedError
+
+    def score(self, tasks: Tasks, outcome) -> dict:
+        """The JSON fields of an evaluation's score (success, and the family's normalized score where it has one)."""
+        raise NotImplementedError
+
+    def floor_score(self, tasks: Tasks, outcome) -> dict:
+        """The score of a floor (a prior alone), as results show it beside the planner's."""
+        return self.score(tasks, outcome)
+
+    def plans_per_episode(self, outcome, made: np.ndarray) -> np.ndarray:
+        """The plans each episode made, ``made`` as counted over the whole run (a family whose episodes end early
+        may count them otherwise)."""
+        return made
+
+    def free(self, env: str) -> Callable[[np.ndarray], np.ndarray] | None:
+        """Whether positions ``[..., 2]`` lie in free space (the wall map; no planner reads it), or None."""
+        return None
+
+    def oracle(self, env: str) -> Agent:
+        """The family's expert (noise-free) as an agent for :meth:`run`."""
+        raise NotImplementedError
+
+    def check_run_data(self, tasks: Tasks, dataset: str, covers_everything: bool = False) -> None:
+        """Refuse tasks that a run's dataset ``dataset`` cannot have prepared it for (Multi2D's goals in cells the data
+        never visits); ``covers_everything``: known to cover them (a shipped planner's)."""
+
+    def __repr__(self) -> str:
+        return f"<{self.title} family>"
+
+
+def unknown(env: str, families) -> BridgeplanError:
+    """The error for an environment name no family owns."""
+    return BridgeplanError(f"unknown environment {env!r}: " + "; ".join(f"{f.title}: {f.names()}" for f in families))
