@@ -751,12 +751,11 @@ def _cmd_demo(args) -> int:
     """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
     from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.envs.maze2d.reference import load_reference_returns
-    from bridgeplan.experiments.grids import Experiment, RunSpec, Series
+    from bridgeplan.experiments.grids import get_experiment
     from bridgeplan.experiments.runner import SweepSettings, run_sweep
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.files import check_writable
     from bridgeplan.paths import store_path
-    from bridgeplan.processes import DDPM, Bridge
     from bridgeplan.report import last_snapshot_table, write_report
 
     maze = get_maze(args.maze).name
@@ -764,10 +763,7 @@ def _cmd_demo(args) -> int:
         positive(flag, getattr(args, flag[2:].replace("-", "_")))
     check_writable(args.out, "demo folder", folder=True)
     print(_reference_table({maze: load_reference_returns()[maze]}))
-    ddpm, bridge = RunSpec(DDPM(16)), RunSpec(Bridge(16), "line")
-    demo = Experiment("demo", "DDPM vs bridge from the straight-line prior (cpu-small)",
-                      tuple(Series(spec.label(), spec, nfe) for spec in (ddpm, bridge)
-                            for nfe in (spec.process.max_nfe, 1)))
+    demo = get_experiment("demo")  # studies/demo.toml runs the same grid: the README's expected range
     settings = SweepSettings(maze=maze, dataset_steps=args.dataset_steps, preset="cpu-small",
                              train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
                              episodes=args.episodes, seeds=(args.seed,), results_dir=args.out,

@@ -29,6 +29,8 @@ GENERATORS = {g.name: g for g in [
     Generator("cddb", "cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("docs/results/README.md",)),
+    Generator("demo", "demo", "demo.md",
+              "what `bridgeplan demo` prints at seeds 0, 1 and 2: the README's expected range", ("README.md",)),
     Generator("gpu", "gpu", "gpu.md",
               "the bench on a GPU beside the same figures on the CPU, and a short real run trained and evaluated there",
               ("README.md",)),

@@ -95,6 +95,9 @@ def build_experiments(steps: int = 16, fixed_nfe: int = 4, informed: Process | N
     runs = {p: RunSpec(informed, p) for p in ("gaussian", "line", "learned")}
     noise, same_nfe = runs["gaussian"], informed.max_nfe
     return {e.name: e for e in [
+        Experiment("demo", f"DDPM vs {name} from the straight-line prior at the full NFE and at NFE 1, N={steps} "
+                   "(`bridgeplan demo`)",
+                   tuple(Series(r.label(), r, k) for r in (ddpm, runs["line"]) for k in (r.process.max_nfe, 1))),
         Experiment("bridge-vs-ddpm", f"{name} vs DDPM from Gaussian noise, N={steps}, NFE={same_nfe}",
                    (Series("DDPM", ddpm, same_nfe), Series(noise.label(), noise, same_nfe))),
         Experiment("ddpm-steps", "DDPM trained with 1, 4, 7, 10 diffusion steps (NFE = steps)",
