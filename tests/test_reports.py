@@ -371,3 +371,22 @@ def test_gpu_report_sets_each_gpu_figure_beside_the_cpu_one(tmp_path):
     block = gpu.block(tmp_path)
     assert "40.0 TFLOP/s at best" in block and "5% of the bf16 matmul rate" in block
     assert "10.0 ± 1.0 at NFE 1, 27.0 ± 1.0 at NFE 256 (200 episodes)" in block
+
+
+def test_demo_report_gives_each_series_lowest_and_highest_over_seeds_at_the_last_snapshot(tmp_path):
+    """The README's expected range: per series, min and max over the training seeds of the last snapshot's score and
+    success (earlier snapshots and validation rows left out), and the line alone's range beneath."""
+    demo = report("demo")
+    ddpm, bridge = make_process("ddpm", steps=16), make_process("bridge", steps=16)
+    rows = []
+    for seed, (d1, b15) in enumerate([(-3.0, 60.2), (8.6, 66.8), (1.0, 63.0)]):
+        rows += [_row("demo", ddpm, "gaussian", 1500, 1, d1, seed), _row("demo", bridge, "line", 1500, 15, b15, seed),
+                 _row("demo", ddpm, "gaussian", 1000, 1, 99.0, seed),  # an earlier snapshot
+                 _row("demo-validation", ddpm, "gaussian", 1500, 1, -50.0, seed)]
+    _write(tmp_path / "demo" / "results.csv", rows)
+    text = demo.block(tmp_path)
+    # _row adds 0.1 * seed to each score
+    assert "| DDPM N=16 NFE=1 | -3 to 9 | 0.50 |" in text
+    assert "| bridge (line) N=16 NFE=15 | 60 to 67 | 0.50 |" in text
+    assert "| the line alone (no network) | 30 |  |" in text
+    assert "S = 0, 1, 2 (step 1500, 200 test episodes each" in text
