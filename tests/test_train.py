@@ -78,6 +78,16 @@ def test_existing_run_without_resume_is_refused(tiny_dataset, tmp_path, capsys):
     assert (run / "checkpoint.pt").read_bytes() == before
 
 
+def test_run_killed_while_writing_its_first_config_starts_again(tiny_dataset, tmp_path):
+    # what a kill before config.json's rename leaves: the lock and mkstemp's temporary file
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / ".lock").touch()
+    (run / ".config.json.k1ll3d.tmp").write_text('{"kind": ')
+    assert main(train_args(tiny_dataset, run, 2)) == 0
+    assert weights(run)[2] == 2 and not list(run.glob(".*.tmp"))
+
+
 def test_resume_with_other_config_is_refused(tiny_dataset, tmp_path, capsys):
     run = tmp_path / "run"
     assert main(train_args(tiny_dataset, run, 2)) == 0

@@ -227,8 +227,14 @@ def _check_run_dir(run_dir: Path, resume: bool, kind: str, config) -> None:
     if resume:
         raise BridgeplanError(f"--resume given but {ckpt_path} does not exist" + (
             " (killed before its first checkpoint: start it again without --resume)" if killed_early else ""))
-    if run_dir.exists() and not killed_early and any(p.name != LOCK_NAME for p in run_dir.iterdir()):
+    if run_dir.exists() and not killed_early and any(not _left_by_a_killed_writer(p) for p in run_dir.iterdir()):
         raise BridgeplanError(f"run directory {run_dir} already exists; pass --resume to continue it")
+
+
+def _left_by_a_killed_writer(path: Path) -> bool:
+    """The lock, or a temporary file of a write killed before it renamed it (e.g. the first config.json's):
+    what a run killed before writing its config leaves; the lock holder removes such files."""
+    return path.name == LOCK_NAME or (path.is_file() and path.name.startswith(".") and path.name.endswith(".tmp"))
 
 
 def _same_run(config_json: Path, kind: str, config) -> bool:
