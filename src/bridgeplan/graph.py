@@ -208,7 +208,9 @@ class DatasetGraph:
         when none is found), ending at rest at the goal; recorded in :attr:`queries`."""
         start = np.asarray(start, np.float64)
         nodes = self.path_nodes(self.layout.state_positions(start), goal)
-        dense = self.densify(start, self.layout.at_rest(np.asarray(goal, np.float64)), nodes)
+        end = self.layout.at_rest(np.asarray(goal, np.float64))  # the state's rest, if any: held from the path's end
+        end = np.where(np.isnan(end), self.observations[self.nodes[nodes[-1]]] if nodes else start, end)
+        dense = self.densify(start, end, nodes)
         self.queries.append((len(dense), bool(nodes), len(set(self.episode[nodes].tolist()))))
         return dense
 

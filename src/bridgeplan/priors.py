@@ -86,7 +86,8 @@ class LinePrior:
     clipped to the simulator's ``MAX_SPEED``;
     the constant action is the unit vector toward the goal (zero when start == goal): the data's actions come
     from a saturating waypoint controller, so their magnitude is about 1, and the tracking controller ignores
-    planned actions anyway. The result is normalized with the normalizer of the data, then the start state
+    planned actions anyway; the rest of the state, where it has more (a user's environment), at the start's values.
+    The result is normalized with the normalizer of the data, then the start state
     (with its velocity) and the goal state (zero velocity, from the planner) are inpainted.
     """
 
@@ -99,12 +100,15 @@ class LinePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, goal_n = _endpoints(conditions, horizon, batch)
         layout = self.layout
-        start = layout.state_positions(self.normalizer.unnormalize(start_n.double(), layout.state_columns))
+        start_state = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
+        start = layout.state_positions(start_state)
         goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
         frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
         steps = float(max(horizon - 1, 1) * self.stride)
         traj = straight_segment(start, goal, frac, torch.full((batch, 1), steps, dtype=torch.float64,
                                                               device=start.device), layout)
+        rest = layout.rest_columns()  # what the line does not say (a user's environment's) stays at the start's
+        layout.states(traj)[..., rest] = start_state[:, None, rest]
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 

@@ -24,8 +24,10 @@ Conditions = dict[int, torch.Tensor]
 
 @dataclass(frozen=True)
 class Layout:
-    """The columns of one transition: ``act_dim`` actions, then ``obs_dim`` state columns, of which two are the
-    position (x, y) and two, if the environment observes it, the velocity (vx, vy).
+    """The columns of one transition: ``act_dim`` actions, then ``obs_dim`` state columns, of which ``goal_dim`` are
+    the position (x, y: what a goal gives), two, if the environment observes it, the velocity (vx, vy), and the rest
+    (a user's environment's, :mod:`bridgeplan.envs.goal_env`) what neither a goal nor a prior says: a goal leaves
+    them free, the line prior holds them at the start's.
 
     The accessors take ``[..., transition_dim]`` transitions (``actions``, ``states``, ``positions``,
     ``velocities``) or ``[..., obs_dim]`` states alone (``state_positions``, ``state_velocities``), numpy or
@@ -42,15 +44,21 @@ class Layout:
     """Index in the state of the position's first column (x; y follows)."""
     velocity: int | None
     """Index in the state of the velocity's first column (vx; vy follows), or None: the state has none."""
+    goal_dim: int = 2
+    """Columns of the position, the part of the state a goal gives."""
+    rest: bool = False
+    """Whether the state has columns beyond the position and the velocity (else it is those alone)."""
 
     def __post_init__(self):
-        # the priors and conditions build a state from a position and a velocity alone: nothing else may be in it
-        parts = [self.position] + ([] if self.velocity is None else [self.velocity])
-        columns = sorted(c for start in parts for c in (start, start + 1))
-        if self.act_dim < 1 or columns != list(range(self.obs_dim)):
-            raise ValueError(f"layout {self.name}: a state is a position and optionally a velocity, two columns "
-                             f"each, and a transition has actions; got act_dim {self.act_dim}, obs_dim "
-                             f"{self.obs_dim}, position at {self.position}, velocity at {self.velocity}")
+        columns = sorted([*range(self.position, self.position + self.goal_dim),
+                          *([] if self.velocity is None else [self.velocity, self.velocity + 1])])
+        fits = columns == list(range(self.obs_dim)) or (
+            self.rest and len(set(columns)) == len(columns) and columns[0] >= 0 and columns[-1] < self.obs_dim)
+        if self.act_dim < 1 or self.goal_dim < 1 or not fits:
+            raise ValueError(f"layout {self.name}: a state is a position and optionally a velocity (two columns), "
+                             f"and the rest only where declared, and a transition has actions; got act_dim "
+                             f"{self.act_dim}, obs_dim {self.obs_dim}, position at {self.position} "
+                             f"({self.goal_dim} columns), velocity at {self.velocity}")
 
     @property
     def transition_dim(self) -> int:
@@ -72,13 +80,13 @@ class Layout:
         return x[..., self.act_dim:]
 
     def positions(self, x):
-        return x[..., self.act_dim + self.position:self.act_dim + self.position + 2]
+        return x[..., self.act_dim + self.position:self.act_dim + self.position + self.goal_dim]
 
     def velocities(self, x):
         return self.states(x)[..., self._velocity_columns()]
 
     def state_positions(self, s):
-        return s[..., self.position:self.position + 2]
+        return s[..., self.position:self.position + self.goal_dim]
 
     def state_velocities(self, s):
         return s[..., self._velocity_columns()]
@@ -88,10 +96,18 @@ class Layout:
             raise BridgeplanError(f"the {self.name} layout has no velocity columns (its state is the position)")
         return slice(self.velocity, self.velocity + 2)
 
+    def rest_columns(self) -> list[int]:
+        """The state's columns that are neither the position nor the velocity."""
+        taken = {*range(self.position, self.position + self.goal_dim),
+                 *(() if self.velocity is None else (self.velocity, self.velocity + 1))}
+        return [c for c in range(self.obs_dim) if c not in taken]
+
     def at_rest(self, positions: np.ndarray) -> np.ndarray:
-        """States ``[..., obs_dim]`` at ``positions [..., 2]``, with zero velocity where the state has one."""
-        positions = np.asarray(positions)
-        states = np.zeros((*positions.shape[:-1], self.obs_dim), dtype=positions.dtype)
+        """States ``[..., obs_dim]`` at ``positions [..., goal_dim]``, with zero velocity where the state has one and
+        NaN (free, as a condition) in the rest."""
+        positions = np.asarray(positions, dtype=np.float64)
+        states = np.zeros((*positions.shape[:-1], self.obs_dim))
+        states[..., self.rest_columns()] = np.nan
         self.state_positions(states)[...] = positions
         return states
 
