@@ -6,9 +6,8 @@ evaluation env), one Minari episode per goal, observations as PointMaze's dict
 (``observation``, ``achieved_goal``, ``desired_goal``), truncation at the end of every episode, and the
 generator's data version in the metadata (:data:`VERSION_KEY`).
 
-Reader: h5py on Minari's layout (``data/main_data.hdf5`` with ``episode_<k>`` groups,
-``data/metadata.json``) so that it reads an official ``D4RL/pointmaze/*`` dataset a user downloaded
-as well as ours, without Minari's per-episode overhead. Episodes are joined into continuous segments
+Reader: :mod:`bridgeplan.data.minari` on Minari's layout, so that it reads an official ``D4RL/pointmaze/*`` dataset a
+user downloaded as well as ours, without Minari's per-episode overhead. Episodes are joined into continuous segments
 by :func:`bridgeplan.data.stream.join_episodes`.
 """
 
@@ -23,14 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.data.minari import DATA_FILE, METADATA_FILE, read_episodes, read_metadata
 from bridgeplan.data.stream import Stream, join_episodes
 from bridgeplan.envs.maze2d.generate import DATA_VERSION, GeneratedStream
 from bridgeplan.envs.maze2d.grids import MAZE_NAMES, Maze, get_maze
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import MAZE2D
 
-DATA_FILE = Path("data") / "main_data.hdf5"
-METADATA_FILE = Path("data") / "metadata.json"
 AUTHOR = "bridgeplan"
 VERSION_KEY = "bridgeplan_data_version"
 """Metadata key of the generator's :data:`~bridgeplan.envs.maze2d.generate.DATA_VERSION`."""
@@ -99,10 +97,6 @@ def write_minari_into(directory: Path, streams: list[GeneratedStream], maze: Maz
     return built
 
 
-def _one_line(e: Exception) -> str:
-    return " ".join(str(e).split()) or type(e).__name__
-
-
 def maze_from_metadata(meta: dict, path: Path) -> str:
     """The maze of a Minari dataset, from the ``maze_map`` of its env spec."""
     walls = None
@@ -137,43 +131,22 @@ def data_version_from_metadata(meta: dict) -> int | None:
 
 def read_minari(path: Path, maze_name: str | None = None) -> Stream:
     """Read a Minari PointMaze dataset directory (ours or an official one) into a :class:`Stream`."""
-    import h5py
-
     path = Path(path)
-    try:
-        meta = json.loads((path / METADATA_FILE).read_text())
-    except (OSError, ValueError) as e:
-        raise BridgeplanError(f"{path} is not a Minari dataset: cannot read {METADATA_FILE} "
-                              f"({_one_line(e)})") from None
+    meta = read_metadata(path)
     maze = get_maze(maze_name).name if maze_name else maze_from_metadata(meta, path)
-    observations, actions = [], []
-    reached = 0
-    try:
-        with h5py.File(path / DATA_FILE, "r") as f:
-            names = sorted((k for k in f.keys() if k.startswith("episode_")),
-                           key=lambda k: int(k.split("_")[1]))
-            for name in names:
-                group = f[name]
-                obs = group["observations"]
-                obs = obs["observation"][()] if isinstance(obs, h5py.Group) else obs[()]
-                act = group["actions"][()]
-                if obs.ndim != 2 or obs.shape[1] != MAZE2D.obs_dim or act.shape != (len(obs) - 1, MAZE2D.act_dim):
-                    raise BridgeplanError(f"{path}: {name} has observations {list(obs.shape)} and actions "
-                                          f"{list(act.shape)}, not a PointMaze episode")
-                if "rewards" in group and len(act):
-                    reached += bool(group["rewards"][-1] > 0)
-                observations.append(obs)
-                actions.append(act)
-    except BridgeplanError:
-        raise
-    except (OSError, KeyError, ValueError, TypeError) as e:
-        raise BridgeplanError(f"cannot read {path / DATA_FILE} (truncated, or not Minari hdf5): "
-                              f"{_one_line(e)}") from None
-    states, acts, starts = join_episodes(observations, actions)
+
+    def check(name: str, obs: np.ndarray, act: np.ndarray) -> None:
+        if obs.ndim != 2 or obs.shape[1] != MAZE2D.obs_dim or act.shape != (len(obs) - 1, MAZE2D.act_dim):
+            raise BridgeplanError(f"{path}: {name} has observations {list(obs.shape)} and actions "
+                                  f"{list(act.shape)}, not a PointMaze episode")
+
+    episodes = read_episodes(path, check)
+    states, acts, starts = join_episodes(episodes.observations, episodes.actions)
     if len(states) == 0:
         raise BridgeplanError(f"{path} holds no transitions")
-    return Stream(maze, states, acts, starts, episodes=len(observations), goals_reached=reached,
-                  source=str(path), data_version=data_version_from_metadata(meta), layout=MAZE2D)
+    return Stream(maze, states, acts, starts, episodes=len(episodes.observations),
+                  goals_reached=episodes.goals_reached, source=str(path), data_version=data_version_from_metadata(meta),
+                  layout=MAZE2D)
 
 
 def resolve_minari_path(path_or_id: str) -> Path | None:
