@@ -554,6 +554,7 @@ def _add_graph_command(sub) -> None:
 
 
 def _cmd_graph(args) -> int:
+    from bridgeplan.envs import family_of
     from bridgeplan.envs.controllers import check_controller
     from bridgeplan.evaluate import check_result_path, make_tasks
     from bridgeplan.graph import check_graph_settings
@@ -580,7 +581,8 @@ def _cmd_graph(args) -> int:
         raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
-    folder = eval_dir(run_dir_of(Path(args.low))) if args.low else Path("results") / "graph" / env
+    folder = (eval_dir(run_dir_of(Path(args.low))) if args.low
+              else Path("results") / "graph" / family_of(env).label(env))
     check_result_path(args.out, folder)
     tasks = make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
     result = evaluate_graph(tasks, dataset, settings, execution,

@@ -134,8 +134,8 @@ class TrainConfig:
         """Directory name of the run, derived from what distinguishes it."""
         hold = [f"hold{self.hold_share:g}"] if self.hold_share else []
         subgoals = [f"sg{self.subgoal_every}"] if self.subgoal_every else []
-        parts = [self.maze, *self.process.run_tag(self.prior), *hold, _horizon_tag(self.horizon, self.stride),
-                 *subgoals, self.preset, f"s{self.seed}"]
+        parts = [family_of(self.maze).label(self.maze), *self.process.run_tag(self.prior), *hold,
+                 _horizon_tag(self.horizon, self.stride), *subgoals, self.preset, f"s{self.seed}"]
         return "-".join(parts)
 
     def label(self) -> str:
@@ -223,7 +223,8 @@ class PriorTrainConfig:
         return family_of(self.maze).layout(self.maze)
 
     def run_name(self) -> str:
-        return f"{self.maze}-prior-learned-{_horizon_tag(self.horizon, self.stride)}-s{self.seed}"
+        return (f"{family_of(self.maze).label(self.maze)}-prior-learned-{_horizon_tag(self.horizon, self.stride)}"
+                f"-s{self.seed}")
 
 
 def learned_prior_config(planner: TrainConfig, steps: int, **fields: Any) -> PriorTrainConfig:

@@ -114,6 +114,10 @@ class Family:
         """``env`` if this family knows it, else a BridgeplanError listing :meth:`names`."""
         raise NotImplementedError
 
+    def label(self, env: str) -> str:
+        """How run names and result folders name ``env`` (a name, never a path)."""
+        return env
+
     def layout(self, env: str) -> Layout:
         """The columns of a transition in ``env`` (actions, state; which of the state is the position)."""
         raise NotImplementedError

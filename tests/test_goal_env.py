@@ -1,0 +1,206 @@
+"""A user's own environment (``bridgeplan.envs.goal_env``) end to end: a tiny goal-reaching gymnasium environment and
+its dataset made here, in OGBench's npz format and Minari's, declared by a spec file; DDPM, the bridge and flow
+trained, planned and evaluated through the real CLI, the dataset graph too; and its bad inputs refused."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridgeplan.cli import main
+from bridgeplan.envs import family_of
+from tests.test_bad_inputs import refused
+
+STEP = 0.1
+"""The point moves by STEP x its action (each component in [-1, 1])."""
+ENV_SOURCE = f'''
+import gymnasium as gym
+import numpy as np
+
+
+class Reach(gym.Env):
+    """A point in [-1, 1]^2 that moves by {STEP} x its action toward a goal drawn at reset. Its state is (x, c, y):
+    the goal is columns 0 and 2; c, between them, is the distance the last step moved (what no goal says)."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (3,))
+    action_space = gym.spaces.Box(-1.0, 1.0, (2,))
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.xy = self.np_random.uniform(-1, 1, 2)
+        self.goal = self.np_random.uniform(-1, 1, 2)
+        self.moved = 0.0
+        return self._obs(), {{"goal": self.goal.copy()}}
+
+    def _obs(self):
+        return np.array([self.xy[0], self.moved, self.xy[1]])
+
+    def step(self, action):
+        before = self.xy.copy()
+        self.xy = np.clip(self.xy + {STEP} * np.clip(action, -1, 1), -1, 1)
+        self.moved = float(np.linalg.norm(self.xy - before))
+        success = bool(np.linalg.norm(self.xy - self.goal) < 0.1)
+        return self._obs(), float(success), success, False, {{"success": success}}
+
+
+def make_env():
+    return Reach()
+'''
+EPISODES, EPISODE_STEPS = 300, 40
+
+
+def expert_data(seed: int = 0) -> dict[str, np.ndarray]:
+    """A noisy expert's episodes (each a random start and goal, the goal reached and held), stepped by the
+    environment's own rule: OGBench's arrays, one row per step (the state before the action, the action)."""
+    rng = np.random.default_rng(seed)
+    obs, actions, terminals = [], [], []
+    for _ in range(EPISODES):
+        xy, goal, moved = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2), 0.0
+        for t in range(EPISODE_STEPS):
+            a = np.clip((goal - xy) / STEP + rng.normal(0, 0.3, 2), -1, 1)
+            obs.append([xy[0], moved, xy[1]])
+            actions.append(a)
+            terminals.append(t == EPISODE_STEPS - 1)
+            before, xy = xy, np.clip(xy + STEP * a, -1, 1)
+            moved = float(np.linalg.norm(xy - before))
+    return {"observations": np.array(obs), "actions": np.array(actions), "terminals": np.array(terminals)}
+
+
+def write_minari(folder: Path, data: dict[str, np.ndarray]) -> Path:
+    """The same episodes in Minari's layout (each episode's T + 1 observations and T actions)."""
+    import h5py
+
+    (folder / "data").mkdir(parents=True)
+    (folder / "data" / "metadata.json").write_text(json.dumps({"dataset_id": "reach/expert-v0"}))
+    ends = np.flatnonzero(data["terminals"])
+    with h5py.File(folder / "data" / "main_data.hdf5", "w") as f:
+        for k, (lo, hi) in enumerate(zip(np.r_[0, ends[:-1] + 1], ends + 1)):
+            g = f.create_group(f"episode_{k}")
+            # the episode's last row has its action; its next state is not in the npz: Minari's form drops that row
+            g["observations"] = data["observations"][lo:hi]
+            g["actions"] = data["actions"][lo:hi - 1]
+    return folder
+
+
+@pytest.fixture(scope="module")
+def reach(tmp_path_factory) -> Path:
+    """The spec file of the environment, its module and its npz dataset in one folder."""
+    root = tmp_path_factory.mktemp("reach")
+    (root / "reach_env.py").write_text(ENV_SOURCE)
+    np.savez(root / "reach.npz", **expert_data())
+    (root / "reach.toml").write_text('env = "reach_env.py:make_env"\ndataset = "reach.npz"\ngoal = [0, 2]\n'
+                                     "episode_steps = 60\nepisodes = 40\nhorizon = 16\nstride = 2\n")
+    return root / "reach.toml"
+
+
+def test_the_spec_declares_the_environment_and_its_data_gives_the_columns(reach):
+    family = family_of(str(reach))
+    assert family.name == "goal-env"
+    layout = family.layout(str(reach))
+    assert (layout.act_dim, layout.obs_dim, layout.goal_dim) == (2, 3, 2) and layout.rest_columns() == [2]
+    stream = family.load_stream(str(reach.parent / "reach.npz"), str(reach))
+    raw = np.load(reach.parent / "reach.npz")
+    assert len(stream) == EPISODES * EPISODE_STEPS and stream.episodes == EPISODES
+    assert stream.segment_starts.tolist() == list(range(0, EPISODES * EPISODE_STEPS, EPISODE_STEPS))
+    # the plan's order: the goal's columns (x, y) first, then c
+    np.testing.assert_array_equal(stream.states, raw["observations"][:, [0, 2, 1]])
+    minari = family.load_stream(str(write_minari(reach.parent / "reach-minari", raw)), str(reach))
+    per_episode = stream.states.reshape(EPISODES, EPISODE_STEPS, 3)
+    np.testing.assert_array_equal(minari.states, per_episode[:, :-1].reshape(-1, 3))
+    assert minari.segment_starts.tolist() == list(range(0, EPISODES * (EPISODE_STEPS - 1), EPISODE_STEPS - 1))
+
+
+def test_the_controller_fitted_on_the_data_steps_onto_its_target(reach):
+    """The inverse dynamics of the data: exact for this environment's linear step, within its action bounds."""
+    body = family_of(str(reach)).body(str(reach))
+    states = np.array([[0.0, 0.0, 0.0], [0.5, -0.5, 0.1]])
+    targets = states.copy()
+    targets[:, :2] += [[0.05, -0.02], [0.5, 0.0]]  # the second is beyond one step: saturated
+    np.testing.assert_allclose(body.track(states, targets), [[0.5, -0.2], [1.0, 0.0]], atol=0.02)
+    # pursuit: a step at the data's pace toward the waypoint, the lookahead ten such steps
+    pace = family_of(str(reach)).load_stream(str(reach.parent / "reach.npz"), str(reach)).pace()
+    assert body.default_lookahead == pytest.approx(10 * pace)
+    action = body.pursue(states[:1], np.array([[3.0, 4.0]]))
+    np.testing.assert_allclose(STEP * action, [[0.6 * pace, 0.8 * pace]], atol=0.002)
+
+
+def _eval(run: Path, *flags) -> dict:
+    out = run / "eval.json"
+    assert main(["eval", str(run), "--device", "cpu", "--no-progress", "--out", str(out), *flags]) == 0
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("process, prior, steps", [("ddpm", None, 400), ("bridge", "line", 200), ("flow", "line", 200)])
+def test_train_plan_and_evaluate_on_your_own_environment(reach, tmp_path, process, prior, steps):
+    """A few hundred steps of a small network (seconds) plan well enough to reach most goals, replanned every 8 steps,
+    where the straight line alone, executed alike, reaches about half (its 31-step plans, replanned, slow down as they
+    near the goal)."""
+    run = tmp_path / process
+    assert main(["train", "--maze", str(reach), "--dataset", str(reach.parent / "reach.npz"), "--preset",
+                 "cpu-small", "--process", process, *(["--prior", prior] if prior else []), "--diffusion-steps", "8",
+                 "--steps", str(steps), "--checkpoint-every", str(steps), "--batch-size", "64", "--lr", "3e-3",
+                 "--seed", "0", "--run-dir", str(run), "--device", "cpu", "--no-progress"]) == 0
+    config = json.loads((run / "config.json").read_text())["config"]
+    assert config["maze"] == str(reach) and (config["horizon"], config["stride"]) == (16, 2)
+    r = _eval(run, "--replan-every", "8")
+    assert (r["env"], r["episodes"], r["episode_steps"], r["process"]) == ("reach", 40, 60, process)
+    assert r["plans_per_episode"]["mean"] > 1 and r["execution"]["replan_every"] == 8
+    # success from the environment's info, beside the straight line alone
+    assert 0.3 <= r["floor_line"]["success_rate"] <= 0.7
+    assert r["success_rate"] >= max(0.8, r["floor_line"]["success_rate"] + 0.2), r["success_rate"]
+    assert r["successes"] == round(r["success_rate"] * 40) and 0 < r["return"]["mean"] <= 1
+
+
+def test_the_dataset_graph_on_your_own_environment(reach, tmp_path):
+    out = tmp_path / "graph.json"
+    assert main(["graph", "--maze", str(reach), "--dataset", str(reach.parent / "reach.npz"), "--episodes", "20",
+                 "--replan-every", "10", "--out", str(out), "--no-progress"]) == 0
+    r = json.loads(out.read_text())
+    assert r["graph"]["paths_found"] == 1.0 and r["graph"]["radius"] == pytest.approx(2.5 * r["graph"]["step"])
+    assert r["success_rate"] >= 0.9
+
+
+# --- bad input: one error line, exit 2, nothing written -------------------------------------------------------------
+
+
+def test_a_dataset_of_another_family(capsys, reach, tmp_path, tiny_dataset):
+    line = refused(capsys, "train", "--maze", reach, "--dataset", tiny_dataset, "--preset", "cpu-small",
+                   "--steps", "1", "--run-dir", tmp_path / "run", watch=tmp_path)
+    assert "its states have 4 columns and its actions 2, the environment's 3 and 2" in line
+    line = refused(capsys, "train", "--maze", "umaze", "--dataset", reach.parent / "reach.npz", "--preset",
+                   "cpu-small", "--steps", "1", "--run-dir", tmp_path / "run", watch=tmp_path)
+    assert "npz file (OGBench's format), not a Maze2D dataset" in line
+
+
+def test_a_run_of_one_family_on_another_familys_tasks(capsys, reach, tmp_path, tiny_runs):
+    line = refused(capsys, "graph", "--maze", reach, "--low", tiny_runs["ddpm"], "--out", tmp_path / "g.json",
+                   watch=tmp_path)
+    assert "the low level was trained on umaze, not" in line
+
+
+@pytest.mark.parametrize("spec, message", [
+    (None, "no environment spec file at"),
+    ('env = "reach_env.py:make_env"\ngoal = [0, 2]\n', "no 'dataset'"),
+    ('env = "reach_env.py:make_env"\ndataset = "reach.npz"\ngoal = [0, 3]\nepisode_steps = 60\n',
+     "are not all in the 3-column state"),
+    ('env = "reach_env.py:nothing"\ndataset = "reach.npz"\ngoal = [0, 2]\n', "cannot be loaded"),
+    ('env = "reach_env.py:make_env"\ndataset = "reach.npz"\ngoal = [0, 2]\nhorizon = 0\n', "horizon must be"),
+    ('env = "reach_env.py:make_env"\ndataset = "reach.npz"\ngoal = [0, 2]\ncolour = 1\n', "unknown key 'colour'"),
+])
+def test_a_bad_spec(capsys, reach, spec, message):
+    bad = reach.parent / "bad.toml"
+    if spec is None:
+        bad.unlink(missing_ok=True)
+    else:
+        bad.write_text(spec)
+    line = refused(capsys, "train", "--maze", bad, "--dataset", reach.parent / "reach.npz", "--preset", "cpu-small",
+                   "--steps", "1", "--run-dir", reach.parent / "never", watch=reach.parent)
+    assert message in line
+
+
+def test_an_unknown_environment_names_every_family(capsys, tmp_path):
+    line = refused(capsys, "graph", "--maze", "nowhere", "--dataset", tmp_path, watch=tmp_path)
+    assert "unknown environment 'nowhere'" in line and "Your own environment: the path of a spec file" in line
