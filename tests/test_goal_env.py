@@ -163,6 +163,54 @@ def test_the_dataset_graph_on_your_own_environment(reach, tmp_path):
     assert r["success_rate"] >= 0.9
 
 
+STUDY = """
+[dataset]
+maze = "{spec}"
+path = "{dataset}"
+
+[training]
+steps = 200
+checkpoint_every = 200
+seeds = [0]
+diffusion_steps = 8
+batch_size = 64
+lr = 3e-3
+device = "cpu"
+
+[evaluation]
+episodes = 20
+workers = 1
+
+[runs.flow-line]
+process = "flow"
+prior = "line"
+
+[[evaluations]]
+command = "eval"
+runs = ["flow-line"]
+args = {{ replan_every = 8 }}
+out = "reach/flow-line-replan8-seed{{eval_seed}}.json"
+
+[[evaluations]]
+command = "graph"
+runs = []
+args = {{ replan_every = 10 }}
+out = "reach/graph-replan10-seed{{eval_seed}}.json"
+"""
+
+
+def test_a_study_of_your_own_environment(reach, tmp_path, monkeypatch):
+    """A study file takes the spec as its maze: `study run` trains its named run and writes its evaluations."""
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "reach.toml").write_text(STUDY.format(spec=reach, dataset=reach.parent / "reach.npz"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["study", "run", "reach", "--no-progress", "--root", str(tmp_path)]) == 0
+    planner = json.loads((tmp_path / "results" / "reach" / "reach" / "flow-line-replan8-seed0.json").read_text())
+    graph = json.loads((tmp_path / "results" / "reach" / "reach" / "graph-replan10-seed0.json").read_text())
+    assert (planner["env"], planner["episodes"], planner["process"], planner["step"]) == ("reach", 20, "flow", 200)
+    assert planner["success_rate"] >= 0.8 and graph["success_rate"] >= 0.9 and graph["method"] == "dataset graph"
+
+
 # --- bad input: one error line, exit 2, nothing written -------------------------------------------------------------
 
 
@@ -203,4 +251,4 @@ def test_a_bad_spec(capsys, reach, spec, message):
 
 def test_an_unknown_environment_names_every_family(capsys, tmp_path):
     line = refused(capsys, "graph", "--maze", "nowhere", "--dataset", tmp_path, watch=tmp_path)
-    assert "unknown environment 'nowhere'" in line and "Your own environment: the path of a spec file" in line
+    assert "unknown environment 'nowhere'" in line and "user-declared: the path of a spec file" in line

@@ -380,7 +380,7 @@ def run_episodes(tasks: GoalTasks, agent, progress: bool = False) -> Outcome:
 
 class GoalEnv(Family):
     name = "goal-env"
-    title = "Your own environment"
+    title = "user-declared"
     generator = "own"
     episodes = 50
     quick_episodes = 5
