@@ -42,7 +42,9 @@ def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
-    return TemporalUNet.from_config(config.model, config.layout.transition_dim, horizon=config.horizon)
+    """The run's U-Net, with the second time input its process asks for (``Process.takes_interval``)."""
+    return TemporalUNet.from_config(config.model, config.layout.transition_dim, horizon=config.horizon,
+                                    interval=config.process.takes_interval)
 
 
 def build_prior_net(layout: Layout, horizon: int) -> PriorMLP:
