@@ -85,5 +85,6 @@ def process_from_dict(d: dict) -> Process:
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "Flow", "MeanFlow", "Shortcut", "Process", "PROCESSES", "make_process", "parse_process_params",
+__all__ = ["DDPM", "Bridge", "Flow", "MeanFlow", "Shortcut", "Process",
+           "PROCESSES", "make_process", "parse_process_params",
            "process_from_dict"]

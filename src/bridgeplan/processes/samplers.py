@@ -109,7 +109,8 @@ def bridge_sample(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditio
 
 
 AverageVelocity = Callable[[torch.Tensor, float, float], torch.Tensor]
-"""``u(z_t, r, t)``: the network's average velocity of the flow over ``[r, t]`` at ``z_t`` (``z_r = z_t - (t - r) u``)."""
+"""``u(z_t, r, t)``: the network's average velocity of the flow over ``[r, t]`` at ``z_t``
+(``z_r = z_t - (t - r) u``)."""
 
 
 def jump_sample(average_velocity: AverageVelocity, x: torch.Tensor, conditions: Conditions,
