@@ -188,8 +188,7 @@ def fit(process, x0, x1, cond, steps=150, seed=0):
     return net, before, measured()
 
 
-@pytest.mark.parametrize("process", [MeanFlow(steps=8, adaptive_p=0.0), MeanFlow(steps=8), Shortcut(steps=8)],
-                         ids=["meanflow-l2", "meanflow", "shortcut"])
+@pytest.mark.parametrize("process", [MeanFlow(steps=8), Shortcut(steps=8)], ids=["meanflow", "shortcut"])
 def test_training_from_a_non_gaussian_prior_moves_the_one_step_sample_onto_the_data(process):
     """A deterministic, non-Gaussian prior (a ramp, as the line prior is a deterministic function of start and
     goal) and one data window: trained briefly, the loss falls and the one-step sample lands near the data and far
@@ -277,6 +276,7 @@ CLI = {"meanflow": ["--process", "meanflow", "--prior", "line"],
 def test_train_and_eval_through_the_cli(tiny_dataset, tmp_path, capsys, name):
     run = tmp_path / "run"
     assert main(train_args(tiny_dataset, run, 3, *CLI[name])) == 0
+    capsys.readouterr()
     saved = json.loads((run / "config.json").read_text())["config"]
     assert saved["process"]["name"] == name and saved["prior"] == "line"
     for nfe in (1, 2):
