@@ -12,7 +12,8 @@ import torch
 from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.unet import TemporalUNet
-from bridgeplan.processes import MeanFlow, Shortcut, make_process, process_from_dict
+from bridgeplan.processes import Distill, MeanFlow, Shortcut, make_process, process_from_dict
+from bridgeplan.processes.samplers import ddim
 from bridgeplan.trajectory import MAZE2D
 from tests.test_train import train_args
 
@@ -287,3 +288,133 @@ def test_train_and_eval_through_the_cli(tiny_dataset, tmp_path, capsys, name):
     impossible = "3" if name == "shortcut" else "7"  # not a power of two; above the steps
     assert main(["eval", str(run), "--episodes", "2", "--device", "cpu", "--nfe", impossible]) == 2
     assert "nfe must be" in one_error_line(capsys)
+
+
+# --- DDPM distilled -------------------------------------------------------------------------------------
+
+def test_distill_targets_are_the_teacher_at_the_last_steps_and_the_student_one_ddim_step_down():
+    """Rows with n < skip take the teacher's x0 prediction; the others the student's output at x_m, the teacher's
+    DDIM step (eta 0) from n to m = n - skip, built here by the DDIM sampler itself."""
+    process = Distill(steps=10, skip=3)
+    gen = torch.Generator().manual_seed(8)
+    x0 = torch.rand((64, H, D), generator=gen, dtype=F64) * 1.8 - 0.9
+
+    def teacher(x, n):  # an arbitrary smooth x0 predictor
+        return torch.tanh(0.7 * x + 0.05 * n[:, None, None])
+
+    def student(x, n):
+        return torch.sin(x - 0.1 * n[:, None, None])
+
+    x_n, n, target = process.consistency_pair(student, teacher, x0, {}, gen)
+    assert set(n.tolist()) == set(range(10))
+    for row in range(64):
+        k, x = int(n[row]), x_n[row:row + 1]
+        if k < 3:
+            assert torch.allclose(target[row], teacher(x, n[row:row + 1].to(F64))[0]), k
+            continue
+        seen = {}
+
+        def predict(z, step):
+            seen[step] = z
+            return teacher(z, torch.full((1,), float(step), dtype=F64)).clamp(-1, 1) if step == k else z
+
+        ddim(predict, x, {}, [k, k - 3], process.alpha_bar, eta=0.0)
+        want = student(seen[k - 3], torch.full((1,), float(k - 3), dtype=F64)).clamp(-1, 1)
+        assert torch.allclose(target[row], want[0], atol=1e-12), k
+
+
+def test_a_student_equal_to_an_exact_teacher_of_a_point_mass_has_zero_loss():
+    """Data a single trajectory c: the teacher that predicts c from anywhere is exact, its ODE ends at c from every
+    (x_n, n), and the student equal to it is already the consistency function (zero loss); another is not."""
+    c = torch.rand((1, H, D), generator=torch.Generator().manual_seed(9), dtype=F64) * 1.8 - 0.9
+    x0 = c.repeat(32, 1, 1)
+
+    def exact(x, n):
+        return c.expand_as(x)
+
+    process = Distill(steps=8, skip=2)
+    assert float(process.training_loss(exact, x0, x0, {}, torch.Generator().manual_seed(1), teacher=exact)) == 0
+    assert float(process.training_loss(lambda x, n: 0 * x, x0, x0, {}, torch.Generator().manual_seed(1),
+                                       teacher=exact)) > 0.01
+    with pytest.raises(BridgeplanError, match="teacher"):
+        process.training_loss(exact, x0, x0, {})
+
+
+def test_distill_samples_in_one_or_two_calls_at_steps_a_consistency_function_uses():
+    assert Distill(steps=16).sample_steps(1) == [15] and Distill(steps=16).sample_steps(2) == [15, 8]
+    assert Distill().max_nfe == 2 and Distill(teacher="/somewhere/run").variant() == {}
+    assert Distill(skip=2).run_tag("gaussian") == ["distill", "N64", "skip2"]
+    for nfe in (0, 3):
+        with pytest.raises(BridgeplanError, match="nfe must be 1 or 2"):
+            Distill().validate_nfe(nfe)
+    with pytest.raises(BridgeplanError, match="skip must be in 1..7"):
+        Distill(steps=8, skip=8)
+
+
+def test_distill_training_lowers_its_loss():
+    """A tiny teacher, its copy as the student, trained briefly on the consistency loss."""
+    torch.manual_seed(3)
+    teacher = TemporalUNet(D, 8, (1, 2)).requires_grad_(False)
+    student = TemporalUNet(D, 8, (1, 2))
+    student.load_state_dict(teacher.state_dict())
+    x0, _, cond = pair(5)
+    x0, cond = x0.float(), {k: v.float() for k, v in cond.items()}
+    process = Distill(steps=8, skip=2)
+    opt = torch.optim.Adam(student.parameters(), lr=3e-3)
+
+    def measured() -> float:
+        return sum(float(process.training_loss(student, x0, x0, cond, torch.Generator().manual_seed(50 + k),
+                                               teacher=teacher).detach()) for k in range(8)) / 8
+
+    before, gen = measured(), torch.Generator().manual_seed(0)
+    for _ in range(80):
+        opt.zero_grad()
+        process.training_loss(student, x0, x0, cond, gen, teacher=teacher).backward()
+        opt.step()
+    assert measured() < 0.5 * before
+
+
+@pytest.fixture(scope="module")
+def distilled(tiny_runs, tiny_dataset, tmp_path_factory):
+    run = tmp_path_factory.mktemp("distill") / "run"
+    assert main(train_args(tiny_dataset, run, 3, "--process", "distill", "--process-param",
+                           f"teacher={tiny_runs['ddpm']}")) == 0
+    return run
+
+
+def test_distill_through_the_cli(distilled, tiny_runs, capsys):
+    capsys.readouterr()
+    from bridgeplan.runs import load_planner
+
+    planner, info = load_planner(distilled, device="cpu")
+    assert info.config.process.name == "distill" and info.config.process.steps == 6
+    assert info.portable_config["process"]["teacher"] == tiny_runs["ddpm"].name
+    # the student started from the teacher's weights: after 3 steps at lr 1e-3 they are still close
+    teacher, _ = load_planner(tiny_runs["ddpm"], device="cpu")
+    gap = max(float((a - b).abs().max()) for a, b in zip(planner.model.state_dict().values(),
+                                                        teacher.model.state_dict().values()))
+    assert gap < 0.05
+    for nfe in (1, 2):
+        assert main(["eval", str(distilled), "--episodes", "4", "--device", "cpu", "--nfe", str(nfe), "--json"]) == 0
+        result = json.loads(capsys.readouterr().out)
+        assert result["process"] == "distill" and result["nfe"] == nfe and result["method"] == "DDPM distilled"
+    assert main(["eval", str(distilled), "--episodes", "2", "--device", "cpu", "--nfe", "3"]) == 2
+    assert "nfe must be 1 or 2" in one_error_line(capsys)
+
+
+@pytest.mark.parametrize("teacher, extra, message", [
+    ("bridge", [], "is a bridge run; distill distills a DDPM run"),
+    ("ddpm", ["--horizon", "16"], "was trained for horizon 32, not 16"),
+    ("ddpm", ["--diffusion-steps", "4"], "has 6 diffusion steps, the student 4"),
+    ("ddpm", ["--dim", "16"], "was trained for model"),
+    ("missing", [], "does not exist"),
+    ("", [], "needs a teacher"),
+])
+def test_distill_refuses_a_teacher_it_cannot_distill(tiny_runs, tiny_dataset, tmp_path, capsys, teacher, extra,
+                                                     message):
+    run = tmp_path / "run"
+    where = {"bridge": tiny_runs["bridge"], "ddpm": tiny_runs["ddpm"], "missing": tmp_path / "nothing", "": ""}
+    assert main(train_args(tiny_dataset, run, 2, "--process", "distill", "--process-param",
+                           f"teacher={where[teacher]}", *extra)) == 2
+    assert message in one_error_line(capsys)
+    assert not run.exists()

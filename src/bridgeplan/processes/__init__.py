@@ -1,5 +1,5 @@
 """Generative processes behind one interface (see ``base.py``, ``ddpm.py``, ``bridge.py``, ``flow.py``, and the
-one-step ``meanflow.py`` and ``shortcut.py`` on ``jumps.py``).
+one-step ``meanflow.py`` and ``shortcut.py`` on ``jumps.py``, and ``distill.py``, DDPM distilled).
 
 A process is the one definition of a method: training, sweeps, evaluation, reports and the bench
 all ask it. Every process is a frozen dataclass derived from :class:`Process` (``to_dict``,
@@ -27,12 +27,13 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes.base import Process
 from bridgeplan.processes.bridge import Bridge
 from bridgeplan.processes.ddpm import DDPM
+from bridgeplan.processes.distill import Distill
 from bridgeplan.processes.flow import Flow
 from bridgeplan.processes.meanflow import MeanFlow
 from bridgeplan.processes.shortcut import Shortcut
 
 PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge, "flow": Flow, "meanflow": MeanFlow,
-                                       "shortcut": Shortcut}
+                                       "shortcut": Shortcut, "distill": Distill}
 
 
 def make_process(name: str, **params) -> Process:
@@ -85,6 +86,6 @@ def process_from_dict(d: dict) -> Process:
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "Flow", "MeanFlow", "Shortcut", "Process",
+__all__ = ["DDPM", "Bridge", "Flow", "MeanFlow", "Shortcut", "Distill", "Process",
            "PROCESSES", "make_process", "parse_process_params",
            "process_from_dict"]
