@@ -418,3 +418,47 @@ def test_distill_refuses_a_teacher_it_cannot_distill(tiny_runs, tiny_dataset, tm
                            f"teacher={where[teacher]}", *extra)) == 2
     assert message in one_error_line(capsys)
     assert not run.exists()
+
+
+ONESTEP_STUDY = """
+[[experiments]]
+name = "onestep"
+last_snapshot_only = true
+series = [{ method = "ddpm", nfe = [1, 4] }, { method = "distill", nfe = [1, 2] },
+          { method = "meanflow-line", nfe = [1, 2] }, { method = "shortcut-line", nfe = [1, 2] }]
+
+[methods.ddpm]
+process = "ddpm"
+
+[methods.distill]
+process = "distill"
+
+[methods.meanflow-line]
+process = "meanflow"
+prior = "line"
+
+[methods.shortcut-line]
+process = "shortcut"
+prior = "line"
+"""
+
+
+def test_a_study_trains_the_teacher_then_distills_it_and_scores_every_one_step_process(tiny_dataset, tmp_path):
+    """A tiny study of the one-step processes against DDPM: the distilled student's teacher is the study's own DDPM
+    run of the same seed (trained first), and the stored rows name it without a path of this machine."""
+    from tests.test_experiments import TINY_STUDY
+
+    from bridgeplan.experiments.store import ResultsStore
+
+    (tmp_path / "studies").mkdir()
+    text = TINY_STUDY.format(dataset=tiny_dataset, steps=2, seeds=[0]).replace("diffusion_steps = 6",
+                                                                               "diffusion_steps = 4")
+    (tmp_path / "studies" / "tiny.toml").write_text(text + ONESTEP_STUDY)
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(tmp_path)]) == 0
+    rows = ResultsStore(tmp_path / "results" / "tiny" / "results.sqlite").rows("onestep")
+    assert sorted((r["process"], r["prior"], r["nfe"]) for r in rows) == [
+        ("ddpm", "gaussian", 1), ("ddpm", "gaussian", 4), ("distill", "gaussian", 1), ("distill", "gaussian", 2),
+        ("meanflow", "line", 1), ("meanflow", "line", 2), ("shortcut", "line", 1), ("shortcut", "line", 2)]
+    teacher = next(json.loads(r["config"])["process"]["teacher"] for r in rows if r["process"] == "distill")
+    ddpm_run = next(r["run_name"] for r in rows if r["process"] == "ddpm")
+    assert teacher == ddpm_run and str(tmp_path) not in json.dumps(rows)
