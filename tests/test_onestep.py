@@ -446,9 +446,8 @@ prior = "line"
 def test_a_study_trains_the_teacher_then_distills_it_and_scores_every_one_step_process(tiny_dataset, tmp_path):
     """A tiny study of the one-step processes against DDPM: the distilled student's teacher is the study's own DDPM
     run of the same seed (trained first), and the stored rows name it without a path of this machine."""
-    from tests.test_experiments import TINY_STUDY
-
     from bridgeplan.experiments.store import ResultsStore
+    from tests.test_experiments import TINY_STUDY
 
     (tmp_path / "studies").mkdir()
     text = TINY_STUDY.format(dataset=tiny_dataset, steps=2, seeds=[0]).replace("diffusion_steps = 6",
