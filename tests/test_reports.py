@@ -390,3 +390,33 @@ def test_demo_report_gives_each_series_lowest_and_highest_over_seeds_at_the_last
     assert "| bridge (line) N=16 NFE=15 | 60 to 67 | 0.50 |" in text
     assert "| the line alone (no network) | 30 |  |" in text
     assert "S = 0, 1, 2 (step 1500, 200 test episodes each" in text
+
+
+def test_the_onestep_report_judges_each_one_step_method_against_ddpms_bar_chosen_on_validation(tmp_path):
+    """DDPM's bar is its NFE chosen on validation (4, though 16 scores higher on test); the mean flow at NFE 1
+    reaches it at the last step, the shortcut at NFE 2 does not; the pursued rows are a part of their own."""
+    onestep = report("onestep")
+    ddpm, meanflow = make_process("ddpm", steps=16), make_process("meanflow", steps=16)
+    shortcut = make_process("shortcut", steps=16)
+    rows = []
+    for seed in SEEDS:
+        for step in (4000, 8000):
+            rows += [_row("onestep-tracked", ddpm, "gaussian", step, 4, 70.0, seed),
+                     _row("onestep-tracked", ddpm, "gaussian", step, 16, 80.0, seed),
+                     _row("onestep-tracked", meanflow, "line", step, 1, 60.0 + step / 800, seed),
+                     _row("onestep-tracked", shortcut, "line", step, 2, 50.0, seed)]
+        rows += [_row("onestep-tracked-validation", ddpm, "gaussian", 8000, 4, 75.0, seed),
+                 _row("onestep-tracked-validation", ddpm, "gaussian", 8000, 16, 72.0, seed),
+                 _row("onestep-pursued", ddpm, "gaussian", 8000, 16, 90.0, seed, execution="pursuit1.5"),
+                 _row("onestep-pursued", meanflow, "line", 8000, 1, 70.0, seed, execution="pursuit1.5")]
+    _write(tmp_path / onestep.SOURCES[0] / "results.csv", rows)
+    text = GENERATORS["onestep"].render(tmp_path)
+    sections = text.split("## ")
+    assert sections[1].startswith("medium, tracked, single-task") and sections[2].startswith("medium, pursued")
+    tracked = sections[1].splitlines()
+    assert "| DDPM's best | 4 / 4 | 70.1 ± 0.1 | 70.1 ± 0.1 |  |" in tracked
+    assert "| mean flow (line) | 1 | 65.1 ± 0.1 | 70.1 ± 0.1 | yes (+0.0 ± 0.0) |" in tracked
+    assert "| shortcut (line) | 2 | 50.1 ± 0.1 | 50.1 ± 0.1 | no (-20.0 ± 0.0) |" in tracked
+    pursued = sections[2].splitlines()
+    assert "| DDPM's best | 16 | 90.1 ± 0.1 |  |" in pursued
+    assert "| mean flow (line) | 1 | 70.1 ± 0.1 | no (-20.0 ± 0.0) |" in pursued

@@ -246,6 +246,8 @@ def _process_params(args, name: str) -> dict:
     params |= _overrides(args, ("beta_max",))
     if args.diffusion_steps is not None:
         params["steps"] = args.diffusion_steps
+    if params.get("teacher"):  # a distillation's teacher run, found from anywhere (as the dataset is)
+        params["teacher"] = _dataset_ref(params["teacher"])
     for flag in ("ot_ode", "consistent"):
         if getattr(args, flag):
             params[flag] = True

@@ -42,7 +42,9 @@ def load_windows(dataset: str, maze: str, horizon: int, stride: int = 1):
 
 
 def build_model(config: cfg.TrainConfig) -> TemporalUNet:
-    return TemporalUNet.from_config(config.model, config.layout.transition_dim, horizon=config.horizon)
+    """The run's U-Net, with the second time input its process asks for (``Process.takes_interval``)."""
+    return TemporalUNet.from_config(config.model, config.layout.transition_dim, horizon=config.horizon,
+                                    interval=config.process.takes_interval)
 
 
 def build_prior_net(layout: Layout, horizon: int) -> PriorMLP:
@@ -70,6 +72,33 @@ def build_prior(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.d
     net = build_prior_net(config.layout, config.horizon)
     net.load_state_dict(state["model"])
     return make_prior("learned", normalizer, config.layout, net=net.to(device).eval())
+
+
+def load_teacher(config: cfg.TrainConfig, normalizer: Normalizer, device: torch.device) -> torch.nn.Module | None:
+    """The network a distilling process (``Process.distills``) trains against: the EMA weights of its ``teacher``
+    run, checked to be a DDPM run of the same maze, plan shape, network, steps and data; None for the others."""
+    process = config.process
+    if not process.distills:
+        return None
+    if not process.teacher:
+        raise BridgeplanError(f"{process.name} needs a teacher: --process-param teacher=RUN (a trained DDPM run)")
+    path = Path(process.teacher)
+    if not path.exists():
+        raise BridgeplanError(f"teacher {process.teacher} does not exist")
+    teacher, info = load_planner(path, device=str(device))
+    if teacher.process.name != "ddpm":
+        raise BridgeplanError(f"teacher {process.teacher} is a {teacher.process.display_name} run; {process.name} "
+                              f"distills a DDPM run")
+    for name in ("maze", "horizon", "stride", "subgoal_every", "model"):
+        if getattr(info.config, name) != getattr(config, name):
+            raise BridgeplanError(f"teacher {process.teacher} was trained for {name} {getattr(info.config, name)!r}, "
+                                  f"not {getattr(config, name)!r}")
+    if teacher.process.steps != process.steps:
+        raise BridgeplanError(f"teacher {process.teacher} has {teacher.process.steps} diffusion steps, the student "
+                              f"{process.steps} (give --diffusion-steps {teacher.process.steps})")
+    if teacher.normalizer.to_dict() != normalizer.to_dict():
+        raise BridgeplanError(f"teacher {process.teacher} was trained on a different dataset")
+    return teacher.model.requires_grad_(False)
 
 
 def build_planner(config: cfg.TrainConfig, model: torch.nn.Module, normalizer: Normalizer,
@@ -106,13 +135,15 @@ class RunInfo:
     def portable_config(self) -> dict:
         """``config_dict`` as results record it: the dataset named by its directory (``medium-1000000-v2``) and a
         learned prior by its run's name, not by where they lay on the machine that trained the run, so that
-        committed rows carry no absolute path."""
+        committed rows carry no absolute path (a distilled run's teacher likewise)."""
         out = dict(self.config_dict)
         if out.get("dataset"):
             out["dataset"] = Path(out["dataset"]).name
         if out.get("prior_run"):
             prior = Path(out["prior_run"])  # a run directory or one of its checkpoint files
             out["prior_run"] = (run_dir_of(prior) if prior.suffix == ".pt" else prior).name
+        if out.get("process", {}).get("teacher"):  # a distilled run's teacher, by its run's name too
+            out["process"] = {**out["process"], "teacher": run_dir_of(Path(out["process"]["teacher"])).name}
         return out
 
 

@@ -30,7 +30,7 @@ from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import LOCK_NAME, run_lock
 from bridgeplan.paths import checkpoint_path, config_path, snapshot_path, snapshot_steps
 from bridgeplan.priors import train_prior_loss
-from bridgeplan.runs import build_model, build_prior, build_prior_net, load_windows
+from bridgeplan.runs import build_model, build_prior, build_prior_net, load_teacher, load_windows
 from bridgeplan.trajectory import window_conditions
 
 # Fields that may change when a run is resumed: they do not change what is being trained.
@@ -108,10 +108,14 @@ def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress
 
 def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> TrainJob:
     """The planner's network (fresh, on ``device``), its loss and EMA settings."""
+    teacher = load_teacher(config, normalizer, device)  # None unless the process distills a run
     model = build_model(config).to(device)
+    if teacher is not None:  # the student starts as its teacher
+        model.load_state_dict(teacher.state_dict())
     net = torch.compile(model) if config.compile else model  # shares model's parameters
     process = config.process
     prior = build_prior(config, normalizer, device)
+    against = {} if teacher is None else {"teacher": teacher}
     layout = config.layout
     rest = torch.as_tensor(normalizer.normalize(np.zeros(layout.transition_dim)), dtype=torch.float32, device=device)
 
@@ -120,7 +124,7 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
             x0 = hold_tails(x0, config.hold_share, rest, layout, gen)
         conditions = window_conditions(x0, layout, config.subgoal_every)
         x1 = prior.sample(conditions, config.horizon, x0.shape[0], generator=gen)
-        return process.training_loss(net, x0, x1, conditions, generator=gen)
+        return process.training_loss(net, x0, x1, conditions, generator=gen, **against)
 
     return TrainJob("planner", config, model, loss, normalizer.to_dict(), config.grad_accum,
                     (config.ema_decay, config.ema_every, config.ema_start))

@@ -29,6 +29,9 @@ GENERATORS = {g.name: g for g in [
     Generator("cddb", "cddb", "cddb.md",
               "CDDB consistency corrections of the consistent bridge and flow against DDPM's best, chosen on "
               "validation", ("docs/results/README.md",)),
+    Generator("onestep", "onestep", "onestep.md",
+              "one network call (mean flows, shortcut models, DDPM distilled) at NFE 1 and 2 against DDPM's best at "
+              "any NFE, per maze, execution and task set, paired over seeds", ()),
     Generator("demo", "demo", "demo.md",
               "what `bridgeplan demo` prints at seeds 0, 1 and 2: the README's expected range", ("README.md",)),
     Generator("gpu", "gpu", "gpu.md",

@@ -8,6 +8,7 @@ among them; ``ray`` submits each job as a Ray task with its CPU/GPU needs.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +20,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
+from bridgeplan.processes import DDPM
 
 
 @dataclass(frozen=True)
@@ -55,10 +57,20 @@ class SweepSettings:
 
 
 def _train_config(s: SweepSettings, spec: RunSpec, seed: int, prior_run: str) -> cfg.TrainConfig:
+    process = spec.process
+    if process.distills:  # its teacher: the sweep's DDPM run of the same seed (trained first, by run_job)
+        teacher = _teacher_config(s, spec, seed)
+        where = (paths.runs_dir(s.results_dir) / teacher.run_name()).resolve()  # found from anywhere, as the data
+        process = dataclasses.replace(process, teacher=str(where))
     return cfg.preset_config(
         s.maze, s.preset, **s.overrides, dataset=s.dataset, steps=s.train_steps, seed=seed,
-        checkpoint_every=s.checkpoint_every, process=spec.process, prior=spec.prior,
+        checkpoint_every=s.checkpoint_every, process=process, prior=spec.prior,
         prior_run=prior_run if spec.prior == "learned" else "")
+
+
+def _teacher_config(s: SweepSettings, spec: RunSpec, seed: int) -> cfg.TrainConfig:
+    """The DDPM run a distilling ``spec`` learns from at ``seed``: the sweep's own, with the student's steps."""
+    return _train_config(s, RunSpec(DDPM(steps=spec.process.steps), "gaussian"), seed, "")
 
 
 def _prior_config(s: SweepSettings, seed: int, planner: cfg.TrainConfig) -> cfg.PriorTrainConfig:
@@ -102,6 +114,9 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         return []
     configure_threads(threads or config.threads)
     run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
+    if config.process.distills:  # the teacher first (another job may be training it: train_to waits for it)
+        teacher = _teacher_config(settings, spec, seed)
+        train_to(train, teacher, Path(config.process.teacher), progress)
     train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []

@@ -7,7 +7,10 @@ stride 2) up; no attention. ``dim=32, dim_mults=(1, 4, 8)`` is Diffuser's Maze2D
 
 The network maps ``x`` ``[batch, horizon, transition_dim]`` and a float time ``t`` ``[batch]`` (DDPM
 passes its step index, the bridge its step index n) to a tensor of the same shape as ``x``; what the
-output means (x0 or I2SB's scaled difference) is the process's business.
+output means (x0 or I2SB's scaled difference) is the process's business. A network built with
+``interval=True`` takes a second float ``[batch]`` (the mean flow's interval, the shortcut's step size),
+embedded like the time and added to its embedding; built without it, it has exactly the parameters (and the
+initial weights, at one seed) it always had, so every earlier run's checkpoint loads and plans unchanged.
 """
 
 from __future__ import annotations
@@ -58,37 +61,53 @@ class SinusoidalEmbedding(nn.Module):
 
     def forward(self, t: torch.Tensor) -> torch.Tensor:
         half = self.dim // 2
-        k = torch.arange(half, device=t.device, dtype=torch.float32)
+        t = t if t.is_floating_point() else t.float()  # in float64 for a float64 network (the tests' exact checks)
+        k = torch.arange(half, device=t.device, dtype=t.dtype)
         freqs = torch.exp(-math.log(10000) * k / (half - 1))
-        args = t.float()[:, None] * freqs[None]
+        args = t[:, None] * freqs[None]
         return torch.cat([args.sin(), args.cos()], dim=-1)
 
 
 class _MishFunction(torch.autograd.Function):
     """Mish with one exponential: ``tanh(softplus(x)) = n / (n + 2)`` with ``n = e^x (e^x + 2)``, and its
     derivative ``t + x (1 - t^2) sigmoid(x)`` from the same ``e^x``. torch's own kernel evaluates exp, log1p and
-    tanh forward and again backward: on the small networks it took a quarter of a training step at batch 256."""
+    tanh forward and again backward: on the small networks it took a quarter of a training step at batch 256.
+    Forward-mode too (``jvp``, for the mean flow's ``torch.func.jvp``): ``forward`` hands ``t`` and ``e`` to
+    ``setup_context`` as outputs of their own, which :class:`Mish` drops."""
 
     @staticmethod
-    def forward(ctx, x):
+    def forward(x):
         e = x.clamp(max=20.0).exp_()  # beyond 20, t is 1 in float32 (and e^2x would overflow near 44)
         n = (e + 2).mul_(e)
         t = n.div_(n + 2)
-        ctx.save_for_backward(x, t, e)
-        return x * t
+        return x * t, t, e
 
     @staticmethod
-    def backward(ctx, grad):
-        x, t, e = ctx.saved_tensors
+    def setup_context(ctx, inputs, output):
+        (x,), (_, t, e) = inputs, output
+        ctx.mark_non_differentiable(t, e)
+        ctx.save_for_backward(x, t, e)
+        ctx.save_for_forward(x, t, e)
+
+    @staticmethod
+    def _derivative(x, t, e):
         sigmoid = e.div(e + 1)
-        return (t * t).neg_().add_(1).mul_(sigmoid).mul_(x).add_(t).mul_(grad)
+        return (t * t).neg_().add_(1).mul_(sigmoid).mul_(x).add_(t)
+
+    @staticmethod
+    def backward(ctx, grad, _grad_t, _grad_e):
+        return _MishFunction._derivative(*ctx.saved_tensors).mul_(grad)
+
+    @staticmethod
+    def jvp(ctx, tangent):
+        return _MishFunction._derivative(*ctx.saved_tensors).mul_(tangent), None, None
 
 
 class Mish(nn.Module):
     """``x * tanh(softplus(x))``, as ``nn.Mish`` (equal to float32 rounding), in fewer operations."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return _MishFunction.apply(x)
+        return _MishFunction.apply(x)[0]
 
 
 class ConvBlock(nn.Sequential):
@@ -119,7 +138,7 @@ class TemporalUNet(nn.Module):
     """
 
     def __init__(self, transition_dim: int, dim: int = 32, dim_mults: tuple[int, ...] = (1, 4, 8),
-                 horizon: int | None = None):
+                 horizon: int | None = None, interval: bool = False):
         super().__init__()
         self.config = UNetConfig(dim, tuple(dim_mults))
         self.transition_dim = transition_dim
@@ -146,18 +165,27 @@ class TemporalUNet(nn.Module):
                 ResidualTemporalBlock(c_out * 2, c_in, dim), ResidualTemporalBlock(c_in, c_in, dim),
                 nn.ConvTranspose1d(c_in, c_in, 4, stride=2, padding=1)]))
         self.final = nn.Sequential(ConvBlock(dim, dim), nn.Conv1d(dim, transition_dim, 1))
+        # built last, so the modules above draw the same initial weights with or without it
+        self.interval_mlp = nn.Sequential(SinusoidalEmbedding(dim), nn.Linear(dim, dim * 4), Mish(),
+                                          nn.Linear(dim * 4, dim)) if interval else None
 
     @classmethod
-    def from_config(cls, config: UNetConfig, transition_dim: int,
-                    horizon: int | None = None) -> "TemporalUNet":
-        return cls(transition_dim, config.dim, config.dim_mults, horizon)
+    def from_config(cls, config: UNetConfig, transition_dim: int, horizon: int | None = None,
+                    interval: bool = False) -> "TemporalUNet":
+        return cls(transition_dim, config.dim, config.dim_mults, horizon, interval)
 
-    def forward(self, x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """``x`` ``[batch, horizon, transition_dim]``, ``t`` ``[batch]`` (any dtype) -> shape of ``x``."""
+    def forward(self, x: torch.Tensor, t: torch.Tensor, interval: torch.Tensor | None = None) -> torch.Tensor:
+        """``x`` ``[batch, horizon, transition_dim]``, ``t`` ``[batch]`` (any dtype), and ``interval`` ``[batch]``
+        exactly when the network was built with one -> shape of ``x``."""
         if x.shape[1] % self.downsample_factor:
             self.config.check_horizon(x.shape[1])
+        if (interval is None) != (self.interval_mlp is None):
+            raise BridgeplanError("this network takes a second time input (an interval)" if interval is None else
+                                  "this network takes one time input; an interval needs a network built with one")
         h = x.transpose(1, 2)
         emb = self.time_mlp(t)
+        if interval is not None:
+            emb = emb + self.interval_mlp(interval)
         skips = []
         for block1, block2, down in self.downs:
             h = block2(block1(h, emb), emb)

@@ -1,4 +1,5 @@
-"""Generative processes behind one interface (see ``base.py``, ``ddpm.py``, ``bridge.py`` and ``flow.py``).
+"""Generative processes behind one interface (see ``base.py``, ``ddpm.py``, ``bridge.py``, ``flow.py``, and the
+one-step ``meanflow.py`` and ``shortcut.py`` on ``jumps.py``, and ``distill.py``, DDPM distilled).
 
 A process is the one definition of a method: training, sweeps, evaluation, reports and the bench
 all ask it. Every process is a frozen dataclass derived from :class:`Process` (``to_dict``,
@@ -7,8 +8,10 @@ inverted by ``process_from_dict``; ``label``, ``run_tag``, ``uses_prior``, ``wit
 - ``training_pair(x0, x1, conditions, generator=None) -> (x_n, n, target)`` (``x0`` the clean normalized
   window ``[B, H, D]``, ``x1`` the prior sample for it, ignored by DDPM) and ``training_target``; the
   base class's ``training_loss`` is the L2 between the network's output on ``(x_n, n)`` and ``target``
-  (weighted per step by ``output_weight``, equal by default),
-- ``predict_x0(model, x_n, n) -> x0_hat`` (clipped to [-1, 1]),
+  (weighted per step by ``output_weight``, equal by default); a process trained otherwise (the mean flow's
+  JVP, the shortcut's self-consistency) overrides ``training_loss`` itself,
+- ``predict_x0(model, x_n, n) -> x0_hat`` (clipped to [-1, 1]; only where ``predicts_x0``: the jump processes
+  move by average velocities instead, their network taking a second time input, ``takes_interval``),
 - ``max_nfe``, ``validate_nfe(nfe)``,
 - ``sample(model, x_start, conditions, nfe, generator=None) -> x0`` (``x_start`` the prior sample:
   noise for DDPM), built on the pure samplers of ``samplers.py`` over the schedules of ``schedules.py``.
@@ -24,9 +27,13 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes.base import Process
 from bridgeplan.processes.bridge import Bridge
 from bridgeplan.processes.ddpm import DDPM
+from bridgeplan.processes.distill import Distill
 from bridgeplan.processes.flow import Flow
+from bridgeplan.processes.meanflow import MeanFlow
+from bridgeplan.processes.shortcut import Shortcut
 
-PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge, "flow": Flow}
+PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge, "flow": Flow, "meanflow": MeanFlow,
+                                       "shortcut": Shortcut, "distill": Distill}
 
 
 def make_process(name: str, **params) -> Process:
@@ -79,5 +86,6 @@ def process_from_dict(d: dict) -> Process:
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 
 
-__all__ = ["DDPM", "Bridge", "Flow", "Process", "PROCESSES", "make_process", "parse_process_params",
+__all__ = ["DDPM", "Bridge", "Flow", "MeanFlow", "Shortcut", "Distill", "Process",
+           "PROCESSES", "make_process", "parse_process_params",
            "process_from_dict"]

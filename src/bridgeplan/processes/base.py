@@ -29,6 +29,12 @@ class Process:
     """Fields that choose how a trained model is sampled; changing them needs no retraining."""
     samplers: ClassVar[tuple[str, ...]] = ()
     """Samplers ``with_sampler`` accepts (empty: the process has one way to sample)."""
+    takes_interval: ClassVar[bool] = False
+    """True: the network takes a second time input besides the time (the mean flow's interval, the shortcut's step
+    size; ``TemporalUNet(interval=True)``)."""
+    distills: ClassVar[bool] = False
+    """True: trained against a teacher's network (its run in the ``teacher`` field): ``training_loss`` takes it as
+    ``teacher`` and the student starts from its weights (``runs.load_teacher``)."""
     predicts_x0: ClassVar[bool] = True
     """True: every sampler step goes through :meth:`predict_x0`, so a correction of x0 (``sample``'s ``correct``)
     applies; a process whose sampler does not (none so far) sets False and corrections refuse it."""

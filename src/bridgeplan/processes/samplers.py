@@ -106,3 +106,21 @@ def bridge_sample(predict_x0: X0Predictor, x: torch.Tensor, conditions: Conditio
         x = bridge_posterior_step(x0, x, float(std_fwd[n]), float(std_fwd[m]), noise)
         x = apply_conditions(x, conditions)
     return x
+
+
+AverageVelocity = Callable[[torch.Tensor, float, float], torch.Tensor]
+"""``u(z_t, r, t)``: the network's average velocity of the flow over ``[r, t]`` at ``z_t``
+(``z_r = z_t - (t - r) u``)."""
+
+
+def jump_sample(average_velocity: AverageVelocity, x: torch.Tensor, conditions: Conditions,
+                times: list[float]) -> torch.Tensor:
+    """From ``x`` at ``times[0]`` down the decreasing ``times`` by jumps ``z_r = z_t - (t - r) u(z_t, r, t)``
+    (NFE = ``len(times) - 1``), the conditions inpainted after every jump; the last lands on the data, clipped.
+
+    With the exact average velocity every jump is exact, whatever its length (a mean flow, a shortcut model).
+    """
+    x = apply_conditions(x, conditions)
+    for t, r in zip(times[:-1], times[1:]):
+        x = apply_conditions(x - (t - r) * average_velocity(x, r, t), conditions)
+    return apply_conditions(x.clamp(-1, 1), conditions)

@@ -1,0 +1,145 @@
+"""Issue 43's table: does a process built for one network call (a mean flow or a shortcut model from each prior,
+DDPM distilled into one or two calls) reach DDPM's best at any NFE, on medium and on large, tracked, pursued and
+replanned, single-task and Multi2D?
+
+Rows: the folders of :data:`SOURCES` under docs/results (studies/onestep-medium.toml: medium, 5 training seeds;
+studies/onestep-large.toml: large, 3 seeds), 200 episodes per evaluation; ``onestep-tracked`` at every snapshot,
+``onestep-pursued`` and ``onestep-replanned`` at the final one, each with its ``-validation`` rows on other
+episodes. Each folder's rows are split by execution and task set: one part each, compared only within itself (a
+pursued mean flow against the pursued DDPM of the same study).
+
+Choices: DDPM's bar at a step is its NFE (1, 2, 4 or 16) with the best mean over seeds on the validation episodes
+at the final snapshot where there are some, else on the test episodes of that step (the bar raised for the others,
+as in cddb.md); it is reported on the test episodes. Every other method is shown at NFE 1 and at NFE 2, not chosen.
+Differences are per seed (the method minus DDPM's bar, Minari score), mean ± standard error over seeds; "reaches":
+yes when the mean is not below zero, "within noise" when below by less than two standard errors, else no.
+
+Made by `bridgeplan study report onestep` (studies/onestep.toml) into docs/results/onestep.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, label, tasks_label
+from bridgeplan.analysis.keys import method as key
+from bridgeplan.analysis.load import Point, Results, read_csv
+from bridgeplan.analysis.selection import best
+from bridgeplan.analysis.stats import goal_verdict, paired
+from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
+from bridgeplan.replan import Execution
+
+SOURCES = ("onestep-medium", "onestep-large")
+"""The studies' folders under docs/results, in the report's order (a folder not exported yet is left out)."""
+N = 16
+DDPM = key("ddpm", steps=N)
+ONE_STEP = (key("distill", steps=N),
+            *(key(process, prior, steps=N) for process in ("meanflow", "shortcut")
+              for prior in ("gaussian", "line", "learned")))
+READS = (DDPM, *ONE_STEP)
+"""The trained methods the tables read (studies that make this report must train them)."""
+GOAL_NFE = (1, 2)
+
+
+def execution_name(execution: Execution) -> str:
+    if execution == OPEN_LOOP:
+        return "tracked"
+    if execution.plans_once and execution.controller == "pursuit":
+        return f"pursued (lookahead {execution.lookahead:g})"
+    return execution.tag()
+
+
+@dataclass(frozen=True)
+class Part:
+    """One maze's rows of one execution and task set: a table of its own."""
+
+    maze: str
+    execution: Execution
+    multi_task: bool
+    results: Results
+
+    @property
+    def title(self) -> str:
+        return f"{self.maze}, {execution_name(self.execution)}, {tasks_label(DDPM.replace(multi_task=self.multi_task))}"
+
+    def here(self, method: MethodKey) -> MethodKey:
+        return method.replace(execution=self.execution, multi_task=self.multi_task)
+
+    def seeds(self) -> list[int]:
+        return sorted({r.seed for r in self.results})
+
+
+def parts(root: Path) -> list[Part]:
+    """The parts of every exported folder of :data:`SOURCES`, in their order; tracked single-task first."""
+    found = []
+    for folder in SOURCES:
+        path = Path(root) / folder / "results.csv"
+        if not path.exists():
+            continue
+        rows = read_csv(path)
+        groups = dict.fromkeys((r.maze, r.key.execution, r.key.multi_task) for r in rows)
+        for maze, execution, multi in sorted(groups, key=lambda g: (g[1] != OPEN_LOOP, g[1].tag(), g[2])):
+            found.append(Part(maze, execution, multi, Results(
+                r for r in rows if (r.maze, r.key.execution, r.key.multi_task) == (maze, execution, multi))))
+    return found
+
+
+def ddpm_bar(part: Part, step: int) -> Point | None:
+    """DDPM's NFE chosen on the validation episodes (at the final snapshot), else on the test ones at ``step``."""
+    ddpm, results = part.here(DDPM), part.results
+    validation_steps = results.steps(ddpm, "validation")
+    if validation_steps:
+        chosen = best(results, results.points(ddpm, validation_steps[-1], "validation"), split="validation")
+        return Point(ddpm, step, chosen.nfe) if results.rows(Point(ddpm, step, chosen.nfe)) else None
+    return best(results, results.points(ddpm, step), split="test")
+
+
+def cell(values: dict[int, float]) -> str:
+    return fmt_mean_se(values, one_seed="mean") if values else "-"
+
+
+def reaches(ours: dict[int, float], bar: dict[int, float]) -> str:
+    if len(set(ours) & set(bar)) < 2:
+        return "not measured"
+    d = paired(ours, bar, seeds="common")
+    return f"{goal_verdict(d, 'reaches')} ({fmt_diff(d)})"
+
+
+def part_table(part: Part) -> list[str]:
+    """Rows: DDPM's bar, then each one-step method at NFE 1 and 2; columns: the snapshots, then the verdict at the
+    last one."""
+    results = part.results
+    steps = results.steps(part.here(DDPM))
+    if not steps:
+        return ["No DDPM rows in this part: nothing to compare with."]
+    bars = {step: ddpm_bar(part, step) for step in steps}
+    header = ["method", "NFE", *(f"step {s}" for s in steps), f"reaches DDPM's best at step {steps[-1]}"]
+    rows = [["DDPM's best", " / ".join(str(bars[s].nfe) if bars[s] else "-" for s in steps),
+             *(cell(results.values(bars[s])) if bars[s] else "-" for s in steps), ""]]
+    final_bar = results.values(bars[steps[-1]]) if bars[steps[-1]] else {}
+    for method in ONE_STEP:
+        here = part.here(method)
+        for nfe in GOAL_NFE:
+            scores = [results.values(Point(here, s, nfe)) for s in steps]
+            if not any(scores):
+                continue
+            rows.append([label(method), nfe, *(cell(v) for v in scores), reaches(scores[-1], final_bar)])
+    return table(header, rows)
+
+
+def render(root: Path) -> str:
+    lines = ["# One network call against DDPM's best at any NFE (issue 43)", "",
+             "Generated by `bridgeplan study report onestep` from the committed rows of "
+             + ", ".join(f"docs/results/{s}" for s in SOURCES) + " (studies/onestep-medium.toml, "
+             "studies/onestep-large.toml); how the bar and the verdicts are made: studies/reports/onestep.py.", ""]
+    found = parts(root)
+    if not found:
+        lines += ["No rows committed yet. The campaigns: `bridgeplan study run onestep-medium` then "
+                  "`bridgeplan study export onestep-medium`, and the same for onestep-large."]
+        return "\n".join(lines)
+    for part in found:
+        lines += [f"## {part.title}", "",
+                  f"Training seeds {', '.join(map(str, part.seeds()))}; Minari score, mean ± SE over seeds.", "",
+                  *part_table(part), ""]
+    return "\n".join(lines).rstrip("\n")
