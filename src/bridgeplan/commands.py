@@ -171,8 +171,10 @@ def _add_train_commands(sub) -> None:
 
 
 def _common_train_flags(p) -> None:
-    p.add_argument("--maze", required=True)
-    p.add_argument("--dataset", required=True, help="dataset directory or legacy D4RL hdf5 file")
+    p.add_argument("--maze", required=True, help="the environment: a Maze2D maze (umaze), an OGBench dataset name "
+                                                 "(pointmaze-medium-navigate-v0) or your own's spec file (NAME.toml)")
+    p.add_argument("--dataset", required=True, help="dataset directory (Minari), legacy D4RL hdf5 file or OGBench "
+                                                    "npz file")
     p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
     p.add_argument("--runs-root", default="runs")
     p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
@@ -285,7 +287,8 @@ def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
 def _add_eval_commands(sub) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run (any environment family) on its environment's tasks",
                        description="Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: "
-                                   "its 5-task protocol, the success rate. Beside the score: the straight line alone, "
+                                   "its 5-task protocol, the success rate; your own environment (a spec file): its "
+                                   "seeded resets, the success rate. Beside the score: the straight line alone, "
                                    "the cost and the decision latency.")
     p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
                                "(`bridgeplan planners list`)")
