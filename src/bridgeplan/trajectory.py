@@ -42,15 +42,24 @@ class Layout:
     """Index in the state of the position's first column (x; y follows)."""
     velocity: int | None
     """Index in the state of the velocity's first column (vx; vy follows), or None: the state has none."""
+    goal: tuple[int, ...] = ()
+    """The state's columns that a goal names (a manipulation task's object positions and switch states, not the
+    robot's pose), where the state holds more than a position and a velocity; empty: a goal is a position."""
 
     def __post_init__(self):
-        # the priors and conditions build a state from a position and a velocity alone: nothing else may be in it
+        # the priors and conditions build a state from a position and a velocity alone: nothing else may be in it,
+        # unless the layout says which columns its goals name (then a goal is those columns, not a whole state)
         parts = [self.position] + ([] if self.velocity is None else [self.velocity])
         columns = sorted(c for start in parts for c in (start, start + 1))
-        if self.act_dim < 1 or columns != list(range(self.obs_dim)):
+        if self.goal:  # a state with columns of its own (a robot's joints): the named ones must lie in it
+            fits = min(columns + list(self.goal)) >= 0 and max(columns + list(self.goal)) < self.obs_dim
+        else:
+            fits = columns == list(range(self.obs_dim))
+        if self.act_dim < 1 or not fits:
             raise ValueError(f"layout {self.name}: a state is a position and optionally a velocity, two columns "
-                             f"each, and a transition has actions; got act_dim {self.act_dim}, obs_dim "
-                             f"{self.obs_dim}, position at {self.position}, velocity at {self.velocity}")
+                             f"each, or holds the columns its goal names; and a transition has actions; got act_dim "
+                             f"{self.act_dim}, obs_dim {self.obs_dim}, position at {self.position}, velocity at "
+                             f"{self.velocity}, goal {self.goal}")
 
     @property
     def transition_dim(self) -> int:

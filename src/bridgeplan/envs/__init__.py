@@ -2,7 +2,8 @@
 
 - :mod:`bridgeplan.envs.maze2d`: gymnasium-robotics' PointMaze, Diffuser's Maze2D (mazes ``open``, ``umaze``,
   ``medium``, ``large``);
-- :mod:`bridgeplan.envs.ogbench_pointmaze`: OGBench's pointmaze (datasets ``pointmaze-{maze}-{kind}-v0``).
+- :mod:`bridgeplan.envs.ogbench_pointmaze`: OGBench's pointmaze (datasets ``pointmaze-{maze}-{kind}-v0``);
+- :mod:`bridgeplan.envs.ogbench_manipulation`: OGBench's manipulation suite (datasets ``cube-single-play-v0``, ...).
 
 :func:`family_of` names the family of an environment name; :func:`get_family` a family by its own name. Nothing
 outside this package tests an environment's name: it asks the family.
@@ -10,13 +11,13 @@ outside this package tests an environment's name: it asks the family.
 
 from __future__ import annotations
 
-from bridgeplan.envs import maze2d, ogbench_pointmaze
+from bridgeplan.envs import maze2d, ogbench_manipulation, ogbench_pointmaze
 from bridgeplan.envs.family import Family, unknown
 from bridgeplan.errors import BridgeplanError
 
 __all__ = ["FAMILIES", "Family", "family_of", "family_of_dataset", "get_family"]
 
-FAMILIES: tuple[Family, ...] = (maze2d.FAMILY, ogbench_pointmaze.FAMILY)
+FAMILIES: tuple[Family, ...] = (maze2d.FAMILY, ogbench_pointmaze.FAMILY, ogbench_manipulation.FAMILY)
 """The built-in families (their modules import no simulator until one is used)."""
 
 
