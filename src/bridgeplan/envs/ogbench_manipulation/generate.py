@@ -1,5 +1,5 @@
-"""Play datasets in OGBench's manipulation recipe (``data_gen_scripts/generate_manipspace.py``, ``--dataset_type=play``),
-written in its npz format.
+"""Play datasets in OGBench's manipulation recipe (``data_gen_scripts/generate_manipspace.py``,
+``--dataset_type=play``), written in its npz format.
 
 The environment is made with ``terminate_at_goal=False, mode="data_collection"`` and ``max_episode_steps`` = the
 episode length, so every episode has exactly that many steps and ``terminals`` is true at its last one only. At each
@@ -31,8 +31,14 @@ from typing import Callable
 
 import numpy as np
 
-from bridgeplan.envs.ogbench_manipulation.names import ACTION_NOISE, EPISODE_STEPS, EPISODES, NOISE_SMOOTHING, \
-    DatasetName, parse_dataset_name
+from bridgeplan.envs.ogbench_manipulation.names import (
+    ACTION_NOISE,
+    EPISODE_STEPS,
+    EPISODES,
+    NOISE_SMOOTHING,
+    DatasetName,
+    parse_dataset_name,
+)
 from bridgeplan.envs.ogbench_pointmaze.maze import legacy_rng
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes, atomic_write_text, check_writable

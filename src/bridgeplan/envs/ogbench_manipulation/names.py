@@ -4,7 +4,8 @@ them a goal names), its evaluation episodes' length and its data recipe's oracle
 The observation layouts are those of ``ogbench.manipspace.envs.*.compute_observation``: the robot first (joint
 positions 6, joint velocities 6, effector position 3, effector yaw as cos and sin 2, gripper opening 1, gripper
 contact 1: 19 columns), then per cube its position 3, quaternion 4, yaw cos and sin 2; per button its state one-hot
-2, position 1, velocity 1 (two states: the one-hot's second column is the state); scene's drawer and window position and velocity. A task is done (``info["success"]``)
+2, position 1, velocity 1 (two states: the one-hot's second column is the state); scene's drawer and window
+position and velocity. A task is done (``info["success"]``)
 when every cube is within 0.04 m of its target (0.4 in the observation's scaled units), every button in its target
 state, and scene's drawer and window within 0.04 of theirs: exactly the columns ``compute_oracle_observation`` keeps.
 Those are the goal's columns (:attr:`DatasetName.goal_columns`), not the robot's pose.
