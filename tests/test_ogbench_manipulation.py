@@ -160,3 +160,39 @@ def test_bad_input(tmp_path, capsys, monkeypatch):
     with pytest.raises(BridgeplanError, match="no noise-free oracle"):
         FAMILY.oracle("cube-single-play-v0")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keyless.npz", "other.npz"]
+
+
+def test_gcbc_trains_and_evaluates_on_cube_single(tmp_path, capsys):
+    """GCBC through its one trainer and the family's evaluation: a tiny generated cube-single dataset, 4 steps, then
+    ``bridgeplan eval RUN`` (and ``gcbc eval``) on a test task and a validation task, one episode each; the mistakes
+    are one error line each and write nothing."""
+    data = tmp_path / "cube-single-play-v0.npz"
+    generate_dataset("cube-single-play-v0", tmp_path, seed=0, episodes=2, episode_steps=101, progress=False)
+    run = tmp_path / "run"
+    train = ["gcbc", "train", str(data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps", "4",
+             "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--log-every", "2",
+             "--device", "cpu", "--no-progress"]
+    assert main(train) == 0
+    capsys.readouterr()
+    assert main(["eval", str(run), "--episodes", "1", "--tasks", "1,6", "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["env_id"] == "cube-single-v0" and row["maze"] == "cube-single-play-v0" and row["step"] == 4
+    assert set(row["tasks"]) == {"1", "6"} and row["episodes"] == 2
+    assert row["tasks"]["1"]["steps"] == [200]  # an untrained policy does not end the episode early
+    assert row["tasks"]["6"]["task_name"] == "validation_task6"
+    saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0-tasks1_6.json").read_text())
+    assert saved == row
+    assert main(["gcbc", "eval", str(run), "--episodes", "1", "--no-progress"]) == 0
+    assert "task 2 task2_vertical1" in capsys.readouterr().out
+    # mistakes
+    before = sorted(p.name for p in (run / "eval").iterdir())
+    assert _error(capsys, ["eval", str(run), "--tasks", "11", "--no-progress"]).startswith(
+        "error: task ids must be in 1..5")
+    assert _error(capsys, ["eval", str(run), "--nfe", "4"]) == (
+        f"error: {run} is a GCBC run (a policy, no plans): --nfe do not apply")
+    assert _error(capsys, ["gcbc", "eval", str(run), "--maze", "puzzle-3x3-play-v0", "--no-progress"]) == (
+        f"error: {run} was trained on 28-D observations, puzzle-3x3-play-v0's are 55-D")
+    assert sorted(p.name for p in (run / "eval").iterdir()) == before
+    assert _error(capsys, ["gcbc", "train", str(data), "--run-dir", str(tmp_path / "r2"), "--maze",
+                           "cube-double-play-v0"]).startswith(f"error: {data} is not a cube-double-play-v0 dataset")
+    assert not (tmp_path / "r2").exists()

@@ -27,7 +27,7 @@ class OGBenchManipulation(Family):
     name = "ogbench-manipulation"
     title = "OGBench manipulation"
     generator = "ogbench-manipulation"
-    episodes = 20  # per task: impls/main.py's --eval_episodes default (hyperparameters.sh passes none for these)
+    episodes = 50  # per task, as every manipulation line of OGBench's hyperparameters.sh (--eval_episodes=50)
     quick_episodes = 4
     default_arrival = "end"
 

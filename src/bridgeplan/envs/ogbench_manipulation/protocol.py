@@ -71,7 +71,7 @@ class ManipulationTasks(Tasks):
         return parse_dataset_name(self.env)
 
     def fields(self) -> dict:
-        return {"dataset": self.env, "env_id": self.spec.scene.env_id, "episodes_per_task": self.episodes_per_task,
+        return {"maze": self.env, "env_id": self.spec.scene.env_id, "episodes_per_task": self.episodes_per_task,
                 "seed": self.seed}
 
     def first(self) -> ManipulationTasks:
