@@ -162,12 +162,66 @@ def test_bad_input(tmp_path, capsys, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keyless.npz", "other.npz"]
 
 
-def test_gcbc_trains_and_evaluates_on_cube_single(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    """A generated cube-single dataset of 3 episodes of 201 steps (and its validation file of one)."""
+    folder = tmp_path_factory.mktemp("manip-data")
+    generate_dataset("cube-single-play-v0", folder, seed=0, episodes=3, episode_steps=201, progress=False)
+    return folder / "cube-single-play-v0.npz"
+
+
+def test_inverse_dynamics_matches_the_data(tiny_data):
+    """The arm's inverse dynamics from one state to the next gives back the data's actions: correlated per axis of the
+    effector's motion, with the response the module states (least squares per axis within 25%)."""
+    from bridgeplan.envs.ogbench_manipulation import controllers
+
+    with np.load(tiny_data) as f:
+        obs, actions, ends = f["observations"], f["actions"], f["terminals"]
+    keep = ~ends[:-1]
+    states, following, done = obs[:-1][keep], obs[1:][keep], actions[:-1][keep]
+    predicted = controllers.inverse_dynamics(states, following)
+    for axis in range(4):  # x, y, z, yaw (the gripper's opening lags its command by several steps)
+        assert np.corrcoef(predicted[:, axis], done[:, axis])[0, 1] > 0.85
+        raw = predicted[:, axis] / controllers.RESPONSE[axis]  # unclipped where the prediction is inside [-1, 1]
+        inside = np.abs(predicted[:, axis]) < 1
+        fitted = (raw[inside] @ done[inside, axis]) / (raw[inside] @ raw[inside])
+        assert fitted == pytest.approx(controllers.RESPONSE[axis], rel=0.25)
+
+
+def test_goal_states_are_the_goal_columns():
+    layout = FAMILY.layout("cube-single-play-v0")
+    goal = np.arange(28.0)[None]
+    states = layout.goal_states(goal)
+    assert np.isnan(states).sum() == 25 and (states[0, [19, 20, 21]] == [19, 20, 21]).all()
+    with pytest.raises(BridgeplanError, match="goal is a 28-D goal observation"):
+        layout.goal_states(np.zeros((1, 3)))
+
+
+@pytest.mark.slow
+def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
+    """Through ``bridgeplan train`` and ``eval``: DDPM's cpu-small shape, 4 steps; state-only plans executed by the
+    arm's inverse dynamics, replanned every 8 steps, on one episode of test task 1 (an untrained planner does not
+    finish it), with the line in state space as its floor."""
+    run = tmp_path / "planner"
+    assert main(["train", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset", "cpu-small",
+                 "--steps", "4", "--batch-size", "4", "--dim", "8", "--checkpoint-every", "4", "--log-every", "2",
+                 "--run-dir", str(run), "--device", "cpu", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(run), "--episodes", "1", "--tasks", "1", "--nfe", "1", "--replan-every", "8",
+                 "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["env_id"] == "cube-single-v0" and row["horizon"] == 32 and row["stride"] == 4
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 25
+    assert row["floor_line"]["success_rate"] == 0.0
+    assert _error(capsys, ["eval", str(run), "--controller", "pursuit", "--no-floor", "--episodes", "1",
+                           "--no-progress"]).startswith("error: --controller pursuit steers a point")
+
+
+def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     """GCBC through its one trainer and the family's evaluation: a tiny generated cube-single dataset, 4 steps, then
     ``bridgeplan eval RUN`` (and ``gcbc eval``) on a test task and a validation task, one episode each; the mistakes
     are one error line each and write nothing."""
-    data = tmp_path / "cube-single-play-v0.npz"
-    generate_dataset("cube-single-play-v0", tmp_path, seed=0, episodes=2, episode_steps=101, progress=False)
+    data = tiny_data
     run = tmp_path / "run"
     train = ["gcbc", "train", str(data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps", "4",
              "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--log-every", "2",

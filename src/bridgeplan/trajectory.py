@@ -97,6 +97,32 @@ class Layout:
             raise BridgeplanError(f"the {self.name} layout has no velocity columns (its state is the position)")
         return slice(self.velocity, self.velocity + 2)
 
+    def goal_only(self, states):
+        """``states [..., obs_dim]`` (numpy or torch, a copy) with every column but the goal's NaN, i.e. free in a
+        condition (:func:`apply_conditions`); as they are where the layout names no goal columns."""
+        if not self.goal:
+            return states
+        free = np.ones(self.obs_dim, dtype=bool)
+        free[list(self.goal)] = False
+        if isinstance(states, torch.Tensor):
+            out = states.clone()
+            out[..., torch.as_tensor(free, device=states.device)] = float("nan")
+            return out
+        out = np.array(states, dtype=np.float64)
+        out[..., free] = np.nan
+        return out
+
+    def goal_states(self, goals: np.ndarray) -> np.ndarray:
+        """The states a planner's goal condition holds: goal positions ``[..., 2]`` at rest; where the layout names goal
+        columns, goal observations ``[..., obs_dim]`` with every other column free (:meth:`goal_only`)."""
+        if not self.goal:
+            return self.at_rest(goals)
+        goals = np.asarray(goals, dtype=np.float64)
+        if goals.shape[-1] != self.obs_dim:
+            raise BridgeplanError(f"a {self.name} goal is a {self.obs_dim}-D goal observation (its columns "
+                                  f"{list(self.goal)} are the task's), got {goals.shape[-1]}-D")
+        return self.goal_only(goals)
+
     def at_rest(self, positions: np.ndarray) -> np.ndarray:
         """States ``[..., obs_dim]`` at ``positions [..., 2]``, with zero velocity where the state has one."""
         positions = np.asarray(positions)
@@ -127,11 +153,15 @@ def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
 
 
 def window_conditions(x0: torch.Tensor, layout: Layout, subgoal_every: int = 0) -> Conditions:
-    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser); for a
+    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser; of the last,
+    the goal's columns alone where the layout names them, as a planner's goal holds them); for a
     hierarchy's low level (``subgoal_every`` j > 0) every j-th state as well (the last one is the goal)."""
     last = x0.shape[1] - 1
     indices = [0, *range(subgoal_every, last, subgoal_every), last] if subgoal_every else [0, last]
-    return {t: layout.states(x0[:, t]) for t in indices}
+    conditions = {t: layout.states(x0[:, t]) for t in indices}
+    if not subgoal_every:  # a goal names its own columns (all, but where the layout says which)
+        conditions[last] = layout.goal_only(conditions[last])
+    return conditions
 
 
 def span(horizon: int, stride: int) -> int:

@@ -53,12 +53,38 @@ class OGBenchManipulation(Family):
         return Layout(spec.scene_name, act_dim=ACT_DIM, obs_dim=spec.obs_dim, position=EFFECTOR_XY, velocity=None,
                       goal=spec.goal_columns)
 
+    # --- plans -------------------------------------------------------------------------------------------------
+
+    def plan_shape(self, env: str, preset: str) -> tuple[int, int]:
+        from bridgeplan.envs.ogbench_manipulation.names import plan_shape
+
+        return plan_shape(env, preset)
+
+    def diffusion_steps(self, env: str) -> int:
+        from bridgeplan.envs.ogbench_manipulation.names import DIFFUSION_STEPS
+
+        return DIFFUSION_STEPS
+
     def longest_span(self, env: str) -> int:
         from bridgeplan.envs.ogbench_manipulation.names import EPISODE_STEPS
 
         return min(parse_dataset_name(env).scene.eval_steps, EPISODE_STEPS)
 
     # --- data --------------------------------------------------------------------------------------------------
+
+    def load_stream(self, dataset: str, env: str):
+        """The file (checked to be ``env``'s) read by ogbench's loader in its compact form, one segment per episode,
+        every row kept (as pointmaze's, :func:`bridgeplan.envs.ogbench_pointmaze.reading.load_stream`)."""
+        import numpy as np
+
+        from bridgeplan.data.stream import Stream
+        from bridgeplan.envs.ogbench_manipulation.reading import load_dataset
+
+        data = load_dataset(dataset, env, compact_dataset=True)
+        ends = np.flatnonzero(data["valids"] == 0)
+        starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
+        return Stream(env, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
+                      episodes=len(ends), source=str(dataset), layout=self.layout(env))
 
     def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
         return f"datasets/ogbench/{parse_dataset_name(env).name}.npz"
@@ -100,6 +126,15 @@ class OGBenchManipulation(Family):
         return asdict(c), c.summary()
 
     # --- evaluation --------------------------------------------------------------------------------------------
+
+    def graph_pace(self, stream):
+        raise BridgeplanError("the dataset graph joins states by their distance in the plane; an arm's states have no "
+                              "such distance here (not built for OGBench manipulation)")
+
+    def body(self, env: str):
+        from bridgeplan.envs.ogbench_manipulation.controllers import body
+
+        return body(self.layout(env))
 
     def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
               task_ids: tuple[int, ...] | None = None):

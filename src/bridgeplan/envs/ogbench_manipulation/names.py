@@ -110,3 +110,19 @@ def parse_dataset_name(name: str) -> DatasetName:
     if m is None or m.group(1) not in SCENES:
         raise BridgeplanError(f"unknown OGBench manipulation dataset {name!r}; expected {names()}")
     return DatasetName(m.group(1))
+
+
+PLAN_SHAPES = {"cpu-small": (32, 4), "diffuser": (32, 1)}
+"""``(horizon, stride)`` per preset, every scene alike (not tuned): cpu-small spans 125 steps, about one and a half of
+the play oracle's pick-and-place (about 90 steps per target in the generated data); diffuser is Diffuser's
+locomotion shape (32 states, every step), a plan replanned as it goes."""
+DIFFUSION_STEPS = 20
+"""The ``diffuser`` preset's diffusion steps (Diffuser's locomotion value)."""
+
+
+def plan_shape(name: str, preset: str) -> tuple[int, int]:
+    parse_dataset_name(name)
+    if preset not in PLAN_SHAPES:
+        raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PLAN_SHAPES)}")
+    return PLAN_SHAPES[preset]
+
