@@ -250,3 +250,33 @@ def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     assert _error(capsys, ["gcbc", "train", str(data), "--run-dir", str(tmp_path / "r2"), "--maze",
                            "cube-double-play-v0"]).startswith(f"error: {data} is not a cube-double-play-v0 dataset")
     assert not (tmp_path / "r2").exists()
+
+
+def test_a_killed_generation_resumes_to_the_same_data(tmp_path, monkeypatch):
+    """Pieces of 2 episodes: a generation stopped after its first piece resumes from it (the random state it had
+    there) and makes the arrays an uninterrupted one makes; the pieces go once the dataset is written."""
+    from bridgeplan.envs.ogbench_manipulation import generate
+
+    monkeypatch.setattr(generate, "CHUNK_EPISODES", 2)
+    whole = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "a", seed=5, episodes=4, episode_steps=60,
+                                      progress=False)
+    assert not (tmp_path / "a" / "puzzle-3x3-play-v0.partial").exists()
+
+    class Killed(Exception):
+        pass
+
+    def kill_after_first_piece(self, *args, **kwargs):
+        saved(self, *args, **kwargs)
+        raise Killed
+
+    saved = generate.Pieces.save
+    monkeypatch.setattr(generate.Pieces, "save", kill_after_first_piece)
+    with pytest.raises(Killed):
+        generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+                                  progress=False)
+    assert json.loads((tmp_path / "b" / "puzzle-3x3-play-v0.partial" / "state.json").read_text())["episodes"] == 2
+    monkeypatch.setattr(generate.Pieces, "save", saved)
+    resumed = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+                                        progress=False)
+    assert resumed.record["content_sha256"] == whole.record["content_sha256"]
+    assert resumed.record["targets"] == whole.record["targets"]

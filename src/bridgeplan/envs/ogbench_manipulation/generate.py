@@ -100,11 +100,56 @@ class Targets:
     """Episodes dropped by scene's health check and made again."""
 
 
+CHUNK_EPISODES = 50
+"""Episodes per saved piece of a generation in progress (:class:`Pieces`): a killed generation resumes from there."""
+
+
+class Pieces:
+    """A generation in progress, saved every :data:`CHUNK_EPISODES` episodes in folder ``NAME.partial`` beside the
+    dataset: the episodes made (``piece-NNNNN.npz``) and ``state.json`` (the identity, the episodes done, the oracles'
+    counts, the two random generators' states), each written whole. A generation of the same identity resumes after
+    the last piece, with the random state it had there, so it makes what an uninterrupted one makes."""
+
+    def __init__(self, folder: Path, ident: dict):
+        self.folder, self.ident = Path(folder), ident
+
+    def load(self) -> tuple[int, list[dict[str, np.ndarray]], dict | None]:
+        """``(episodes done, their pieces' arrays, the saved state)``; nothing where none of this identity is."""
+        state_path = self.folder / "state.json"
+        if not state_path.is_file():
+            return 0, [], None
+        state = json.loads(state_path.read_text())
+        if state["identity"] != self.ident:
+            return 0, [], None
+        pieces = []
+        for i in range(state["pieces"]):
+            with np.load(self.folder / f"piece-{i:05d}.npz") as f:
+                pieces.append({k: f[k] for k in f.files})
+        return state["episodes"], pieces, state
+
+    def save(self, piece: dict[str, np.ndarray], index: int, episodes: int, targets: Targets, env) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(self.folder / f"piece-{index:05d}.npz", lambda f: np.savez(f, **piece))
+        legacy = np.random.get_state()
+        state = {"identity": self.ident, "episodes": episodes, "pieces": index + 1,
+                 "targets": [targets.done, targets.reached, targets.unhealthy],
+                 "legacy_rng": [legacy[0], legacy[1].tolist(), *map(float, legacy[2:])],
+                 "env_rng": env.unwrapped.np_random.bit_generator.state}
+        atomic_write_text(self.folder / "state.json", json.dumps(state))
+
+    def remove(self) -> None:
+        import shutil
+
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
 def generate_episodes(name: str, episodes: int, episode_steps: int, seed: int,
-                      progress: Callable[[int], None] | None = None) -> tuple[dict[str, np.ndarray], Targets]:
+                      progress: Callable[[int], None] | None = None, pieces: Pieces | None = None
+                      ) -> tuple[dict[str, np.ndarray], Targets]:
     """``episodes`` episodes of ``episode_steps`` steps as OGBench's arrays, and what the oracles reached.
 
-    ``progress``: called with the number of steps after each kept episode."""
+    ``progress``: called with the number of steps after each kept episode (and once with those of resumed pieces).
+    ``pieces``: where the generation is saved as it goes and resumed from."""
     spec = parse_dataset_name(name)
     if episodes <= 0 or episode_steps <= 0:
         raise BridgeplanError(f"episodes and steps must be positive, got {episodes} and {episode_steps}")
@@ -112,15 +157,20 @@ def generate_episodes(name: str, episodes: int, episode_steps: int, seed: int,
                    max_episode_steps=episode_steps)
     buttons = spec.scene.buttons > 0
     oracles = make_oracles(env, spec)
-    n = episodes * episode_steps
-    out: dict[str, np.ndarray] = {}
     targets = Targets()
+    done, made, state = pieces.load() if pieces is not None else (0, [], None)
+    if progress is not None and done:
+        progress(done * episode_steps)
     with legacy_rng(seed):
-        first = True
-        for ep in range(episodes):
+        if state is not None:  # the random state after the last saved piece
+            name_, keys, pos, has_gauss, cached = state["legacy_rng"]
+            np.random.set_state((name_, np.asarray(keys, np.uint32), int(pos), int(has_gauss), cached))
+            env.unwrapped.np_random.bit_generator.state = state["env_rng"]
+            targets = Targets(*state["targets"])
+        current: list[dict[str, np.ndarray]] = []
+        for ep in range(done, episodes):
             while True:  # scene: until the episode passes the health check
-                ob, info = env.reset(seed=seed if first else None)
-                first = False
+                ob, info = env.reset(seed=seed if ep == 0 else None)
                 p_stack = stack_probability(spec)
                 agent = oracles[info["privileged/target_task"]]
                 agent.reset(ob, info)
@@ -128,14 +178,17 @@ def generate_episodes(name: str, episodes: int, episode_steps: int, seed: int,
                 if spec.scene_name != "scene" or healthy(rows["qpos"]):
                     break
                 targets.unhealthy += 1
-            if not out:
-                out = {k: np.empty((n, *v.shape[1:]), v.dtype) for k, v in rows.items()}
-            for k, v in rows.items():
-                out[k][ep * episode_steps:(ep + 1) * episode_steps] = v
+            current.append(rows)
+            if pieces is not None and len(current) == CHUNK_EPISODES and ep + 1 < episodes:
+                made.append({k: np.concatenate([r[k] for r in current]) for k in rows})
+                pieces.save(made[-1], len(made) - 1, ep + 1, targets, env)
+                current = []
             if progress is not None:
                 progress(episode_steps)
+        if current:
+            made.append({k: np.concatenate([r[k] for r in current]) for k in current[0]})
     env.close()
-    return out, targets
+    return {k: np.concatenate([m[k] for m in made]) for k in made[0]}, targets
 
 
 def _episode(env, ob, info, agent, oracles: dict, p_stack: float, steps: int, buttons: bool,
@@ -246,7 +299,8 @@ def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: in
     """Dataset ``name`` (the recipe's size unless ``episodes`` / ``episode_steps`` say otherwise) in ``out_dir``:
     NAME.npz, NAME-val.npz and NAME.json (its identity, each file's sha256 and the arrays' own). Files already there
     with the same identity and the recorded digests are the cache: nothing is made. Other files there are refused
-    (BridgeplanError) unless ``force``."""
+    (BridgeplanError) unless ``force``. A generation killed on the way resumes from its last saved piece
+    (:class:`Pieces`, in ``NAME.partial``)."""
     from tqdm import tqdm
 
     spec = parse_dataset_name(name)
@@ -268,7 +322,9 @@ def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: in
     t0 = time.perf_counter()
     with tqdm(total=(episodes + n_val) * episode_steps, disable=not progress, desc=f"generate {name}",
               unit="step", unit_scale=True, mininterval=1.0) as bar:
-        data, targets = generate_episodes(name, episodes + n_val, episode_steps, seed, progress=bar.update)
+        pieces = Pieces(Path(out_dir) / f"{spec.name}.partial", ident)
+        data, targets = generate_episodes(name, episodes + n_val, episode_steps, seed, progress=bar.update,
+                                          pieces=pieces)
     seconds = time.perf_counter() - t0
     cut = episodes * episode_steps
     train = {k: v[:cut] for k, v in data.items()}
@@ -281,6 +337,7 @@ def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: in
               "targets": {"done": targets.done, "reached": targets.reached, "unhealthy_episodes": targets.unhealthy},
               "seconds": round(seconds, 1)}
     atomic_write_text(record_path, json.dumps(record, indent=2) + "\n")
+    pieces.remove()
     return Generated(name, train_path, val_path, record, cached=False, targets=targets, seconds=seconds)
 
 
