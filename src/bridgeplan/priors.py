@@ -108,6 +108,8 @@ class LinePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, goal_n = _endpoints(conditions, horizon, batch)
         layout = self.layout
+        if layout.goal:
+            return apply_conditions(self._state_line(start_n, goal_n, horizon), conditions)
         start_state = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
         start = layout.state_positions(start_state)
         goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
@@ -117,6 +119,18 @@ class LinePrior:
         traj = straight_segment(start, goal, frac, steps, layout, rest_of(start_state, layout))
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
+
+    def _state_line(self, start_n: torch.Tensor, goal_n: torch.Tensor, horizon: int) -> torch.Tensor:
+        """Where the layout names goal columns (a robot moving objects), the line in state space: those columns evenly
+        from the start's to the goal's, every other column held at the start's, the actions zero."""
+        layout = self.layout
+        start = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
+        goal = self.normalizer.unnormalize(goal_n.double(), layout.state_columns)
+        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
+        end = torch.where(torch.isnan(goal), start, goal)
+        traj = start.new_zeros(len(start), horizon, layout.transition_dim)
+        layout.states(traj)[...] = start[:, None] + frac * (end - start)[:, None]
+        return self.normalizer.normalize(traj).to(start_n.dtype)
 
 
 class CoarsePrior:
