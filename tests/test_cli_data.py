@@ -59,7 +59,8 @@ def test_default_location(tmp_path, capsys, monkeypatch):
 
 @pytest.mark.parametrize("argv, message", [
     (["--maze", "maze9"], "unknown environment 'maze9': Maze2D: open, umaze, medium, large; OGBench pointmaze: "
-                          "pointmaze-{medium,large,giant,teleport}-{navigate,stitch}-v0; user-declared: the path "
+                          "pointmaze-{medium,large,giant,teleport}-{navigate,stitch}-v0; OGBench manipulation: "
+                          "{cube-single,cube-double,scene,puzzle-3x3,puzzle-4x4}-play-v0; user-declared: the path "
                           "of a spec file NAME.toml (docs/usage.md: your own environment)"),
     (["--maze", "umaze", "--steps", "0"], "--steps must be positive, got 0"),
     (["--maze", "umaze", "--steps", "-5"], "--steps must be positive, got -5"),

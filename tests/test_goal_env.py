@@ -127,20 +127,57 @@ def test_the_controller_fitted_on_the_data_steps_onto_its_target(reach):
     np.testing.assert_allclose(STEP * action, [[0.6 * pace, 0.8 * pace]], atol=0.002)
 
 
+def test_the_priors_hold_what_a_goal_leaves_free():
+    """A state with a column beyond the goal's (the plan's order: x, y, c): the goal leaves c free (NaN), the line
+    and the coarse line hold it at the start's, the learned prior sees the start's in its place, as it was trained."""
+    import torch
+
+    from bridgeplan.nets.prior_mlp import PriorMLP
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import CoarsePrior, LearnedPrior, LinePrior, train_prior_loss
+    from bridgeplan.trajectory import Layout
+
+    layout = Layout("reach state", act_dim=2, obs_dim=3, position=0, velocity=None, rest=True)
+    norm = Normalizer((-1.0, -1.0, -1.0, -1.0, 0.0), (1.0, 1.0, 1.0, 1.0, 0.2))
+    start = np.array([[-0.5, 0.5, 0.1]])
+    goal = layout.at_rest(np.array([[0.5, -0.5]]))
+    assert np.isnan(goal[0, 2]) and goal[0, :2].tolist() == [0.5, -0.5]
+    cond = {t: torch.as_tensor(norm.normalize(s, layout.state_columns), dtype=torch.float32)
+            for t, s in ((0, start), (7, goal))}
+    for prior in (LinePrior(norm, layout), CoarsePrior(norm, layout)):
+        states = layout.states(norm.unnormalize(prior.sample(cond, 8, 1).double().numpy()))
+        np.testing.assert_allclose(states[0, :, 2], 0.1, atol=1e-6)  # c held, at the goal too
+        np.testing.assert_allclose(states[0, [0, 7], :2], [[-0.5, 0.5], [0.5, -0.5]], atol=1e-6)
+    net = PriorMLP(3, 8, 5)
+    x = LearnedPrior(net).sample(cond, 8, 1)
+    filled = torch.where(torch.isnan(cond[7]), cond[0], cond[7])
+    torch.testing.assert_close(x[0, 1:7], net(cond[0], filled)[0, 1:7].detach())
+    window = torch.randn(4, 8, 5)
+    expected = torch.mean((net(window[:, 0, 2:], torch.cat([window[:, -1, 2:4], window[:, 0, 4:]], 1)) - window) ** 2)
+    torch.testing.assert_close(train_prior_loss(net, window, layout), expected)
+
+
 def _eval(run: Path, *flags) -> dict:
     out = run / "eval.json"
     assert main(["eval", str(run), "--device", "cpu", "--no-progress", "--out", str(out), *flags]) == 0
     return json.loads(out.read_text())
 
 
-@pytest.mark.parametrize("process, prior, steps", [("ddpm", None, 400), ("bridge", "line", 200), ("flow", "line", 200)])
+@pytest.mark.parametrize("process, prior, steps", [
+    ("ddpm", None, 400), ("bridge", "line", 200), ("flow", "line", 200),
+    pytest.param("bridge", "learned", 200, marks=pytest.mark.slow)])
 def test_train_plan_and_evaluate_on_your_own_environment(reach, tmp_path, process, prior, steps):
     """A few hundred steps of a small network (seconds) plan well enough to reach most goals, replanned every 8 steps,
     where the straight line alone, executed alike, reaches about half (its 31-step plans, replanned, slow down as they
     near the goal)."""
-    run = tmp_path / process
-    assert main(["train", "--maze", str(reach), "--dataset", str(reach.parent / "reach.npz"), "--preset",
-                 "cpu-small", "--process", process, *(["--prior", prior] if prior else []), "--diffusion-steps", "8",
+    run, data = tmp_path / process, str(reach.parent / "reach.npz")
+    learned = []
+    if prior == "learned":
+        learned = ["--prior-run", str(tmp_path / "prior")]
+        assert main(["train-prior", "--maze", str(reach), "--dataset", data, "--preset", "cpu-small", "--steps", "500",
+                     "--run-dir", learned[1], "--device", "cpu", "--no-progress"]) == 0
+    assert main(["train", "--maze", str(reach), "--dataset", data, "--preset", "cpu-small", "--process", process,
+                 *(["--prior", prior] if prior else []), *learned, "--diffusion-steps", "8",
                  "--steps", str(steps), "--checkpoint-every", str(steps), "--batch-size", "64", "--lr", "3e-3",
                  "--seed", "0", "--run-dir", str(run), "--device", "cpu", "--no-progress"]) == 0
     config = json.loads((run / "config.json").read_text())["config"]

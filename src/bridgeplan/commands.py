@@ -171,8 +171,10 @@ def _add_train_commands(sub) -> None:
 
 
 def _common_train_flags(p) -> None:
-    p.add_argument("--maze", required=True)
-    p.add_argument("--dataset", required=True, help="dataset directory or legacy D4RL hdf5 file")
+    p.add_argument("--maze", required=True, help="the environment: a Maze2D maze (umaze), an OGBench dataset name "
+                                                 "(pointmaze-medium-navigate-v0) or your own's spec file (NAME.toml)")
+    p.add_argument("--dataset", required=True, help="dataset directory (Minari), legacy D4RL hdf5 file or OGBench "
+                                                    "npz file")
     p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
     p.add_argument("--runs-root", default="runs")
     p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
@@ -285,7 +287,8 @@ def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
 def _add_eval_commands(sub) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run (any environment family) on its environment's tasks",
                        description="Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: "
-                                   "its 5-task protocol, the success rate. Beside the score: the straight line alone, "
+                                   "its 5-task protocol, the success rate; your own environment (a spec file): its "
+                                   "seeded resets, the success rate. Beside the score: the straight line alone, "
                                    "the cost and the decision latency.")
     p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
                                "(`bridgeplan planners list`)")
@@ -440,8 +443,12 @@ def _show(result, args, out: Path) -> int:
 
 def _cmd_eval(args) -> int:
     from bridgeplan.evaluate import check_result_path, evaluate_run
+    from bridgeplan.gcbc import is_gcbc_run
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
+
+    if is_gcbc_run(args.run):
+        return _eval_gcbc(args)
 
     execution = _execution(args)
     correction = _correction(args)
@@ -456,6 +463,28 @@ def _cmd_eval(args) -> int:
         args.compile and "compiled", execution.resolved(result.family, result.tasks.env).tag(),
         correction and correction.file_tag()) if part)
     return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.run))), name))
+
+
+def _eval_gcbc(args) -> int:
+    """``eval`` of a GCBC run: its policy (``--snapshot``: that step's) on its environment's tasks; the flags about
+    plans do not apply and are refused."""
+    from bridgeplan.files import atomic_write_text, check_writable
+    from bridgeplan.gcbc import evaluate_gcbc
+
+    planning = [f"--{k.replace('_', '-')}" for k in ("nfe", "sampler", "replan_every", "replan_tolerance")
+                if getattr(args, k, None) is not None] + (["--multi-task"] if args.multi_task else [])
+    if planning:
+        raise BridgeplanError(f"{args.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
+    if args.out:
+        check_writable(args.out, "evaluation JSON")
+    row = evaluate_gcbc(args.run, steps=None if args.snapshot is None else [args.snapshot],
+                        episodes=args.episodes or 0, seed=args.seed, progress=not args.no_progress,
+                        task_ids=_task_ids(args.tasks))[0]
+    text = row.pop("text")
+    if args.out:
+        atomic_write_text(Path(args.out), json.dumps(row, indent=2) + "\n")
+    print(json.dumps(row, indent=2) if args.json else text)
+    return 0
 
 
 def _cmd_render(args) -> int:

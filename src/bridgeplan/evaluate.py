@@ -392,7 +392,8 @@ def format_table(r: dict) -> str:
                   f"  success rate:              {r['success_rate']['mean']:7.3f}"]
     else:
         for i, t in r.get("tasks", {}).items():
-            lines.append(f"  task {i} {tuple(t['init_cell'])} -> {tuple(t['goal_cell'])}: {t['success_rate']:6.1%} "
+            task = f"{tuple(t['init_cell'])} -> {tuple(t['goal_cell'])}" if "init_cell" in t else t["task_name"]
+            lines.append(f"  task {i} {task}: {t['success_rate']:6.1%} "
                          f"({t['successes']}/{t['episodes']}), mean steps {np.mean(t['steps']):.0f}")
         lines.append(f"  overall: {r['success_rate']:.1%} ({r['successes']}/{r['episodes']})")
     b1, pb, p = r["decision_ms_batch1"], r["decision_ms_per_batch"], r["plans_per_episode"]

@@ -1,4 +1,4 @@
-"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline for pointmaze.
+"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation).
 
 What OGBench does (``impls/agents/gcbc.py``, ``impls/utils/datasets.py`` ``GCDataset``, ``impls/main.py``),
 re-implemented in PyTorch:
@@ -43,6 +43,8 @@ from tqdm import tqdm
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, resolve_device
+from bridgeplan.envs import family_of
+from bridgeplan.envs.ogbench_pointmaze.names import dataset_env as environment
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import run_lock
@@ -66,9 +68,9 @@ class GCBCConfig:
     dataset: str = ""
     """Path to the training npz in OGBench's format (``observations``, ``actions``, ``terminals``)."""
     maze: str = ""
-    """The OGBench pointmaze the data is of (``medium``, ...): the file is checked to be one
-    (:func:`bridgeplan.envs.ogbench_pointmaze.reading.check_dataset`) and evaluation defaults to it. Empty: any
-    OGBench-format file, unchecked."""
+    """The OGBench environment the data is of: a dataset name (``pointmaze-medium-navigate-v0``,
+    ``cube-single-play-v0``) or a bare pointmaze maze (``medium``, as earlier runs name it): the file is checked to be
+    one (its family's ``dataset_info``) and evaluation defaults to it. Empty: any OGBench-format file, unchecked."""
     lr: float = 3e-4
     """Adam's learning rate (OGBench: 3e-4)."""
     batch_size: int = 1024
@@ -118,9 +120,8 @@ class GoalDataset:
                  p_randomgoal: float = 0.0, geom_sample: bool = False, discount: float = 0.99, maze: str = ""):
         self.path = Path(path)
         if maze:
-            from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset
-
-            check_dataset(self.path, maze)
+            env = environment(maze)
+            family_of(env).dataset_info(str(self.path), env)  # the file checked to be of its environment
         self.p_curgoal, self.p_trajgoal, self.p_randomgoal = p_curgoal, p_trajgoal, p_randomgoal
         self.geom_sample, self.discount = geom_sample, discount
         data = _load_compact(self.path)
@@ -229,6 +230,17 @@ def load_policy(path: str | Path, device: str = "cpu") -> GCBCPolicy:
     net = build_policy(config, state["obs_dim"], state["action_dim"]).to(dev)
     net.load_state_dict(state["policy"])
     return GCBCPolicy(net, state["step"], config, dev)
+
+
+def is_gcbc_run(path: str | Path) -> bool:
+    """Whether ``path`` is a GCBC run directory (its ``config.json`` says so)."""
+    from bridgeplan.paths import config_path
+
+    config = config_path(path)
+    try:
+        return Path(path).is_dir() and json.loads(config.read_text()).get("kind") == KIND
+    except (OSError, ValueError):
+        return False
 
 
 def policy_snapshots(run_dir: str | Path) -> list[tuple[int, Path]]:
@@ -379,17 +391,40 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
 
 
 
+class PolicyAgent:
+    """A policy as an agent of a family's episodes (:meth:`~bridgeplan.envs.family.Family.run`): it keeps no state."""
+
+    def __init__(self, policy: GCBCPolicy):
+        self.policy = policy
+
+    def begin(self, n: int) -> None:
+        pass
+
+    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return self.policy.act(states, goals)
+
+    def end(self, rows: np.ndarray) -> None:
+        pass
+
+
+def format_score(row: dict) -> str:
+    """One evaluation's success per task and overall, from its family's score fields."""
+    lines = [f"  task {i} {t.get('task_name', '')}: {t['success_rate']:6.1%} ({t['successes']}/{t['episodes']})"
+             for i, t in row["tasks"].items()]
+    return "\n".join([f"{row['env_id']}: {row['episodes_per_task']} episodes per task, seed {row['seed']}", *lines,
+                      f"  overall: {row['success_rate']:.1%} ({row['successes']}/{row['episodes']})"])
+
+
 def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None = None, episodes: int = 0,
-                  seed: int = 0, progress: bool = False) -> list[dict]:
-    """OGBench's evaluation protocol (:func:`bridgeplan.envs.ogbench_pointmaze.protocol.evaluate_policy`: 5 tasks,
-    50 episodes each by default) for a run's policy snapshots at ``steps`` (default: its latest checkpoint).
-    Each result is also written to ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>.json``; returns them in order."""
-    from bridgeplan.envs.ogbench_pointmaze.protocol import EVAL_EPISODES_PER_TASK, evaluate_policy
+                  seed: int = 0, progress: bool = False, task_ids: tuple[int, ...] | None = None) -> list[dict]:
+    """The environment family's evaluation (:meth:`~bridgeplan.envs.family.Family.tasks`, ``run``, ``score``: OGBench's
+    5 tasks, 50 episodes each by default; ``task_ids`` 6-10: its validation tasks) for a run's policy snapshots at
+    ``steps`` (default: its latest checkpoint). Each result is also written to
+    ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>[-tasks...].json``; returns them in order."""
     from bridgeplan.files import atomic_write_text
     from bridgeplan.paths import eval_dir
 
     run_dir = Path(run_dir)
-    episodes = episodes or EVAL_EPISODES_PER_TASK
     available = dict(policy_snapshots(run_dir))
     paths = [checkpoint_path(run_dir)] if steps is None else []
     for s in steps or []:
@@ -402,14 +437,22 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
         policy = load_policy(path)
         on = maze or policy.config.maze
         if not on:
-            raise BridgeplanError(f"{run_dir} was trained without --maze: say which maze to evaluate in")
-        r = evaluate_policy(on, policy.act, episodes_per_task=episodes, seed=seed, progress=progress)
+            raise BridgeplanError(f"{run_dir} was trained without --maze: say which environment to evaluate in")
+        env = environment(on)
+        family = family_of(env)
+        tasks = family.tasks(env, episodes or None, seed, task_ids=task_ids)
+        if policy.net.obs_dim != family.layout(env).obs_dim:
+            raise BridgeplanError(f"{run_dir} was trained on {policy.net.obs_dim}-D observations, {env}'s are "
+                                  f"{family.layout(env).obs_dim}-D")
+        outcome = family.run(tasks, PolicyAgent(policy), progress)
         # the run and its dataset named by what they are (no path of this machine); the training seed beside
         # the protocol's evaluation seed, so that rows over several training seeds can be averaged as OGBench does
         row = {"run": run_dir.name, "dataset": Path(policy.config.dataset).stem, "train_seed": policy.config.seed,
-               "step": policy.step, "code_version": code_version(), **r.to_dict()}
-        atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{episodes}-seed{seed}.json",
-                          json.dumps(row, indent=2) + "\n")
-        results.append(row | {"text": r.format()})
+               "step": policy.step, "code_version": code_version(), **tasks.fields(),
+               **family.score(tasks, outcome)}
+        row = json.loads(json.dumps(row))  # as written: task ids as strings
+        which = "" if task_ids is None else "-tasks" + "_".join(map(str, task_ids))
+        atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{row['episodes_per_task']}-seed{seed}"
+                          f"{which}.json", json.dumps(row, indent=2) + "\n")
+        results.append(row | {"text": format_score(row)})
     return results
-

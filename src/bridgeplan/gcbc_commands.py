@@ -17,7 +17,8 @@ def add_gcbc_commands(sub) -> None:
                                   "lr 3e-4, batch 1024, MLP 512x3, future-state goals, 1M steps.")
     t.add_argument("dataset", help="training npz in OGBench's format")
     t.add_argument("--run-dir", required=True)
-    t.add_argument("--maze", help="the pointmaze the data is of (checked; evaluation's default)")
+    t.add_argument("--maze", help="the OGBench dataset the data is of (pointmaze-medium-navigate-v0, cube-single-play-"
+                                  "v0, or a bare pointmaze maze; checked; evaluation's default)")
     for name, kind in (("steps", int), ("minutes", float), ("batch-size", int), ("lr", float), ("seed", int),
                        ("p-curgoal", float), ("p-trajgoal", float), ("p-randomgoal", float), ("discount", float),
                        ("checkpoint-every", int), ("log-every", int), ("threads", int)):
@@ -28,9 +29,10 @@ def add_gcbc_commands(sub) -> None:
     t.add_argument("--resume", action="store_true")
     t.add_argument("--no-progress", action="store_true")
     t.set_defaults(func=_cmd_gcbc_train)
-    e = og.add_parser("eval", help="a GCBC run on OGBench's 5-task evaluation protocol")
+    e = og.add_parser("eval", help="a GCBC run's snapshots on OGBench's 5-task evaluation protocol (one snapshot on "
+                                   "any tasks, validation's too: `bridgeplan eval RUN --tasks 6,7,8,9,10`)")
     e.add_argument("run", help="a `gcbc train` run directory")
-    e.add_argument("--maze", help="default: the maze the run was trained with")
+    e.add_argument("--maze", help="default: the environment the run was trained with")
     e.add_argument("--steps", help="comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
     e.add_argument("--episodes", type=int, default=0, help="episodes per task (default 50, as OGBench)")
     e.add_argument("--seed", type=int, default=0)

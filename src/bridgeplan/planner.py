@@ -74,8 +74,9 @@ class Planner:
 
     def conditions(self, starts: np.ndarray, goals: np.ndarray | None, arrival: np.ndarray | None = None,
                    subgoals: np.ndarray | None = None) -> Conditions:
-        """Normalized conditions: the start state at t=0, the goal at rest (zero velocity, if the state has one)
-        at t=H-1 and, for a plan with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every
+        """Normalized conditions: the start state at t=0, the goal at rest (zero velocity, if the state has one;
+        where the layout names goal columns, a goal observation's columns alone: ``Layout.goal_states``) at t=H-1
+        and, for a plan with an ``arrival`` index ``a < H - 1`` (``[N]``, planned states), at every
         t >= a as well (held). A low level takes ``subgoals`` ``[N, m, obs_dim]`` (whole states) at
         ``j, 2j, ..., H - 1`` instead of a goal."""
         state_dims = self.layout.state_columns
@@ -96,7 +97,7 @@ class Planner:
                                       f"{list(subgoals.shape)}")
             every = self.subgoal_every
             return {0: norm(starts), **{every * (i + 1): norm(subgoals[:, i]) for i in range(want[1])}}
-        goal = norm(self.layout.at_rest(goals))
+        goal = norm(self.layout.goal_states(goals))
         conditions = {0: norm(starts), self.horizon - 1: goal}
         if arrival is not None:
             arrival = torch.as_tensor(np.asarray(arrival), device=self.device)[:, None]
@@ -112,7 +113,8 @@ class Planner:
     def plan(self, starts: np.ndarray, goals: np.ndarray | None, nfe: int, generator: torch.Generator,
              prior_only: bool = False, arrival: np.ndarray | None = None,
              subgoals: np.ndarray | None = None) -> Plan:
-        """Plan from ``starts`` ``[N, obs_dim]`` to goal positions ``goals`` ``[N, 2]`` with ``nfe`` network calls.
+        """Plan from ``starts`` ``[N, obs_dim]`` to goal positions ``goals`` ``[N, 2]`` (goal observations
+        ``[N, obs_dim]`` where the layout names goal columns) with ``nfe`` network calls.
 
         ``prior_only`` returns the prior sample itself (the floor every model must beat). ``arrival`` ``[N]``
         (planned states): hold the goal from there on (:meth:`conditions`). A low level plans through

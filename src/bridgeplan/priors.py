@@ -44,13 +44,14 @@ def _endpoints(conditions: Conditions, horizon: int, batch: int) -> tuple[torch.
 
 
 def straight_segment(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor, steps: torch.Tensor,
-                     layout: Layout) -> torch.Tensor:
+                     layout: Layout, rest: torch.Tensor | None = None) -> torch.Tensor:
     """Physical trajectory ``[B, T, D]`` in ``layout`` along the straight line from ``start`` to ``goal``
     (``[B, 2]``) at the fractions ``frac`` ``[B or 1, T]`` of the way: positions on the line, where the state has
     a velocity the constant one that covers the line in ``steps`` ``[B, 1]`` environment steps (the data's
     velocities are per second; each component clipped to the simulator's ``MAX_SPEED``), and the unit vector
     toward the goal as the action (zero when start == goal): the data's actions come from a saturating
-    controller, so their magnitude is about 1."""
+    controller, so their magnitude is about 1. ``rest`` ``[B, len(layout.rest_columns())]``: the state's other
+    columns (a user's environment's), held along the segment (default 0)."""
     delta = goal - start
     horizon = frac.shape[1]
     traj = delta.new_zeros(len(delta), horizon, layout.transition_dim)
@@ -58,7 +59,14 @@ def straight_segment(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor
     if layout.has_velocity:
         layout.velocities(traj)[...] = (delta[:, None] / (steps[..., None] * SIM_DT)).clamp(-MAX_SPEED, MAX_SPEED)
     layout.actions(traj)[...] = (delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-9))[:, None]
+    if rest is not None:
+        layout.states(traj)[..., layout.rest_columns()] = rest[:, None]
     return traj
+
+
+def rest_of(states: torch.Tensor, layout: Layout) -> torch.Tensor:
+    """``[B, len(layout.rest_columns())]`` the columns of states ``[B, obs_dim]`` that a line does not draw."""
+    return states[:, layout.rest_columns()]
 
 
 class GaussianPrior:
@@ -100,17 +108,29 @@ class LinePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, goal_n = _endpoints(conditions, horizon, batch)
         layout = self.layout
+        if layout.goal:
+            return apply_conditions(self._state_line(start_n, goal_n, horizon), conditions)
         start_state = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
         start = layout.state_positions(start_state)
         goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
         frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
         steps = float(max(horizon - 1, 1) * self.stride)
-        traj = straight_segment(start, goal, frac, torch.full((batch, 1), steps, dtype=torch.float64,
-                                                              device=start.device), layout)
-        rest = layout.rest_columns()  # what the line does not say (a user's environment's) stays at the start's
-        layout.states(traj)[..., rest] = start_state[:, None, rest]
+        steps = torch.full((batch, 1), steps, dtype=torch.float64, device=start.device)
+        traj = straight_segment(start, goal, frac, steps, layout, rest_of(start_state, layout))
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
+
+    def _state_line(self, start_n: torch.Tensor, goal_n: torch.Tensor, horizon: int) -> torch.Tensor:
+        """Where the layout names goal columns (a robot moving objects), the line in state space: those columns evenly
+        from the start's to the goal's, every other column held at the start's, the actions zero."""
+        layout = self.layout
+        start = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
+        goal = self.normalizer.unnormalize(goal_n.double(), layout.state_columns)
+        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
+        end = torch.where(torch.isnan(goal), start, goal)
+        traj = start.new_zeros(len(start), horizon, layout.transition_dim)
+        layout.states(traj)[...] = start[:, None] + frac * (end - start)[:, None]
+        return self.normalizer.normalize(traj).to(start_n.dtype)
 
 
 class CoarsePrior:
@@ -121,7 +141,8 @@ class CoarsePrior:
     With only the start and the goal conditioned it is the line prior. In training the subgoals are the
     window's own states (``TrainConfig.subgoal_every``), so the prior is the window's coarse version; in
     planning they are a high-level plan's states, so the prior is that coarse plan, densified. Conditions
-    with NaN rows (holds) are inpainted but are not knots.
+    with NaN rows (holds) are inpainted but are not knots; a goal whose rest columns alone are free (a user's
+    environment's) is one.
     """
 
     name = "coarse"
@@ -133,14 +154,15 @@ class CoarsePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, _ = _endpoints(conditions, horizon, batch)
         layout = self.layout
-        knots = sorted(t for t, state in conditions.items() if not bool(torch.isnan(state).any()))
-        positions = {t: layout.state_positions(self.normalizer.unnormalize(conditions[t].double(),
-                                                                           layout.state_columns)) for t in knots}
+        knots = sorted(t for t, state in conditions.items()  # a goal's free rest columns do not unmake a knot
+                       if not bool(torch.isnan(layout.state_positions(state)).any()))
+        states = {t: self.normalizer.unnormalize(conditions[t].double(), layout.state_columns) for t in knots}
         traj = torch.zeros(batch, horizon, layout.transition_dim, dtype=torch.float64, device=start_n.device)
         for a, b in zip(knots[:-1], knots[1:]):
             frac = torch.linspace(0, 1, b - a + 1, dtype=torch.float64, device=start_n.device)[None, :]
             steps = torch.full((batch, 1), float((b - a) * self.stride), dtype=torch.float64, device=start_n.device)
-            traj[:, a:b + 1] = straight_segment(positions[a], positions[b], frac, steps, layout)
+            traj[:, a:b + 1] = straight_segment(layout.state_positions(states[a]), layout.state_positions(states[b]),
+                                                frac, steps, layout, rest_of(states[a], layout))
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -162,6 +184,7 @@ class LearnedPrior:
         net_horizon = getattr(self.net, "horizon", horizon)
         if net_horizon != horizon:
             raise BridgeplanError(f"the learned prior was trained for horizon {net_horizon}, not {horizon}")
+        goal = torch.where(torch.isnan(goal), start, goal)  # what a goal leaves free, as trained (train_prior_loss)
         with torch.no_grad():
             x = self.net(start, goal).to(start.dtype)
         return apply_conditions(x, conditions)
@@ -224,15 +247,19 @@ class WarmPrior:
         left = (horizon - 1 - end).clamp(min=1e-9)
         goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
         line = straight_segment(layout.positions(prev[:, -1]), goal, (t - end).clamp(min=0) / left,
-                                (left * self.stride).clamp(min=1), layout)
+                                (left * self.stride).clamp(min=1), layout,
+                                rest_of(layout.states(prev[:, -1]), layout))
         traj = torch.where((t > end)[..., None], line, traj)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
 
 def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor, layout: Layout) -> torch.Tensor:
-    """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``."""
-    out = net(layout.states(x0[:, 0]), layout.states(x0[:, -1]))
+    """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``; the last state's
+    rest columns (a user's environment's, which a goal leaves free) are the first's, as :class:`LearnedPrior` plans."""
+    start, goal = layout.states(x0[:, 0]), layout.states(x0[:, -1]).clone()
+    goal[:, layout.rest_columns()] = start[:, layout.rest_columns()]
+    out = net(start, goal)
     return torch.mean((out - x0) ** 2)
 
 

@@ -48,17 +48,25 @@ class Layout:
     """Columns of the position, the part of the state a goal gives."""
     rest: bool = False
     """Whether the state has columns beyond the position and the velocity (else it is those alone)."""
+    goal: tuple[int, ...] = ()
+    """Where a goal is not a position (a manipulation task's object positions and switch states, not the robot's
+    pose): the state's columns it names, a goal then being a whole goal observation of which those columns count;
+    the state may hold other columns. Empty: a goal is a position (``goal_dim`` columns)."""
 
     def __post_init__(self):
         columns = sorted([*range(self.position, self.position + self.goal_dim),
                           *([] if self.velocity is None else [self.velocity, self.velocity + 1])])
-        fits = columns == list(range(self.obs_dim)) or (
-            self.rest and len(set(columns)) == len(columns) and columns[0] >= 0 and columns[-1] < self.obs_dim)
+        inside = len(set(columns)) == len(columns) and columns[0] >= 0 and columns[-1] < self.obs_dim
+        if self.goal:  # a state with columns of its own (a robot's joints): the named ones must lie in it
+            fits = inside and min(self.goal) >= 0 and max(self.goal) < self.obs_dim
+        else:
+            fits = columns == list(range(self.obs_dim)) or (self.rest and inside)
         if self.act_dim < 1 or self.goal_dim < 1 or not fits:
             raise ValueError(f"layout {self.name}: a state is a position and optionally a velocity (two columns), "
-                             f"and the rest only where declared, and a transition has actions; got act_dim "
-                             f"{self.act_dim}, obs_dim {self.obs_dim}, position at {self.position} "
-                             f"({self.goal_dim} columns), velocity at {self.velocity}")
+                             f"and the rest only where declared (or where its goal names columns), and a transition "
+                             f"has actions; got act_dim {self.act_dim}, obs_dim {self.obs_dim}, position at "
+                             f"{self.position} ({self.goal_dim} columns), velocity at {self.velocity}, "
+                             f"goal {self.goal}")
 
     @property
     def transition_dim(self) -> int:
@@ -102,6 +110,32 @@ class Layout:
                  *(() if self.velocity is None else (self.velocity, self.velocity + 1))}
         return [c for c in range(self.obs_dim) if c not in taken]
 
+    def goal_only(self, states):
+        """``states [..., obs_dim]`` (numpy or torch, a copy) with every column but the goal's NaN, i.e. free in a
+        condition (:func:`apply_conditions`); as they are where the layout names no goal columns."""
+        if not self.goal:
+            return states
+        free = np.ones(self.obs_dim, dtype=bool)
+        free[list(self.goal)] = False
+        if isinstance(states, torch.Tensor):
+            out = states.clone()
+            out[..., torch.as_tensor(free, device=states.device)] = float("nan")
+            return out
+        out = np.array(states, dtype=np.float64)
+        out[..., free] = np.nan
+        return out
+
+    def goal_states(self, goals: np.ndarray) -> np.ndarray:
+        """The states a planner's goal condition holds: goal positions ``[..., 2]`` at rest; where the layout names goal
+        columns, goal observations ``[..., obs_dim]`` with every other column free (:meth:`goal_only`)."""
+        if not self.goal:
+            return self.at_rest(goals)
+        goals = np.asarray(goals, dtype=np.float64)
+        if goals.shape[-1] != self.obs_dim:
+            raise BridgeplanError(f"a {self.name} goal is a {self.obs_dim}-D goal observation (its columns "
+                                  f"{list(self.goal)} are the task's), got {goals.shape[-1]}-D")
+        return self.goal_only(goals)
+
     def at_rest(self, positions: np.ndarray) -> np.ndarray:
         """States ``[..., obs_dim]`` at ``positions [..., goal_dim]``, with zero velocity where the state has one and
         NaN (free, as a condition) in the rest."""
@@ -116,6 +150,7 @@ MAZE2D = Layout("maze2d", act_dim=2, obs_dim=4, position=0, velocity=2)
 """Maze2D (gymnasium-robotics PointMaze): actions are forces, the state ``(x, y, vx, vy)``."""
 KINEMATIC_POINT = Layout("kinematic point", act_dim=2, obs_dim=2, position=0, velocity=None)
 """OGBench pointmaze: actions are position steps (scaled by the environment's gain), the state ``(x, y)``."""
+
 
 def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
     """Overwrite the state columns of ``x`` at the conditioned time indices (returns a new tensor); rows of
@@ -134,11 +169,15 @@ def apply_conditions(x: torch.Tensor, conditions: Conditions) -> torch.Tensor:
 
 
 def window_conditions(x0: torch.Tensor, layout: Layout, subgoal_every: int = 0) -> Conditions:
-    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser); for a
+    """Start and goal conditions of a training window ``[B, H, D]``: its first and last states (Diffuser; of the last,
+    the goal's columns alone where the layout names them, as a planner's goal holds them); for a
     hierarchy's low level (``subgoal_every`` j > 0) every j-th state as well (the last one is the goal)."""
     last = x0.shape[1] - 1
     indices = [0, *range(subgoal_every, last, subgoal_every), last] if subgoal_every else [0, last]
-    return {t: layout.states(x0[:, t]) for t in indices}
+    conditions = {t: layout.states(x0[:, t]) for t in indices}
+    if not subgoal_every:  # a goal names its own columns (all, but where the layout says which)
+        conditions[last] = layout.goal_only(conditions[last])
+    return conditions
 
 
 def span(horizon: int, stride: int) -> int:

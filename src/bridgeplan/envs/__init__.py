@@ -3,6 +3,7 @@
 - :mod:`bridgeplan.envs.maze2d`: gymnasium-robotics' PointMaze, Diffuser's Maze2D (mazes ``open``, ``umaze``,
   ``medium``, ``large``);
 - :mod:`bridgeplan.envs.ogbench_pointmaze`: OGBench's pointmaze (datasets ``pointmaze-{maze}-{kind}-v0``);
+- :mod:`bridgeplan.envs.ogbench_manipulation`: OGBench's manipulation suite (datasets ``cube-single-play-v0``, ...).
 - :mod:`bridgeplan.envs.goal_env`: a user's own goal-conditioned gymnasium environment and data (a spec file
   ``NAME.toml``).
 
@@ -12,13 +13,14 @@ outside this package tests an environment's name: it asks the family.
 
 from __future__ import annotations
 
-from bridgeplan.envs import goal_env, maze2d, ogbench_pointmaze
+from bridgeplan.envs import goal_env, maze2d, ogbench_manipulation, ogbench_pointmaze
 from bridgeplan.envs.family import Family, unknown
 from bridgeplan.errors import BridgeplanError
 
 __all__ = ["FAMILIES", "Family", "family_of", "family_of_dataset", "get_family"]
 
-FAMILIES: tuple[Family, ...] = (maze2d.FAMILY, ogbench_pointmaze.FAMILY, goal_env.FAMILY)
+FAMILIES: tuple[Family, ...] = (maze2d.FAMILY, ogbench_pointmaze.FAMILY, ogbench_manipulation.FAMILY,
+                               goal_env.FAMILY)
 """The built-in families (their modules import no simulator until one is used)."""
 
 
@@ -33,7 +35,7 @@ def family_of(env: str) -> Family:
 
 
 def get_family(name: str) -> Family:
-    """The family called ``name`` (``maze2d``, ``ogbench-pointmaze``, ``goal-env``)."""
+    """The family called ``name`` (``maze2d``, ``ogbench-pointmaze``, ``ogbench-manipulation``, ``goal-env``)."""
     for family in FAMILIES:
         if family.name == name:
             return family

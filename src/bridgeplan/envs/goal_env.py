@@ -33,7 +33,6 @@ import importlib
 import importlib.util
 import time
 import tomllib
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -206,6 +205,7 @@ def read_arrays(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """``(observations [T, obs], actions [T, act], segment starts, episodes)`` of an OGBench npz file (episodes end
     at ``terminals`` or ``timeouts``; every row kept) or a Minari dataset directory."""
     from bridgeplan.data.minari import DATA_FILE, read_episodes
+    from bridgeplan.data.npz import read_npz
     from bridgeplan.data.stream import join_episodes
 
     if path.is_dir():
@@ -220,26 +220,12 @@ def read_arrays(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         episodes = read_episodes(path, check)
         obs, act, starts = join_episodes(episodes.observations, episodes.actions)
         return obs, act, starts, len(episodes.observations)
-    if not path.is_file():
-        raise BridgeplanError(f"no dataset at {path}")
-    if not zipfile.is_zipfile(path):
-        raise BridgeplanError(f"{path} is neither an npz file (OGBench's format) nor a Minari dataset directory")
-    try:
-        with np.load(path) as f:
-            if "observations" not in f or "actions" not in f or "terminals" not in f:
-                raise BridgeplanError(f"{path} is not an OGBench-format dataset: it needs observations, actions and "
-                                      f"terminals arrays, it has {', '.join(f.keys())}")
-            obs, act = np.asarray(f["observations"], np.float64), np.asarray(f["actions"], np.float64)
-            ends = np.asarray(f["terminals"]).astype(bool)
-            if "timeouts" in f:
-                ends = ends | np.asarray(f["timeouts"]).astype(bool)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise BridgeplanError(f"{path} is not a readable npz file ({type(e).__name__}: {e})") from None
-    if obs.ndim != 2 or act.ndim != 2 or len(act) != len(obs) or ends.shape != (len(obs),):
-        raise BridgeplanError(f"{path}: observations {list(obs.shape)}, actions {list(act.shape)} and terminals "
-                              f"{list(ends.shape)} are not one row per step")
-    if len(obs) == 0 or not ends[-1]:
-        raise BridgeplanError(f"{path}: {'empty' if len(obs) == 0 else 'the last episode has no terminal'}")
+    arrays, _ = read_npz(path, optional=("timeouts",))
+    obs, act = arrays["observations"].astype(np.float64), arrays["actions"].astype(np.float64)
+    ends = arrays["terminals"].astype(bool) | arrays.get("timeouts", np.zeros(len(obs))).astype(bool)
+    if obs.ndim != 2 or act.ndim != 2:
+        raise BridgeplanError(f"{path}: observations {list(obs.shape)} and actions {list(act.shape)} are not one row "
+                              f"of columns per step")
     stops = np.flatnonzero(ends)
     return obs, act, np.concatenate([[0], stops[:-1] + 1]), len(stops)
 

@@ -64,6 +64,12 @@ class DatasetName:
         return 2001 if self.maze == "giant" else 1001
 
 
+def dataset_env(maze_or_name: str) -> str:
+    """A dataset name (``pointmaze-medium-stitch-v0``) as it is, or a bare maze (``medium``, as earlier GCBC runs name
+    their environment) as its navigate dataset's name: the same evaluation environment."""
+    return f"pointmaze-{maze_or_name}-navigate-v0" if maze_or_name in MAZES else maze_or_name
+
+
 def parse_dataset_name(name: str) -> DatasetName:
     """``pointmaze-{medium,large,giant,teleport}-{navigate,stitch}-v0`` -> (maze, kind)."""
     m = _NAME.fullmatch(name)

@@ -10,18 +10,16 @@ dataset of another maze (or of another environment: antmaze observations are 29-
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.data.npz import REQUIRED, read_npz
 from bridgeplan.envs.ogbench_pointmaze.maze import geometry
 from bridgeplan.envs.ogbench_pointmaze.names import MAZES, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import KINEMATIC_POINT
-
-REQUIRED = ("observations", "actions", "terminals")
 
 
 def resolve_maze(maze_or_name: str) -> str:
@@ -68,27 +66,14 @@ def check_dataset(path: str | Path, maze: str) -> DatasetCheck:
     path = Path(path)
     if path.is_dir():
         raise BridgeplanError(f"{path} is a folder, not an npz file (OGBench's datasets are single .npz files)")
-    if not path.is_file():
-        raise BridgeplanError(f"no dataset file at {path}")
-    if not zipfile.is_zipfile(path):
-        raise BridgeplanError(f"{path} is not an npz file")
-    try:
-        with np.load(path) as f:
-            keys = list(f.keys())
-            missing = [k for k in REQUIRED if k not in keys]
-            if missing:
-                raise BridgeplanError(f"{path} is not an OGBench dataset: no {', '.join(missing)} array")
-            obs, actions, terminals = (np.asarray(f[k]) for k in REQUIRED)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise BridgeplanError(f"{path} is not a readable npz file ({type(e).__name__}: {e})") from None
+    arrays, keys = read_npz(path)
+    obs, actions, terminals = (arrays[k] for k in REQUIRED)
     if obs.ndim != 2 or obs.shape[1] != 2:
         raise BridgeplanError(f"{path} is not a pointmaze dataset: observations have shape {obs.shape}, "
                               "pointmaze's are [N, 2] (x, y)")
-    if actions.shape != obs.shape or terminals.shape != obs.shape[:1]:
+    if actions.shape != obs.shape:
         raise BridgeplanError(f"{path}: arrays of unequal length (observations {obs.shape}, actions "
                               f"{actions.shape}, terminals {terminals.shape})")
-    if len(obs) == 0 or not terminals[-1]:
-        raise BridgeplanError(f"{path}: {'empty' if len(obs) == 0 else 'the last episode has no terminal'}")
     inside = _in_free_cells(maze, obs)
     fits = [m for m in MAZES if _in_free_cells(m, obs).all()]
     if not inside.all():

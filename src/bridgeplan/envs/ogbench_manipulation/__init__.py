@@ -1,0 +1,169 @@
+"""OGBench's manipulation suite (Park et al., ICLR 2025) on the ``ogbench`` package, the family :data:`FAMILY`: a
+UR5e arm with a gripper, acting in 5 dimensions (effector x, y, z, yaw, gripper; each in [-1, 1]) on cubes
+(``cube-single``, ``cube-double``), a scene of a cube, buttons, a drawer and a window (``scene``) and button puzzles
+(``puzzle-3x3``, ``puzzle-4x4``).
+
+Its parts: dataset names and observation columns (``names``), a dataset generator in OGBench's play recipe and npz
+format, cached by identity (``generate``), reading and checking dataset files (``reading``) and the 5-task
+evaluation protocol in ogbench's own environments (``protocol``). Its environment names are the datasets'
+(``cube-single-play-v0``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bridgeplan.envs.family import Family
+from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, ROBOT_COLUMNS, names, parse_dataset_name
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.trajectory import Layout
+
+SUFFIX = "-play-v0"
+EFFECTOR_XY = 12
+"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y follows)."""
+
+
+class OGBenchManipulation(Family):
+    name = "ogbench-manipulation"
+    title = "OGBench manipulation"
+    generator = "ogbench-manipulation"
+    episodes = 50  # per task, as every manipulation line of OGBench's hyperparameters.sh (--eval_episodes=50)
+    quick_episodes = 4
+    default_arrival = "end"
+
+    @property
+    def validation_tasks(self) -> tuple[int, ...]:
+        from bridgeplan.envs.ogbench_manipulation.protocol import VALIDATION_TASK_IDS
+
+        return VALIDATION_TASK_IDS
+
+    def owns(self, env: str) -> bool:
+        return env.endswith(SUFFIX) and not env.startswith("pointmaze-")
+
+    def names(self) -> str:
+        return names()
+
+    def check(self, env: str) -> str:
+        return parse_dataset_name(env).name
+
+    def layout(self, env: str) -> Layout:
+        """The observation whole as the state; the effector's xy as its position; the goal the task's columns."""
+        spec = parse_dataset_name(env)
+        assert EFFECTOR_XY + 2 <= ROBOT_COLUMNS
+        return Layout(spec.scene_name, act_dim=ACT_DIM, obs_dim=spec.obs_dim, position=EFFECTOR_XY, velocity=None,
+                      goal=spec.goal_columns)
+
+    # --- plans -------------------------------------------------------------------------------------------------
+
+    def plan_shape(self, env: str, preset: str) -> tuple[int, int]:
+        from bridgeplan.envs.ogbench_manipulation.names import plan_shape
+
+        return plan_shape(env, preset)
+
+    def diffusion_steps(self, env: str) -> int:
+        from bridgeplan.envs.ogbench_manipulation.names import DIFFUSION_STEPS
+
+        return DIFFUSION_STEPS
+
+    def longest_span(self, env: str) -> int:
+        from bridgeplan.envs.ogbench_manipulation.names import EPISODE_STEPS
+
+        return min(parse_dataset_name(env).scene.eval_steps, EPISODE_STEPS)
+
+    # --- data --------------------------------------------------------------------------------------------------
+
+    def load_stream(self, dataset: str, env: str):
+        """The file (checked to be ``env``'s) read by ogbench's loader in its compact form, one segment per episode,
+        every row kept (as pointmaze's, :func:`bridgeplan.envs.ogbench_pointmaze.reading.load_stream`)."""
+        import numpy as np
+
+        from bridgeplan.data.stream import Stream
+        from bridgeplan.envs.ogbench_manipulation.reading import load_dataset
+
+        data = load_dataset(dataset, env, compact_dataset=True)
+        ends = np.flatnonzero(data["valids"] == 0)
+        starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
+        return Stream(env, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
+                      episodes=len(ends), source=str(dataset), layout=self.layout(env))
+
+    def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
+        return f"datasets/ogbench/{parse_dataset_name(env).name}.npz"
+
+    def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
+                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+        """OGBench's play recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz,
+        NAME-val.npz and NAME.json (identity and sha256) in ``out``'s folder (default ``datasets/ogbench``, or under
+        ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused."""
+        from bridgeplan.envs.ogbench_manipulation.generate import generate_dataset
+        from bridgeplan.paths import datasets_root
+
+        if steps is not None or piece_steps is not None or workers != 1:
+            raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
+                                  "not --steps, --piece-steps or --workers")
+        folder = datasets_root() / "ogbench" if out is None else Path(out)
+        folder = folder.parent if folder.suffix == ".npz" else folder
+        made = generate_dataset(env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force,
+                                progress=progress)
+        if made.cached:
+            print(f"cached: {made.train_path} has this identity (sha256 {made.record['files'][made.train_path.name]})")
+        return made.train_path
+
+    def reads(self, path: str) -> bool:
+        """An npz file (OGBench's format); which scene it is of is :meth:`dataset_info`'s to check."""
+        import zipfile
+
+        return Path(path).is_file() and zipfile.is_zipfile(path)
+
+    def dataset_info(self, path: str, env: str | None) -> tuple[dict, str]:
+        from dataclasses import asdict
+
+        from bridgeplan.envs.ogbench_manipulation.reading import check_dataset
+
+        if env is None:
+            raise BridgeplanError(f"{path}: an OGBench file does not say its dataset: give --maze NAME")
+        c = check_dataset(path, env)
+        return asdict(c), c.summary()
+
+    # --- evaluation --------------------------------------------------------------------------------------------
+
+    def graph_pace(self, stream):
+        raise BridgeplanError("the dataset graph joins states by their distance in the plane; an arm's states have no "
+                              "such distance here (not built for OGBench manipulation)")
+
+    def body(self, env: str):
+        from bridgeplan.envs.ogbench_manipulation.controllers import body
+
+        return body(self.layout(env))
+
+    def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
+              task_ids: tuple[int, ...] | None = None):
+        from bridgeplan.envs.ogbench_manipulation.protocol import ManipulationTasks
+
+        if multi_task:
+            raise BridgeplanError("OGBench's protocol has its 5 tasks, no Multi2D (--multi-task): choose tasks with "
+                                  "--tasks")
+        return ManipulationTasks.make(env, self.episodes if episodes is None else episodes, seed, task_ids)
+
+    def run(self, tasks, agent, progress: bool = False):
+        """OGBench's protocol in its own environments, the episodes side by side (:mod:`.protocol`)."""
+        from bridgeplan.envs.ogbench_manipulation.protocol import run_tasks
+
+        return run_tasks(tasks, agent, progress)
+
+    def score(self, tasks, outcome) -> dict:
+        """The success rate (the mean of the tasks'), the counts, and each task's."""
+        d = outcome.to_dict()
+        return {"success_rate": d["success_rate"], "successes": d["successes"], "episodes": d["episodes"],
+                "tasks": d["tasks"], "protocol_seconds": outcome.seconds}
+
+    def floor_score(self, tasks, outcome) -> dict:
+        return {"success_rate": outcome.success_rate, "tasks": {i: t.success_rate for i, t in outcome.tasks.items()}}
+
+    def oracle(self, env: str):
+        from bridgeplan.envs.ogbench_manipulation.protocol import OracleAgent
+
+        return OracleAgent(parse_dataset_name(env).name)
+
+
+FAMILY = OGBenchManipulation()

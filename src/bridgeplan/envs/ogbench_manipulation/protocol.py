@@ -1,0 +1,260 @@
+"""OGBench's evaluation protocol on manipulation: 5 fixed tasks per scene, in ogbench's own environments.
+
+As ``impls/main.py`` and ``impls/utils/evaluation.py`` do it: the registered environment (``cube-single-v0``, ...;
+``ogbench.make_env_and_datasets(name, env_only=True)`` makes the same) is reset with ``options=dict(task_id=i)``
+(the task's objects, slightly randomized), the agent gets the observation and ``info["goal"]`` (the goal's whole
+observation; the task's part of it is the layout's ``goal`` columns), its action is clipped to [-1, 1], and the
+episode ends when the environment terminates at the goal or truncates it at its limit (cube-single 200, cube-double
+500, scene 750, puzzle 500 steps). An episode succeeds when its last step's ``info["success"]`` is true; a task's
+success rate is the mean over its episodes, the overall rate the mean over the tasks.
+
+Episodes run batched: one environment per episode of a batch, stepped in lockstep, the agent called once per step on
+the whole batch. Each episode's environment is reset with its own seed (from ``seed``, its task and its index), which
+seeds what the environment draws from its ``np_random`` (the objects' jitter and yaw, the arm's start). One draw is
+outside any seed: ogbench's reset takes two random actions (its ``action_space`` property builds a fresh, unseeded
+space each time) before it records the goal observation, so the robot's part of ``info["goal"]`` varies slightly
+from run to run (the objects' part, which success reads, does not).
+
+Validation tasks (ids 6-10, :func:`validation_tasks`) are not the test tasks: drawn once per scene by a fixed seed.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from bridgeplan.envs.family import Agent, Tasks
+from bridgeplan.envs.ogbench_manipulation.generate import make_env
+from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, DatasetName, parse_dataset_name
+from bridgeplan.envs.ogbench_pointmaze.protocol import episode_seed
+from bridgeplan.errors import BridgeplanError
+
+TASK_IDS = (1, 2, 3, 4, 5)
+VALIDATION_TASK_IDS = (6, 7, 8, 9, 10)
+VALIDATION_TASKS_SEED = 42
+"""The seed that draws each scene's validation tasks (fixed: the same tasks on every machine and run)."""
+MIN_MOVE = 0.1
+"""A validation task moves each cube at least this far (m), as every cube-moving test task does."""
+MIN_APART = 0.08
+"""Cubes of a validation task start and end at least this far apart (m): never on top of one another."""
+BATCH = 100
+"""Episodes stepped side by side (one environment each)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ManipulationTasks(Tasks):
+    """The protocol's episodes of one dataset's scene: ``episodes_per_task`` of each task in ``task_ids``."""
+
+    episodes_per_task: int
+    task_ids: tuple[int, ...] = TASK_IDS
+
+    @classmethod
+    def make(cls, env: str, episodes_per_task: int, seed: int = 0,
+             task_ids: tuple[int, ...] | None = None) -> ManipulationTasks:
+        spec = parse_dataset_name(env)
+        if episodes_per_task <= 0:
+            raise BridgeplanError(f"episodes per task must be positive, got {episodes_per_task}")
+        ids = tuple(TASK_IDS if task_ids is None else task_ids)
+        known = TASK_IDS + VALIDATION_TASK_IDS
+        if not ids or any(not isinstance(t, (int, np.integer)) or t not in known for t in ids):
+            raise BridgeplanError(f"task ids must be in 1..5 (OGBench's test tasks) or 6..10 (the validation tasks), "
+                                  f"got {list(ids)}")
+        return cls(spec.name, episodes_per_task * len(ids), seed, spec.scene.eval_steps,
+                   episodes_per_task=episodes_per_task, task_ids=ids)
+
+    @property
+    def spec(self) -> DatasetName:
+        return parse_dataset_name(self.env)
+
+    def fields(self) -> dict:
+        return {"maze": self.env, "env_id": self.spec.scene.env_id, "episodes_per_task": self.episodes_per_task,
+                "seed": self.seed}
+
+    def first(self) -> ManipulationTasks:
+        return ManipulationTasks(self.env, 1, self.seed, self.episode_steps, episodes_per_task=1,
+                                 task_ids=self.task_ids[:1])
+
+
+@dataclass
+class TaskResult:
+    task_id: int
+    task_name: str
+    episodes: int
+    successes: int
+    steps: list[int] = field(default_factory=list)
+    """Steps each episode ran (the step it reached the goal on, or the limit)."""
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes
+
+
+@dataclass
+class ProtocolResult:
+    dataset: str
+    env_id: str
+    episodes_per_task: int
+    seed: int
+    tasks: dict[int, TaskResult]
+    seconds: float = 0.0
+
+    @property
+    def success_rate(self) -> float:
+        """The mean of the per-task rates (OGBench's ``overall_success``)."""
+        return float(np.mean([t.success_rate for t in self.tasks.values()]))
+
+    @property
+    def successes(self) -> int:
+        return sum(t.successes for t in self.tasks.values())
+
+    @property
+    def episodes(self) -> int:
+        return sum(t.episodes for t in self.tasks.values())
+
+    def to_dict(self) -> dict:
+        return {"dataset": self.dataset, "env_id": self.env_id, "episodes_per_task": self.episodes_per_task,
+                "seed": self.seed, "success_rate": self.success_rate, "successes": self.successes,
+                "episodes": self.episodes, "seconds": self.seconds,
+                "tasks": {i: {**asdict(t), "success_rate": t.success_rate} for i, t in self.tasks.items()}}
+
+    def format(self) -> str:
+        lines = [f"{self.dataset} ({self.env_id}): {self.episodes_per_task} episodes per task, seed {self.seed}"]
+        for i, t in self.tasks.items():
+            lines.append(f"  task {i} {t.task_name}: {t.success_rate:6.1%} ({t.successes}/{t.episodes}), "
+                         f"mean steps {np.mean(t.steps):.0f}")
+        lines.append(f"  overall: {self.success_rate:.1%} ({self.successes}/{self.episodes}) in {self.seconds:.1f} s")
+        return "\n".join(lines)
+
+
+def _cube_xyzs(rng: np.random.Generator, bounds: np.ndarray, cubes: int) -> np.ndarray:
+    """``cubes`` positions on the table, uniform in ``bounds`` (xy) and at least :data:`MIN_APART` apart."""
+    while True:
+        xy = rng.uniform(bounds[0], bounds[1], size=(cubes, 2))
+        if cubes < 2 or min(np.linalg.norm(xy[i] - xy[j]) for i in range(cubes) for j in range(i)) >= MIN_APART:
+            return np.column_stack([xy, np.full(cubes, 0.02)])
+
+
+def validation_tasks(spec: DatasetName, env) -> list[dict]:
+    """Five tasks that are not the test tasks, in ogbench's ``task_info`` form, named ``validation_task6`` to
+    ``validation_task10``, drawn by NumPy's ``default_rng(VALIDATION_TASKS_SEED)`` by the rules of the scene's own
+    data (its object sampling bounds):
+
+    - cubes: each cube's start and goal uniform on the table in the environment's object sampling bounds, the cubes
+      at least 8 cm apart at the start and at the goal (no stacking), each moved at least 10 cm;
+    - puzzles: start and goal button states uniform bits, drawn again while the goal equals the start or the pair is
+      a test task's;
+    - scene: the cube as above; buttons as the puzzle's; drawer closed (0) or open (-0.16) and window closed (0) or
+      open (0.2), each uniform, start and goal apart; drawn again while no part of the goal differs from the start.
+    The test tasks' continuous positions are never drawn exactly, so no validation task is a test task."""
+    rng = np.random.default_rng(VALIDATION_TASKS_SEED)
+    u, scene = env.unwrapped, spec.scene
+    tests = u.task_infos
+    bounds = np.asarray(u._object_sampling_bounds, np.float64)
+    out = []
+    for i in VALIDATION_TASK_IDS:
+        name = f"validation_task{i}"
+        if scene.cubes and not scene.buttons:
+            while True:
+                init, goal = _cube_xyzs(rng, bounds, scene.cubes), _cube_xyzs(rng, bounds, scene.cubes)
+                if np.linalg.norm(goal - init, axis=1).min() >= MIN_MOVE:
+                    break
+            out.append({"task_name": name, "init_xyzs": init, "goal_xyzs": goal})
+        elif not scene.cubes:
+            pairs = {(tuple(t["init_button_states"]), tuple(t["goal_button_states"])) for t in tests}
+            while True:
+                init, goal = rng.integers(0, 2, scene.buttons), rng.integers(0, 2, scene.buttons)
+                if (init != goal).any() and (tuple(init), tuple(goal)) not in pairs:
+                    break
+            out.append({"task_name": name, "init_button_states": init, "goal_button_states": goal})
+        else:
+            while True:
+                parts = [{"block_xyzs": _cube_xyzs(rng, bounds, scene.cubes),
+                          "button_states": rng.integers(0, 2, scene.buttons),
+                          "drawer_pos": float(rng.choice([0.0, -0.16])), "window_pos": float(rng.choice([0.0, 0.2]))}
+                         for _ in range(2)]
+                init, goal = parts
+                moved = np.linalg.norm(goal["block_xyzs"] - init["block_xyzs"], axis=1).min() >= MIN_MOVE
+                if moved or (goal["button_states"] != init["button_states"]).any() or \
+                        goal["drawer_pos"] != init["drawer_pos"] or goal["window_pos"] != init["window_pos"]:
+                    break
+            out.append({"task_name": name, "init": init, "goal": goal})
+    return out
+
+
+class OracleAgent:
+    """Where the family's noise-free expert would act: not built (the play oracles plan toward one target at a time
+    in ``data_collection`` mode; a task's several targets at once need a sequencer of their own)."""
+
+    def __init__(self, name: str):
+        raise BridgeplanError(f"{name}: OGBench manipulation has no noise-free oracle on its evaluation tasks here "
+                              "(its play oracles serve data collection only)")
+
+
+def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) -> ProtocolResult:
+    """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), at most
+    :data:`BATCH` side by side."""
+    from tqdm import tqdm
+
+    spec = tasks.spec
+    episodes = [(t, k) for t in tasks.task_ids for k in range(tasks.episodes_per_task)]
+    envs = [make_env(spec.scene.env_id) for _ in range(min(BATCH, len(episodes)))]
+    infos = list(envs[0].unwrapped.task_infos)
+    if any(t in VALIDATION_TASK_IDS for t in tasks.task_ids):
+        infos += validation_tasks(spec, envs[0])
+    success = np.zeros(len(episodes), dtype=bool)
+    steps = np.zeros(len(episodes), dtype=np.int64)
+    t0 = time.perf_counter()
+    with tqdm(total=len(episodes), disable=not progress, desc=f"evaluate {spec.name}", unit="episode") as bar:
+        for lo in range(0, len(episodes), len(envs)):
+            batch = episodes[lo:lo + len(envs)]
+            agent.begin(len(batch))
+            s, n = _run_batch(envs[:len(batch)], agent, batch, tasks.seed, infos, spec.obs_dim, bar.update)
+            success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
+    for env in envs:
+        env.close()
+    results = {}
+    for t in tasks.task_ids:
+        rows = [i for i, (task, _) in enumerate(episodes) if task == t]
+        results[int(t)] = TaskResult(int(t), infos[t - 1]["task_name"], len(rows), int(success[rows].sum()),
+                                     steps[rows].tolist())
+    return ProtocolResult(spec.name, spec.scene.env_id, tasks.episodes_per_task, tasks.seed, results,
+                          time.perf_counter() - t0)
+
+
+def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int, infos: Sequence[dict],
+               obs_dim: int, finished) -> tuple[np.ndarray, np.ndarray]:
+    n = len(batch)
+    obs, goals = np.empty((n, obs_dim)), np.empty((n, obs_dim))
+    for i, (env, (task, k)) in enumerate(zip(envs, batch)):
+        options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the fresh action space's float64 bounds, cast at each reset
+            ob, info = env.reset(seed=episode_seed(seed, task, k), options=options)
+        obs[i], goals[i] = ob, info["goal"]
+    active = np.ones(n, dtype=bool)
+    success = np.zeros(n, dtype=bool)
+    steps = np.zeros(n, dtype=np.int64)
+    while active.any():
+        actions = np.asarray(agent.act(obs.copy(), goals.copy()), dtype=np.float64)
+        if actions.shape != (n, ACT_DIM):
+            raise BridgeplanError(f"the agent returned actions of shape {list(actions.shape)}, expected {[n, ACT_DIM]}")
+        if not np.isfinite(actions[active]).all():
+            raise BridgeplanError("the agent returned non-finite actions")
+        actions = np.clip(actions, -1, 1)
+        ended = []
+        for i in np.flatnonzero(active):
+            ob, _, terminated, truncated, info = envs[i].step(actions[i])
+            obs[i] = ob
+            steps[i] += 1
+            if terminated or truncated:
+                active[i] = False
+                success[i] = bool(info["success"])
+                ended.append(i)
+                finished(1)
+        if ended:
+            agent.end(np.asarray(ended))
+    return success, steps

@@ -1,0 +1,282 @@
+"""The OGBench manipulation family: names and columns, OGBench's play recipe at a tiny size, the protocol, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ogbench")
+
+from bridgeplan.cli import main  # noqa: E402
+from bridgeplan.envs import family_of  # noqa: E402
+from bridgeplan.envs.ogbench_manipulation import FAMILY, protocol  # noqa: E402
+from bridgeplan.envs.ogbench_manipulation.generate import generate_dataset, make_env  # noqa: E402
+from bridgeplan.envs.ogbench_manipulation.names import parse_dataset_name  # noqa: E402
+from bridgeplan.errors import BridgeplanError  # noqa: E402
+
+NAMES = {"cube-single-play-v0": (28, 200), "cube-double-play-v0": (37, 500), "scene-play-v0": (40, 750),
+         "puzzle-3x3-play-v0": (55, 500)}
+
+
+@pytest.fixture(autouse=True)
+def _headless(monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_layout_and_goal_columns_are_the_environments(name):
+    """Observation width and action width from the real environment; the goal's columns are exactly what ogbench's
+    success reads (``compute_oracle_observation``), after some random steps."""
+    assert family_of(name) is FAMILY
+    layout = FAMILY.layout(name)
+    env = make_env(parse_dataset_name(name).scene.env_id, mode="data_collection")
+    ob, _ = env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        ob, *_ = env.step(rng.uniform(-1, 1, 5))
+    assert (layout.obs_dim, env.spec.max_episode_steps) == NAMES[name]
+    assert layout.act_dim == env.action_space.shape[0] == 5
+    np.testing.assert_allclose(ob[list(layout.goal)], env.unwrapped.compute_oracle_observation(), atol=1e-6)
+    assert FAMILY.tasks(name).episode_steps == NAMES[name][1]
+
+
+def test_the_recipe_at_a_tiny_size(tmp_path):
+    """Sizes, OGBench's loader reads it back, the actions are the noisy oracle's (not constant, within [-1, 1], the
+    gripper mostly at its bounds), the oracle reaches its targets, and the same identity is the cache."""
+    from ogbench.utils import load_dataset
+
+    made = generate_dataset("cube-single-play-v0", tmp_path, seed=3, episodes=4, episode_steps=201, progress=False)
+    assert not made.cached
+    train = load_dataset(str(made.train_path))  # drops each episode's last step (no next observation)
+    val = load_dataset(str(made.val_path))
+    assert train["observations"].shape == (4 * 200, 28) and val["observations"].shape == (1 * 200, 28)
+    with np.load(made.train_path) as f:
+        assert sorted(f.files) == ["actions", "observations", "qpos", "qvel", "terminals"]
+        actions, terminals = f["actions"], f["terminals"]
+    assert actions.shape == (804, 5) and np.flatnonzero(terminals).tolist() == [200, 401, 602, 803]
+    # the oracle's actions (differences to its noisy plan, normalized): every axis used, centred, within [-1, 1]
+    assert np.abs(actions).max() <= 1
+    assert (0.1 < actions.std(axis=0)).all() and (actions.std(axis=0) < 0.9).all()
+    assert (np.abs(actions.mean(axis=0)) < 0.25).all()
+    t = made.record["targets"]
+    assert t["done"] >= 8 and t["reached"] >= 0.8 * t["done"]
+    again = generate_dataset("cube-single-play-v0", tmp_path, seed=3, episodes=4, episode_steps=201, progress=False)
+    assert again.cached and again.record == made.record
+    with pytest.raises(BridgeplanError, match="another identity"):
+        generate_dataset("cube-single-play-v0", tmp_path, seed=4, episodes=4, episode_steps=201, progress=False)
+    record = json.loads((tmp_path / "cube-single-play-v0.json").read_text())
+    assert record["identity"]["noise"] == 0.1 and record["identity"]["noise_smoothing"] == 0.5
+    info, text = FAMILY.dataset_info(str(made.train_path), "cube-single-play-v0")
+    assert info["episodes"] == 4 and info["sha256"] == record["files"]["cube-single-play-v0.npz"]
+
+
+def test_scene_health_check():
+    from bridgeplan.envs.ogbench_manipulation.generate import healthy
+
+    qpos = np.zeros((5, 20))
+    qpos[:, 14:17] = [0.4, 0.0, 0.02]
+    assert healthy(qpos)
+    qpos[2, 15] = 0.3  # too far right
+    assert not healthy(qpos)
+    qpos[2, 15:17] = [-0.31, 0.07]  # far left, in the drawer
+    assert healthy(qpos)
+    qpos[2, 16] = 0.02  # far left on the table
+    assert not healthy(qpos)
+
+
+class _Zero:
+    def __init__(self):
+        self.ended = []
+
+    def begin(self, n):
+        pass
+
+    def act(self, states, goals):
+        assert goals.shape == states.shape  # the goal's whole observation; the layout names its task columns
+        return np.zeros((len(states), 5))
+
+    def end(self, rows):
+        self.ended += list(rows)
+
+
+def test_protocol_success_comes_from_the_environment(monkeypatch):
+    """A task whose goal is its start succeeds at once (the environment ends the episode there); a real task is not
+    done by standing still and runs to its limit."""
+    env = make_env("cube-single-v0")
+    trivial = dict(task_name="trivial", init_xyzs=np.array([[0.425, 0.1, 0.02]]),
+                   goal_xyzs=np.array([[0.425, 0.1, 0.02]]))
+    real = env.unwrapped.task_infos[0]
+    monkeypatch.setattr(protocol, "validation_tasks", lambda spec, env: [trivial, real, real, real, real])
+    tasks = FAMILY.tasks("cube-single-play-v0", episodes=1, task_ids=(6, 1))
+    agent = _Zero()
+    out = FAMILY.run(tasks, agent)
+    assert out.tasks[6].successes == 1 and out.tasks[6].steps[0] < 5
+    assert out.tasks[1].successes == 0 and out.tasks[1].steps == [200]
+    assert sorted(agent.ended) == [0, 1]
+    assert FAMILY.score(tasks, out)["success_rate"] == 0.5
+
+
+def test_validation_tasks_are_fixed_and_not_the_test_tasks():
+    for name in ("cube-double-play-v0", "puzzle-3x3-play-v0", "scene-play-v0"):
+        spec = parse_dataset_name(name)
+        env = make_env(spec.scene.env_id)
+        a, b = protocol.validation_tasks(spec, env), protocol.validation_tasks(spec, env)
+        assert [t["task_name"] for t in a] == [f"validation_task{i}" for i in range(6, 11)]
+        assert repr(a) == repr(b)
+        tests = {repr(t) for t in env.unwrapped.task_infos}
+        assert not tests & {repr(t) for t in a}
+    cubes = protocol.validation_tasks(parse_dataset_name("cube-double-play-v0"), make_env("cube-double-v0"))
+    for t in cubes:
+        assert np.linalg.norm(t["goal_xyzs"] - t["init_xyzs"], axis=1).min() >= protocol.MIN_MOVE
+        assert np.linalg.norm(t["init_xyzs"][0] - t["init_xyzs"][1]) >= protocol.MIN_APART
+
+
+def _error(capsys, argv) -> str:
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def test_bad_input(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    line = _error(capsys, ["data", "generate", "--maze", "cube-triple-play-v0", "--no-progress"])
+    assert line == ("error: unknown OGBench manipulation dataset 'cube-triple-play-v0'; expected "
+                    "{cube-single,cube-double,scene,puzzle-3x3,puzzle-4x4}-play-v0")
+    assert list(tmp_path.iterdir()) == []
+    other = tmp_path / "other.npz"  # a puzzle file given as cube-single
+    np.savez(other, observations=np.zeros((3, 55), np.float32), actions=np.zeros((3, 5), np.float32),
+             terminals=np.array([0, 0, 1], bool))
+    line = _error(capsys, ["data", "info", str(other), "--maze", "cube-single-play-v0"])
+    assert "is not a cube-single-play-v0 dataset: observations have shape [3, 55]" in line
+    keyless = tmp_path / "keyless.npz"
+    np.savez(keyless, observations=np.zeros((3, 28), np.float32))
+    line = _error(capsys, ["data", "info", str(keyless), "--maze", "cube-single-play-v0"])
+    assert "no actions, terminals array" in line
+    with pytest.raises(BridgeplanError, match="task ids must be in 1..5"):
+        FAMILY.tasks("cube-single-play-v0", task_ids=(11,))
+    with pytest.raises(BridgeplanError, match="no noise-free oracle"):
+        FAMILY.oracle("cube-single-play-v0")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keyless.npz", "other.npz"]
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    """A generated cube-single dataset of 3 episodes of 201 steps (and its validation file of one)."""
+    folder = tmp_path_factory.mktemp("manip-data")
+    generate_dataset("cube-single-play-v0", folder, seed=0, episodes=3, episode_steps=201, progress=False)
+    return folder / "cube-single-play-v0.npz"
+
+
+def test_inverse_dynamics_matches_the_data(tiny_data):
+    """The arm's inverse dynamics from one state to the next gives back the data's actions: correlated per axis of the
+    effector's motion, with the response the module states (least squares per axis within 25%)."""
+    from bridgeplan.envs.ogbench_manipulation import controllers
+
+    with np.load(tiny_data) as f:
+        obs, actions, ends = f["observations"], f["actions"], f["terminals"]
+    keep = ~ends[:-1]
+    states, following, done = obs[:-1][keep], obs[1:][keep], actions[:-1][keep]
+    predicted = controllers.inverse_dynamics(states, following)
+    for axis in range(4):  # x, y, z, yaw (the gripper's opening lags its command by several steps)
+        assert np.corrcoef(predicted[:, axis], done[:, axis])[0, 1] > 0.85
+        raw = predicted[:, axis] / controllers.RESPONSE[axis]  # unclipped where the prediction is inside [-1, 1]
+        inside = np.abs(predicted[:, axis]) < 1
+        fitted = (raw[inside] @ done[inside, axis]) / (raw[inside] @ raw[inside])
+        assert fitted == pytest.approx(controllers.RESPONSE[axis], rel=0.25)
+
+
+def test_goal_states_are_the_goal_columns():
+    layout = FAMILY.layout("cube-single-play-v0")
+    goal = np.arange(28.0)[None]
+    states = layout.goal_states(goal)
+    assert np.isnan(states).sum() == 25 and (states[0, [19, 20, 21]] == [19, 20, 21]).all()
+    with pytest.raises(BridgeplanError, match="goal is a 28-D goal observation"):
+        layout.goal_states(np.zeros((1, 3)))
+
+
+@pytest.mark.slow
+def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
+    """Through ``bridgeplan train`` and ``eval``: DDPM's cpu-small shape, 4 steps; state-only plans executed by the
+    arm's inverse dynamics, replanned every 8 steps, on one episode of test task 1 (an untrained planner does not
+    finish it), with the line in state space as its floor."""
+    run = tmp_path / "planner"
+    assert main(["train", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset", "cpu-small",
+                 "--steps", "4", "--batch-size", "4", "--dim", "8", "--checkpoint-every", "4", "--log-every", "2",
+                 "--run-dir", str(run), "--device", "cpu", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(run), "--episodes", "1", "--tasks", "1", "--nfe", "1", "--replan-every", "8",
+                 "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["env_id"] == "cube-single-v0" and row["horizon"] == 32 and row["stride"] == 4
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 25
+    assert row["floor_line"]["success_rate"] == 0.0
+    assert _error(capsys, ["eval", str(run), "--controller", "pursuit", "--no-floor", "--episodes", "1",
+                           "--no-progress"]).startswith("error: --controller pursuit steers a point")
+
+
+def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
+    """GCBC through its one trainer and the family's evaluation: a tiny generated cube-single dataset, 4 steps, then
+    ``bridgeplan eval RUN`` (and ``gcbc eval``) on a test task and a validation task, one episode each; the mistakes
+    are one error line each and write nothing."""
+    data = tiny_data
+    run = tmp_path / "run"
+    train = ["gcbc", "train", str(data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps", "4",
+             "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--log-every", "2",
+             "--device", "cpu", "--no-progress"]
+    assert main(train) == 0
+    capsys.readouterr()
+    assert main(["eval", str(run), "--episodes", "1", "--tasks", "1,6", "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["env_id"] == "cube-single-v0" and row["maze"] == "cube-single-play-v0" and row["step"] == 4
+    assert set(row["tasks"]) == {"1", "6"} and row["episodes"] == 2
+    assert row["tasks"]["1"]["steps"] == [200]  # an untrained policy does not end the episode early
+    assert row["tasks"]["6"]["task_name"] == "validation_task6"
+    saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0-tasks1_6.json").read_text())
+    assert saved == row
+    assert main(["gcbc", "eval", str(run), "--episodes", "1", "--no-progress"]) == 0
+    assert "task 2 task2_vertical1" in capsys.readouterr().out
+    # mistakes
+    before = sorted(p.name for p in (run / "eval").iterdir())
+    assert _error(capsys, ["eval", str(run), "--tasks", "11", "--no-progress"]).startswith(
+        "error: task ids must be in 1..5")
+    assert _error(capsys, ["eval", str(run), "--nfe", "4"]) == (
+        f"error: {run} is a GCBC run (a policy, no plans): --nfe do not apply")
+    assert _error(capsys, ["gcbc", "eval", str(run), "--maze", "puzzle-3x3-play-v0", "--no-progress"]) == (
+        f"error: {run} was trained on 28-D observations, puzzle-3x3-play-v0's are 55-D")
+    assert sorted(p.name for p in (run / "eval").iterdir()) == before
+    assert _error(capsys, ["gcbc", "train", str(data), "--run-dir", str(tmp_path / "r2"), "--maze",
+                           "cube-double-play-v0"]).startswith(f"error: {data} is not a cube-double-play-v0 dataset")
+    assert not (tmp_path / "r2").exists()
+
+
+def test_a_killed_generation_resumes_to_the_same_data(tmp_path, monkeypatch):
+    """Pieces of 2 episodes: a generation stopped after its first piece resumes from it (the random state it had
+    there) and makes the arrays an uninterrupted one makes; the pieces go once the dataset is written."""
+    from bridgeplan.envs.ogbench_manipulation import generate
+
+    monkeypatch.setattr(generate, "CHUNK_EPISODES", 2)
+    whole = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "a", seed=5, episodes=4, episode_steps=60,
+                                      progress=False)
+    assert not (tmp_path / "a" / "puzzle-3x3-play-v0.partial").exists()
+
+    class Killed(Exception):
+        pass
+
+    def kill_after_first_piece(self, *args, **kwargs):
+        saved(self, *args, **kwargs)
+        raise Killed
+
+    saved = generate.Pieces.save
+    monkeypatch.setattr(generate.Pieces, "save", kill_after_first_piece)
+    with pytest.raises(Killed):
+        generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+                                  progress=False)
+    assert json.loads((tmp_path / "b" / "puzzle-3x3-play-v0.partial" / "state.json").read_text())["episodes"] == 2
+    monkeypatch.setattr(generate.Pieces, "save", saved)
+    resumed = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+                                        progress=False)
+    assert resumed.record["content_sha256"] == whole.record["content_sha256"]
+    assert resumed.record["targets"] == whole.record["targets"]
