@@ -248,6 +248,25 @@ def test_a_study_of_your_own_environment(reach, tmp_path, monkeypatch):
     assert planner["success_rate"] >= 0.8 and graph["success_rate"] >= 0.9 and graph["method"] == "dataset graph"
 
 
+@pytest.mark.slow
+def test_ogbench_pointmaze_declared_as_your_own_environment(tmp_path, medium_navigate):
+    """OGBench's own environment and dataset through a spec file alone: the controller fitted on the data finds its
+    point's step (0.2 per unit of action), the graph's settings in the data's pace come out as OGBench's family's
+    (a jump of 0.5, reach 2.0, within a few hundredths), and its paths reach the goals of the environment's resets."""
+    (tmp_path / "ogb_env.py").write_text("import gymnasium as gym\nimport ogbench  # noqa: F401\n\n\n"
+                                         "def make():\n    return gym.make('pointmaze-medium-v0')\n")
+    spec = tmp_path / "ogb.toml"
+    spec.write_text(f'env = "ogb_env.py:make"\ndataset = "{medium_navigate}"\ngoal = [0, 1]\n')
+    body = family_of(str(spec)).body(str(spec))
+    np.testing.assert_allclose(body.track(np.zeros((1, 2)), np.array([[0.1, -0.05]])), [[0.5, -0.25]], atol=0.02)
+    out = tmp_path / "graph.json"
+    assert main(["graph", "--maze", str(spec), "--dataset", medium_navigate, "--episodes", "50", "--out", str(out),
+                 "--no-progress"]) == 0
+    r = json.loads(out.read_text())
+    assert r["graph"]["radius"] == pytest.approx(0.5, abs=0.02) and r["graph"]["reach"] == pytest.approx(2.0, abs=0.1)
+    assert r["episode_steps"] == 1000 and r["success_rate"] >= 0.9
+
+
 # --- bad input: one error line, exit 2, nothing written -------------------------------------------------------------
 
 

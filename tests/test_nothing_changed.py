@@ -61,17 +61,11 @@ def test_the_shipped_medium_planner_scores_as_committed(tmp_path, nfe, execution
 
 
 @pytest.mark.slow
-def test_the_dataset_graph_on_ogbench_medium_navigate_as_committed(tmp_path):
-    from bridgeplan.paths import datasets_root
-
+def test_the_dataset_graph_on_ogbench_medium_navigate_as_committed(tmp_path, medium_navigate):
     committed = json.loads(GRAPH_JSON.read_text())
     name = committed["config"]["dataset"]
-    dataset = datasets_root() / "ogbench" / f"{name}.npz"
-    if not dataset.exists():
-        assert main(["data", "generate", "--maze", name, "--out", str(tmp_path), "--no-progress"]) == 0
-        dataset = tmp_path / f"{name}.npz"
     out = tmp_path / "graph.json"
-    assert main(["graph", "--maze", name, "--dataset", str(dataset), "--seed", str(committed["seed"]), "--out",
+    assert main(["graph", "--maze", name, "--dataset", medium_navigate, "--seed", str(committed["seed"]), "--out",
                  str(out), "--no-progress"]) == 0
     r = json.loads(out.read_text())
     assert r["config"]["dataset_identity"] == committed["config"]["dataset_identity"]  # the same data, by sha256
