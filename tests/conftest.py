@@ -40,3 +40,18 @@ def tiny_runs(tiny_dataset, tmp_path_factory) -> dict:
     assert main(train_args(tiny_dataset, runs["bridge"], 3, "--checkpoint-every", "2", "--process", "bridge",
                            "--prior", "learned", "--prior-run", str(prior))) == 0
     return runs
+
+
+@pytest.fixture(scope="session")
+def medium_navigate(tmp_path_factory) -> str:
+    """OGBench's pointmaze-medium-navigate-v0 dataset by its recipe: at its default place if it is there
+    (``datasets/ogbench``, or under ``$BRIDGEPLAN_DATASETS``), else made here (a few minutes: slow tests only)."""
+    from bridgeplan.cli import main
+    from bridgeplan.paths import datasets_root
+
+    dataset = datasets_root() / "ogbench" / "pointmaze-medium-navigate-v0.npz"
+    if not dataset.exists():
+        folder = tmp_path_factory.mktemp("ogbench")
+        assert main(["data", "generate", "--maze", dataset.stem, "--out", str(folder), "--no-progress"]) == 0
+        dataset = folder / dataset.name
+    return str(dataset.resolve())

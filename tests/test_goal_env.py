@@ -248,6 +248,55 @@ def test_a_study_of_your_own_environment(reach, tmp_path, monkeypatch):
     assert planner["success_rate"] >= 0.8 and graph["success_rate"] >= 0.9 and graph["method"] == "dataset graph"
 
 
+def test_coarse_plans_without_a_wall_map():
+    """A hierarchy's diagnostics of its coarse plans in a family without a wall map: no wall shares, the arrival."""
+    from bridgeplan.hierarchy import COARSE_ARRIVAL, coarse_diagnostics
+    from bridgeplan.trajectory import KINEMATIC_POINT
+
+    dense = np.zeros((2, 5, 2))
+    dense[1, 3:, 0] = 2 * COARSE_ARRIVAL  # the second plan arrives at step 3 at a goal 2 x COARSE_ARRIVAL away
+    goals = np.array([[0.0, 0.0], [2 * COARSE_ARRIVAL, 0.0]])
+    assert coarse_diagnostics(dense, goals, None, KINEMATIC_POINT) == {"in_walls": None, "crossing_walls": None,
+                                                                       "arrival_step": 1.5}
+
+
+@pytest.mark.slow
+def test_a_hierarchy_on_your_own_environment(reach, tmp_path):
+    """A high level (flow from the line, every 3rd step) and a low level through its subgoals (flow from the coarse
+    line): the coarse plans' diagnostics without a wall map, the goals reached."""
+    common = ["--maze", str(reach), "--dataset", str(reach.parent / "reach.npz"), "--preset", "cpu-small",
+              "--diffusion-steps", "8", "--steps", "200", "--checkpoint-every", "200", "--batch-size", "64", "--lr",
+              "3e-3", "--device", "cpu", "--no-progress", "--process", "flow"]
+    assert main(["train", *common, "--prior", "line", "--horizon", "12", "--stride", "3", "--run-dir",
+                 str(tmp_path / "high")]) == 0
+    assert main(["train", *common, "--prior", "coarse", "--horizon", "16", "--stride", "1", "--subgoal-every", "3",
+                 "--run-dir", str(tmp_path / "low")]) == 0
+    out = tmp_path / "hierarchy.json"
+    assert main(["hierarchy", "eval", str(tmp_path / "high"), str(tmp_path / "low"), "--nfe-high", "4", "--nfe-low",
+                 "2", "--device", "cpu", "--no-progress", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["coarse_plans"]["in_walls"] is None and r["success_rate"] >= 0.8
+
+
+@pytest.mark.slow
+def test_ogbench_pointmaze_declared_as_your_own_environment(tmp_path, medium_navigate):
+    """OGBench's own environment and dataset through a spec file alone: the controller fitted on the data finds its
+    point's step (0.2 per unit of action), the graph's settings in the data's pace come out as OGBench's family's
+    (a jump of 0.5, reach 2.0, within a few hundredths), and its paths reach the goals of the environment's resets."""
+    (tmp_path / "ogb_env.py").write_text("import gymnasium as gym\nimport ogbench  # noqa: F401\n\n\n"
+                                         "def make():\n    return gym.make('pointmaze-medium-v0')\n")
+    spec = tmp_path / "ogb.toml"
+    spec.write_text(f'env = "ogb_env.py:make"\ndataset = "{medium_navigate}"\ngoal = [0, 1]\n')
+    body = family_of(str(spec)).body(str(spec))
+    np.testing.assert_allclose(body.track(np.zeros((1, 2)), np.array([[0.1, -0.05]])), [[0.5, -0.25]], atol=0.02)
+    out = tmp_path / "graph.json"
+    assert main(["graph", "--maze", str(spec), "--dataset", medium_navigate, "--episodes", "50", "--out", str(out),
+                 "--no-progress"]) == 0
+    r = json.loads(out.read_text())
+    assert r["graph"]["radius"] == pytest.approx(0.5, abs=0.02) and r["graph"]["reach"] == pytest.approx(2.0, abs=0.1)
+    assert r["episode_steps"] == 1000 and r["success_rate"] >= 0.9
+
+
 # --- bad input: one error line, exit 2, nothing written -------------------------------------------------------------
 
 

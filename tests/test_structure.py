@@ -87,3 +87,40 @@ def test_the_package_imports_without_circles():
     assert {"bridgeplan.cli", "bridgeplan.commands", "bridgeplan.studies.plan", "bridgeplan.runs"} <= set(graph)
     assert "bridgeplan.commands" in graph["bridgeplan.studies.jobs"]  # lazy imports are read too
     assert circles(graph) == []
+
+
+def environment_name_tests(package: Path = PACKAGE) -> list[str]:
+    """``module:line`` of every comparison, membership or ``startswith``/``endswith`` test against an environment
+    name's text (a Maze2D maze, an OGBench maze or prefix, a spec file's suffix) outside ``bridgeplan.envs``."""
+    from bridgeplan.envs.maze2d.grids import MAZE_NAMES
+    from bridgeplan.envs.ogbench_pointmaze.names import KINDS, MAZES
+
+    names = {*MAZE_NAMES, *MAZES, *KINDS, "pointmaze", "pointmaze-", ".toml"}
+    out = []
+    for path in sorted(package.rglob("*.py")):
+        parts = path.relative_to(package.parent).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        if module.startswith("bridgeplan.envs"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            texts = []
+            if isinstance(node, ast.Compare):
+                texts = [n for n in (node.left, *node.comparators) if isinstance(n, (ast.Constant, ast.Tuple,
+                                                                                     ast.List, ast.Set))]
+                texts = [c for n in texts for c in ([n] if isinstance(n, ast.Constant) else n.elts)]
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                  and node.func.attr in ("startswith", "endswith")):
+                texts = node.args
+            if any(isinstance(t, ast.Constant) and t.value in names for t in texts):
+                out.append((module, node.lineno))
+    return [f"{m}:{line}" for m, line in sorted(out)]
+
+
+def test_nothing_outside_envs_tests_an_environments_name(tmp_path):
+    """The rest of the package asks the family (``bridgeplan.envs.family_of``) instead."""
+    assert environment_name_tests() == []
+    (tmp_path / "bridgeplan").mkdir()
+    (tmp_path / "bridgeplan" / "evaluate.py").write_text('if maze == "umaze" or env.startswith("pointmaze-"):\n'
+                                                         '    pass\nif name in ("large", "x"):\n    pass\n')
+    assert environment_name_tests(tmp_path / "bridgeplan") == ["bridgeplan.evaluate:1", "bridgeplan.evaluate:1",
+                                                               "bridgeplan.evaluate:3"]
