@@ -286,8 +286,10 @@ def test_train_and_eval_through_the_cli(tiny_dataset, tmp_path, capsys, name):
         assert result["process"] == name and result["nfe"] == nfe and result["prior"] == "line"
         assert math.isfinite(result["score"]["minari"]["mean"])
     impossible = "3" if name == "shortcut" else "7"  # not a power of two; above the steps
+    written = sorted(run.rglob("*"))
     assert main(["eval", str(run), "--episodes", "2", "--device", "cpu", "--nfe", impossible]) == 2
     assert "nfe must be" in one_error_line(capsys)
+    assert sorted(run.rglob("*")) == written
 
 
 # --- DDPM distilled -------------------------------------------------------------------------------------
@@ -398,8 +400,10 @@ def test_distill_through_the_cli(distilled, tiny_runs, capsys):
         assert main(["eval", str(distilled), "--episodes", "4", "--device", "cpu", "--nfe", str(nfe), "--json"]) == 0
         result = json.loads(capsys.readouterr().out)
         assert result["process"] == "distill" and result["nfe"] == nfe and result["method"] == "DDPM distilled"
+    written = sorted(distilled.rglob("*"))
     assert main(["eval", str(distilled), "--episodes", "2", "--device", "cpu", "--nfe", "3"]) == 2
     assert "nfe must be 1 or 2" in one_error_line(capsys)
+    assert sorted(distilled.rglob("*")) == written
 
 
 @pytest.mark.parametrize("teacher, extra, message", [
