@@ -390,3 +390,24 @@ def test_demo_report_gives_each_series_lowest_and_highest_over_seeds_at_the_last
     assert "| bridge (line) N=16 NFE=15 | 60 to 67 | 0.50 |" in text
     assert "| the line alone (no network) | 30 |  |" in text
     assert "S = 0, 1, 2 (step 1500, 200 test episodes each" in text
+
+
+def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(tmp_path):
+    """Each method's rows by the file (GCBC, GCIQL) or folder (a planner's) they are in; the validation tasks (ids
+    above 5) apart from the test tasks; mean ± SE over training seeds; published numbers beside the test rows."""
+    mc = report("manip-cube-single")
+    assert "No rows yet" in mc.render(tmp_path)
+    folder = tmp_path / mc.FOLDER
+
+    def write(path, rate, tasks=(1, 2, 3, 4, 5)):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"success_rate": rate, "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
+
+    write(folder / "gcbc-s0-step20000-seed0.json", 0.04)
+    write(folder / "gcbc-s1-step20000-seed0.json", 0.08)
+    write(folder / "ddpm-s0" / "nfe16-replan8-seed0.json", 0.5)
+    write(folder / "ddpm-s0" / "nfe16-replan8-seed1000-tasks678910.json", 0.3, tasks=(6, 7, 8, 9, 10))
+    lines = mc.render(tmp_path).splitlines()
+    assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) |" in lines
+    assert "| ddpm | test | 1 | 50.0 | - |" in lines
+    assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines
