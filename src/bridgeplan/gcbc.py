@@ -1,4 +1,5 @@
-"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation).
+"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation);
+its training loop also trains GCIQL (``GCBCConfig.agent``, :mod:`bridgeplan.gciql`), whose actor is the same policy.
 
 What OGBench does (``impls/agents/gcbc.py``, ``impls/utils/datasets.py`` ``GCDataset``, ``impls/main.py``),
 re-implemented in PyTorch:
