@@ -185,15 +185,6 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
     return out
 
 
-class OracleAgent:
-    """Where the family's noise-free expert would act: not built (the play oracles plan toward one target at a time
-    in ``data_collection`` mode; a task's several targets at once need a sequencer of their own)."""
-
-    def __init__(self, name: str):
-        raise BridgeplanError(f"{name}: OGBench manipulation has no noise-free oracle on its evaluation tasks here "
-                              "(its play oracles serve data collection only)")
-
-
 def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) -> ProtocolResult:
     """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), at most
     :data:`BATCH` side by side."""
