@@ -8,16 +8,14 @@ has its own observation width (:attr:`~bridgeplan.envs.ogbench_manipulation.name
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_common import read_arrays
 from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-
-REQUIRED = ("observations", "actions", "terminals")
 
 
 @dataclass
@@ -50,19 +48,7 @@ def check_dataset(path: str | Path, name: str) -> DatasetCheck:
     not 5-D in [-1, 1], arrays of unequal length, a last episode without its terminal."""
     spec = parse_dataset_name(name)
     path = Path(path)
-    if not path.is_file():
-        raise BridgeplanError(f"no dataset file at {path}")
-    if not zipfile.is_zipfile(path):
-        raise BridgeplanError(f"{path} is not an npz file")
-    try:
-        with np.load(path) as f:
-            keys = list(f.keys())
-            missing = [k for k in REQUIRED if k not in keys]
-            if missing:
-                raise BridgeplanError(f"{path} is not an OGBench dataset: no {', '.join(missing)} array")
-            obs, actions, terminals = (np.asarray(f[k]) for k in REQUIRED)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise BridgeplanError(f"{path} is not a readable npz file ({type(e).__name__}: {e})") from None
+    keys, obs, actions, terminals = read_arrays(path)
     if obs.ndim != 2 or obs.shape[1] != spec.obs_dim:
         raise BridgeplanError(f"{path} is not a {spec.name} dataset: observations have shape {list(obs.shape)}, "
                               f"{spec.name}'s are [N, {spec.obs_dim}]")

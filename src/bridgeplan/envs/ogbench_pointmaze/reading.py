@@ -10,18 +10,16 @@ dataset of another maze (or of another environment: antmaze observations are 29-
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_common import read_arrays
 from bridgeplan.envs.ogbench_pointmaze.maze import geometry
 from bridgeplan.envs.ogbench_pointmaze.names import MAZES, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import KINEMATIC_POINT
-
-REQUIRED = ("observations", "actions", "terminals")
 
 
 def resolve_maze(maze_or_name: str) -> str:
@@ -66,21 +64,7 @@ def check_dataset(path: str | Path, maze: str) -> DatasetCheck:
     """
     maze = check_maze(resolve_maze(maze))
     path = Path(path)
-    if path.is_dir():
-        raise BridgeplanError(f"{path} is a folder, not an npz file (OGBench's datasets are single .npz files)")
-    if not path.is_file():
-        raise BridgeplanError(f"no dataset file at {path}")
-    if not zipfile.is_zipfile(path):
-        raise BridgeplanError(f"{path} is not an npz file")
-    try:
-        with np.load(path) as f:
-            keys = list(f.keys())
-            missing = [k for k in REQUIRED if k not in keys]
-            if missing:
-                raise BridgeplanError(f"{path} is not an OGBench dataset: no {', '.join(missing)} array")
-            obs, actions, terminals = (np.asarray(f[k]) for k in REQUIRED)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise BridgeplanError(f"{path} is not a readable npz file ({type(e).__name__}: {e})") from None
+    keys, obs, actions, terminals = read_arrays(path)
     if obs.ndim != 2 or obs.shape[1] != 2:
         raise BridgeplanError(f"{path} is not a pointmaze dataset: observations have shape {obs.shape}, "
                               "pointmaze's are [N, 2] (x, y)")
