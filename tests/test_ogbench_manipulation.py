@@ -188,6 +188,20 @@ def test_inverse_dynamics_matches_the_data(tiny_data):
         assert fitted == pytest.approx(controllers.RESPONSE[axis], rel=0.25)
 
 
+def test_priors_in_the_plane_are_refused():
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import WarmPrior, make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    normalizer = Normalizer.fit(np.random.default_rng(0).normal(size=(50, layout.transition_dim)))
+    for name in ("learned", "coarse", "warm"):
+        with pytest.raises(BridgeplanError, match=f"prior {name} is drawn from positions in the plane"):
+            make_prior(name, normalizer, layout)
+    with pytest.raises(BridgeplanError, match="prior warm"):
+        WarmPrior(normalizer, layout)
+    assert make_prior("line", normalizer, layout).name == "line"
+
+
 def test_goal_states_are_the_goal_columns():
     layout = FAMILY.layout("cube-single-play-v0")
     goal = np.arange(28.0)[None]
