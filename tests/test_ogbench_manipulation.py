@@ -70,6 +70,14 @@ def test_the_recipe_at_a_tiny_size(tmp_path):
     assert record["identity"]["noise"] == 0.1 and record["identity"]["noise_smoothing"] == 0.5
     info, text = FAMILY.dataset_info(str(made.train_path), "cube-single-play-v0")
     assert info["episodes"] == 4 and info["sha256"] == record["files"]["cube-single-play-v0.npz"]
+    with np.load(made.val_path) as f:  # a file changed since: not the dataset its record names, nor the cache
+        changed = {k: f[k] for k in f.files}
+    changed["actions"] = changed["actions"] * 0.5
+    np.savez(made.val_path, **changed)
+    with pytest.raises(BridgeplanError, match="is not the file its identity record cube-single-play-v0.json names"):
+        FAMILY.dataset_info(str(made.val_path), "cube-single-play-v0")
+    with pytest.raises(BridgeplanError, match="not this dataset"):
+        generate_dataset("cube-single-play-v0", tmp_path, seed=3, episodes=4, episode_steps=201, progress=False)
 
 
 def test_scene_health_check():
