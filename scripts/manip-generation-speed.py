@@ -13,7 +13,7 @@ from bridgeplan.envs.ogbench_manipulation.generate import measure_overhead  # no
 from bridgeplan.files import atomic_write_text, code_version  # noqa: E402
 
 out, names = sys.argv[1], sys.argv[2:] or ["cube-single-play-v0"]
-rows = [measure_overhead(n, episodes=3, episode_steps=1001) for n in names]
+rows = [measure_overhead(n, episodes=2, episode_steps=1001, rounds=3) for n in names]
 atomic_write_text(__import__("pathlib").Path(out), json.dumps(
     {"code_version": code_version(), "machine": platform.machine(), "cpus": os.cpu_count(),
      "load_average_1min": os.getloadavg()[0], "rows": rows}, indent=2) + "\n")

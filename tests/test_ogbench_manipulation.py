@@ -70,6 +70,14 @@ def test_the_recipe_at_a_tiny_size(tmp_path):
     assert record["identity"]["noise"] == 0.1 and record["identity"]["noise_smoothing"] == 0.5
     info, text = FAMILY.dataset_info(str(made.train_path), "cube-single-play-v0")
     assert info["episodes"] == 4 and info["sha256"] == record["files"]["cube-single-play-v0.npz"]
+    with np.load(made.val_path) as f:  # a file changed since: not the dataset its record names, nor the cache
+        changed = {k: f[k] for k in f.files}
+    changed["actions"] = changed["actions"] * 0.5
+    np.savez(made.val_path, **changed)
+    with pytest.raises(BridgeplanError, match="is not the file its identity record cube-single-play-v0.json names"):
+        FAMILY.dataset_info(str(made.val_path), "cube-single-play-v0")
+    with pytest.raises(BridgeplanError, match="not this dataset"):
+        generate_dataset("cube-single-play-v0", tmp_path, seed=3, episodes=4, episode_steps=201, progress=False)
 
 
 def test_scene_health_check():
@@ -188,6 +196,20 @@ def test_inverse_dynamics_matches_the_data(tiny_data):
         assert fitted == pytest.approx(controllers.RESPONSE[axis], rel=0.25)
 
 
+def test_priors_in_the_plane_are_refused():
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import WarmPrior, make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    normalizer = Normalizer.fit(np.random.default_rng(0).normal(size=(50, layout.transition_dim)))
+    for name in ("learned", "coarse", "warm"):
+        with pytest.raises(BridgeplanError, match=f"prior {name} is drawn from positions in the plane"):
+            make_prior(name, normalizer, layout)
+    with pytest.raises(BridgeplanError, match="prior warm"):
+        WarmPrior(normalizer, layout)
+    assert make_prior("line", normalizer, layout).name == "line"
+
+
 def test_goal_states_are_the_goal_columns():
     layout = FAMILY.layout("cube-single-play-v0")
     goal = np.arange(28.0)[None]
@@ -215,6 +237,11 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
     assert row["floor_line"]["success_rate"] == 0.0
     assert _error(capsys, ["eval", str(run), "--controller", "pursuit", "--no-floor", "--episodes", "1",
                            "--no-progress"]).startswith("error: --controller pursuit steers a point")
+    # Diffuser's own form: the plans' actions executed, replanned every 4 steps
+    assert main(["eval", str(run), "--episodes", "1", "--tasks", "1", "--nfe", "1", "--replan-every", "4",
+                 "--controller", "actions", "--no-floor", "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
 
 
 def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
@@ -280,3 +307,23 @@ def test_a_killed_generation_resumes_to_the_same_data(tmp_path, monkeypatch):
                                         progress=False)
     assert resumed.record["content_sha256"] == whole.record["content_sha256"]
     assert resumed.record["targets"] == whole.record["targets"]
+
+
+def test_the_actions_controller_executes_planned_actions():
+    """Diffuser's form: the plan's own action at the step it is at; from its last state on, tracking that state;
+    decisions of states alone refused."""
+    from bridgeplan.envs.controllers import Follower
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    follower = Follower(2, FAMILY.body("cube-single-play-v0"), "actions")
+    plans = np.zeros((2, 3, layout.transition_dim))
+    plans[:, :, :5] = np.arange(3)[None, :, None] * 0.1 + np.array([[[0.0]], [[0.5]]])  # action = 0.1 t (+ 0.5)
+    states = np.zeros((2, 28))
+    np.testing.assert_allclose(follower.actions(states, plans, np.array([1, 0])), [[0.1] * 5, [0.5] * 5])
+    plans[1, 2, 5 + 12] = 0.01  # the last planned state's effector 1 mm further in x: tracked, not its action
+    done = follower.actions(states, plans, np.array([0, 2]))
+    tracked = FAMILY.body("cube-single-play-v0").track(states[1:], layout.states(plans[1:, 2]))
+    np.testing.assert_allclose(done[1], tracked[0])
+    assert done[1, 0] != 0.5 + 0.2
+    with pytest.raises(BridgeplanError, match="plan states alone"):
+        follower.actions(states, layout.states(plans), np.array([0, 0]))

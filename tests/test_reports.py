@@ -420,3 +420,24 @@ def test_the_onestep_report_judges_each_one_step_method_against_ddpms_bar_chosen
     pursued = sections[2].splitlines()
     assert "| DDPM's best | 16 | 90.1 ± 0.1 |  |" in pursued
     assert "| mean flow (line) | 1 | 70.1 ± 0.1 | no (-20.0 ± 0.0) |" in pursued
+
+
+def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(tmp_path):
+    """Each method's rows by the file (GCBC, GCIQL) or folder (a planner's) they are in; the validation tasks (ids
+    above 5) apart from the test tasks; mean ± SE over training seeds; published numbers beside the test rows."""
+    mc = report("manip-cube-single")
+    assert "No rows yet" in mc.render(tmp_path)
+    folder = tmp_path / mc.FOLDER
+
+    def write(path, rate, tasks=(1, 2, 3, 4, 5)):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"success_rate": rate, "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
+
+    write(folder / "gcbc-s0-step20000-seed0.json", 0.04)
+    write(folder / "gcbc-s1-step20000-seed0.json", 0.08)
+    write(folder / "ddpm-s0" / "nfe16-replan8-seed0.json", 0.5)
+    write(folder / "ddpm-s0" / "nfe16-replan8-seed1000-tasks678910.json", 0.3, tasks=(6, 7, 8, 9, 10))
+    lines = mc.render(tmp_path).splitlines()
+    assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) |" in lines
+    assert "| ddpm | test | 1 | 50.0 | - |" in lines
+    assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines

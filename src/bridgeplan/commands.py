@@ -402,8 +402,9 @@ def _execution_flags(p, controller: str, plans: bool = True) -> None:
                             "end: its episodes end at the goal) when replanning or with candidates, else end")
     g = p.add_argument_group("controller (how a plan is executed)")
     g.add_argument("--controller", default=controller,
-                   help=f"track (Diffuser's: the planned states in time) or pursuit (the plan's path at the expert's "
-                        f"pace: toward the first planned position --lookahead away); default {controller}")
+                   help=f"track (Diffuser's: the planned states in time), pursuit (the plan's path at the expert's "
+                        f"pace: toward the first planned position --lookahead away) or actions (a planner's own "
+                        f"planned actions, Diffuser's joint state-action plans); default {controller}")
     g.add_argument("--lookahead", type=float, default=None, metavar="R",
                    help="pursuit: distance to the planned position driven toward (default: the family's, Maze2D 1.0, "
                         "OGBench 2.0)")

@@ -1,4 +1,5 @@
-"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation).
+"""Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation);
+its training loop also trains GCIQL (``GCBCConfig.agent``, :mod:`bridgeplan.gciql`), whose actor is the same policy.
 
 What OGBench does (``impls/agents/gcbc.py``, ``impls/utils/datasets.py`` ``GCDataset``, ``impls/main.py``),
 re-implemented in PyTorch:
@@ -27,6 +28,7 @@ evaluation loads), ``RUN/metrics.jsonl`` one line per ``log_every`` steps (loss,
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -53,6 +55,7 @@ from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
 from bridgeplan.train import make_optimizer
 
 KIND = "gcbc"
+AGENTS = ("gcbc", "gciql")
 METRICS_NAME = "metrics.jsonl"
 # Fields a resumed run may change: they do not change what is trained, only how long and where. The dataset's
 # path may change too (a moved file): its content is checked instead, by fingerprint.
@@ -100,9 +103,36 @@ class GCBCConfig:
     device: str = "auto"
     threads: int = 0
     """Torch CPU threads (0: one on a CPU device, see :func:`bridgeplan.device.configure_threads`)."""
+    agent: str = "gcbc"
+    """What is trained: ``gcbc`` (the policy alone) or ``gciql`` (:mod:`bridgeplan.gciql`: a value, critics and the
+    policy as their actor; the fields below are its, defaults OGBench's ``impls/agents/gciql.py``)."""
+    alpha: float = 0.3
+    """GCIQL: the behaviour-cloning weight of the DDPG+BC actor (OGBench 0.3; hyperparameters.sh: 1.0 on every
+    manipulation dataset, 0.003 on pointmaze)."""
+    expectile: float = 0.9
+    """GCIQL: the value's expectile."""
+    tau: float = 0.005
+    """GCIQL: the slow critics' Polyak rate."""
+    value_p_curgoal: float = 0.2
+    """GCIQL: probability that the value's goal is the current state (``value_p_curgoal``)."""
+    value_p_trajgoal: float = 0.5
+    """GCIQL: ... a future state of the same trajectory, at a Geometric(1 - discount) offset (``value_geom_sample``)."""
+    value_p_randomgoal: float = 0.3
+    """GCIQL: ... a random state of the dataset."""
+    layer_norm: bool = True
+    """GCIQL: layer normalization in the value and the critics."""
 
     def __post_init__(self):
         cfg.check_optimization(self)
+        if self.agent not in AGENTS:
+            raise BridgeplanError(f"unknown agent {self.agent!r}: choose from {', '.join(AGENTS)}")
+        value = (self.value_p_curgoal, self.value_p_trajgoal, self.value_p_randomgoal)
+        if min(value) < 0 or not math.isclose(sum(value), 1.0):
+            raise BridgeplanError(f"value goal probabilities (current, trajectory, random) must be >= 0 and sum to 1, "
+                                  f"got {value}")
+        if not (0.5 <= self.expectile < 1 and 0 < self.tau <= 1 and self.alpha >= 0 and 0 < self.discount < 1):
+            raise BridgeplanError(f"GCIQL needs expectile in [0.5, 1), tau in (0, 1], alpha >= 0 and discount in "
+                                  f"(0, 1), got {self.expectile}, {self.tau}, {self.alpha}, {self.discount}")
         if not self.hidden_dims or min(self.hidden_dims) <= 0:
             raise BridgeplanError(f"hidden_dims must be positive widths, got {self.hidden_dims}")
         probs = (self.p_curgoal, self.p_trajgoal, self.p_randomgoal)
@@ -202,6 +232,65 @@ def _load_compact(path: Path) -> dict[str, np.ndarray]:
     return data
 
 
+class _GCBCStep:
+    """GCBC's step: the data's action's NLL under the policy, goals as ``GCBCConfig`` draws them."""
+
+    columns = ("loss", "mse")
+
+    def __init__(self, config: GCBCConfig, data: GoalDataset, device: torch.device):
+        self.config, self.data = config, data
+        self.net = self.policy = build_policy(config, data.obs_dim, data.action_dim).to(device)
+
+    def trained(self) -> torch.nn.Module:
+        return self.net
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor, rng: np.random.Generator):
+        idx, goal_idx = self.data.sample(self.config.batch_size, rng)
+        idx_t, goal_t = torch.from_numpy(idx).to(obs.device), torch.from_numpy(goal_idx).to(obs.device)
+        mean, a = self.net(obs[idx_t], obs[goal_t]), actions[idx_t]
+        loss = unit_gaussian_nll(mean, a).mean()
+        return loss, torch.stack([loss.detach(), (mean - a).square().mean().detach()])  # OGBench's "mse" too
+
+    def after_step(self) -> None:
+        pass
+
+
+class _GCIQLStep:
+    """GCIQL's step (:class:`bridgeplan.gciql.GCIQL`): the value's goals and the actor's drawn apart, the state after
+    each one (its index + 1: a valid state is never a trajectory's last), rewards from the goals' indices."""
+
+    columns = ("loss", "value_loss", "critic_loss", "actor_loss", "mse")
+
+    def __init__(self, config: GCBCConfig, data: GoalDataset, device: torch.device):
+        from bridgeplan.gciql import GCIQL
+
+        self.config, self.data = config, data
+        self.value_goals = copy.copy(data)
+        self.value_goals.p_curgoal, self.value_goals.p_trajgoal, self.value_goals.p_randomgoal = (
+            config.value_p_curgoal, config.value_p_trajgoal, config.value_p_randomgoal)
+        self.value_goals.geom_sample = True
+        self.net = GCIQL(data.obs_dim, data.action_dim, config.hidden_dims, config.layer_norm).to(device)
+        self.policy = self.net.actor
+
+    def trained(self) -> torch.nn.Module:
+        """What the optimizer moves (the slow critics follow by ``update_target``)."""
+        return torch.nn.ModuleList([self.net.actor, self.net.value, self.net.critic])
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor, rng: np.random.Generator):
+        c = self.config
+        idx = self.data.random_idxs(c.batch_size, rng)
+        value_goal = self.value_goals.sample_goals(idx, rng)
+        actor_goal = self.data.sample_goals(idx, rng)
+        reached = torch.from_numpy((idx == value_goal).astype(np.float32)).to(obs.device)
+        i, vg, ag = (torch.from_numpy(v).to(obs.device) for v in (idx, value_goal, actor_goal))
+        loss, logged = self.net.loss(obs[i], obs[i + 1], actions[i], obs[vg], obs[ag], reached - 1.0, 1.0 - reached,
+                                     c.discount, c.expectile, c.alpha)
+        return loss, torch.cat([loss.detach()[None], logged])
+
+    def after_step(self) -> None:
+        self.net.update_target(self.config.tau)
+
+
 def build_policy(config: GCBCConfig, obs_dim: int, action_dim: int) -> GoalPolicy:
     """The policy network for ``config`` (goals are full observations, as in OGBench's state-based tasks)."""
     return GoalPolicy(obs_dim, obs_dim, action_dim, config.hidden_dims)
@@ -278,23 +367,24 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
     config_dict = cfg.to_dict(config)
     fingerprint = data.fingerprint()
     torch.manual_seed(config.seed)  # the initial weights
-    net = build_policy(config, data.obs_dim, data.action_dim).to(device)
-    optimizer = make_optimizer(net, config.lr)
+    learner = (_GCIQLStep if config.agent == "gciql" else _GCBCStep)(config, data, device)
+    net = learner.net
+    optimizer = make_optimizer(learner.trained(), config.lr)
     rng = np.random.default_rng(config.seed)
     step, elapsed = 0, 0.0
-    # NLL and MSE summed since the log line at step log_from (saved: a resumed run writes the same lines)
-    sums, log_from = torch.zeros(2, device=device), 0
+    # the logged columns summed since the log line at step log_from (saved: a resumed run writes the same lines)
+    sums, log_from = torch.zeros(len(learner.columns), device=device), 0
     if resume:
         state = load_checkpoint(ckpt)
         if state["kind"] != KIND:
             raise BridgeplanError(f"{ckpt} is a {state['kind']} checkpoint, not a GCBC one")
-        if _comparable(state["config"]) != _comparable(config_dict):
-            diff = sorted(k for k in _comparable(config_dict)
-                          if _comparable(state["config"]).get(k) != _comparable(config_dict)[k])
+        saved = _comparable(cfg.to_dict(cfg.from_dict(GCBCConfig, state["config"])))  # fields added since: defaults
+        if saved != _comparable(config_dict):
+            diff = sorted(k for k in _comparable(config_dict) if saved.get(k) != _comparable(config_dict)[k])
             raise BridgeplanError(f"{ckpt} was trained with a different config ({', '.join(diff)} differ)")
         if state["dataset"] != fingerprint:
             raise BridgeplanError(f"{ckpt} was trained on different data than {config.dataset}")
-        net.load_state_dict(state["policy"])
+        net.load_state_dict(state.get("agent", state["policy"]))
         optimizer.load_state_dict(state["optimizer"])
         rng.bit_generator.state = state["rng"]
         step, elapsed = state["step"], state["elapsed_seconds"]
@@ -309,17 +399,18 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
     def snapshot_state() -> dict:
         return {"kind": KIND, "config": config_dict, "dataset": fingerprint, "obs_dim": data.obs_dim,
                 "action_dim": data.action_dim, "step": step, "elapsed_seconds": elapsed,
-                "code_version": code_version(), "policy": net.state_dict()}
+                "code_version": code_version(), "policy": learner.policy.state_dict()}
 
     def save() -> None:
         # the snapshot first: killed between the writes, the resumed run rewrites it (identically)
         save_checkpoint(snapshot_path(run_dir, step), snapshot_state())
-        save_checkpoint(ckpt, snapshot_state() | {"optimizer": optimizer.state_dict(),
+        agent = {"agent": net.state_dict()} if net is not learner.policy else {}  # the critics too, to resume
+        save_checkpoint(ckpt, snapshot_state() | agent | {"optimizer": optimizer.state_dict(),
                                                   "rng": rng.bit_generator.state, "log_sums": sums.cpu(),
                                                   "log_from": log_from})
 
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc="train gcbc", unit="step",
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {config.agent}", unit="step",
                dynamic_ncols=True)
     nonfinite = torch.zeros((), dtype=torch.bool, device=device)  # read only at logs and saves (a GPU sync)
     last_saved, t_start = step, time.perf_counter()
@@ -327,19 +418,17 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
     net.train()
     try:
         while step < config.steps and elapsed < budget:
-            idx, goal_idx = data.sample(config.batch_size, rng)
-            idx_t, goal_t = torch.from_numpy(idx).to(device), torch.from_numpy(goal_idx).to(device)
-            mean, a = net(obs[idx_t], obs[goal_t]), actions[idx_t]
-            loss = unit_gaussian_nll(mean, a).mean()
+            loss, logged = learner.loss(obs, actions, rng)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
+            learner.after_step()
             step += 1
             elapsed = elapsed0 + time.perf_counter() - t_start
             bar.update(1)
             with torch.no_grad():
                 nonfinite |= ~torch.isfinite(loss)
-                sums += torch.stack([loss.detach(), (mean - a).square().mean()])  # OGBench's "mse" too
+                sums += logged
             log_due, save_due = step % config.log_every == 0, step % config.checkpoint_every == 0
             if (log_due or save_due) and bool(nonfinite):
                 raise BridgeplanError(f"loss became non-finite before step {step}; stopped"
@@ -347,12 +436,11 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
             if log_due:
                 now = time.perf_counter()
                 rate = (step - step_rate) / max(now - t_log, 1e-9)
-                nll, mse = (sums / (step - log_from)).tolist()
+                means = dict(zip(learner.columns, (sums / (step - log_from)).tolist()))
                 t_log, step_rate, log_from = now, step, step
                 sums.zero_()
-                bar.set_postfix(loss=f"{nll:.4f}", mse=f"{mse:.4f}", steps_per_s=f"{rate:.1f}")
-                metrics.write({"step": step, "loss": nll, "mse": mse, "steps_per_s": rate,
-                               "elapsed_seconds": elapsed})
+                bar.set_postfix(loss=f"{means['loss']:.4f}", mse=f"{means['mse']:.4f}", steps_per_s=f"{rate:.1f}")
+                metrics.write({"step": step, **means, "steps_per_s": rate, "elapsed_seconds": elapsed})
             if save_due:
                 save()
                 last_saved = step

@@ -21,9 +21,12 @@ def add_gcbc_commands(sub) -> None:
                                   "v0, or a bare pointmaze maze; checked; evaluation's default)")
     for name, kind in (("steps", int), ("minutes", float), ("batch-size", int), ("lr", float), ("seed", int),
                        ("p-curgoal", float), ("p-trajgoal", float), ("p-randomgoal", float), ("discount", float),
-                       ("checkpoint-every", int), ("log-every", int), ("threads", int)):
+                       ("checkpoint-every", int), ("log-every", int), ("threads", int), ("alpha", float),
+                       ("expectile", float), ("tau", float)):
         t.add_argument(f"--{name}", type=kind)
     t.add_argument("--hidden-dims", help="comma-separated widths (default 512,512,512)")
+    t.add_argument("--agent", help="gcbc (default) or gciql (a value and critics, the policy their actor; --alpha, "
+                                   "--expectile, --tau are its)")
     t.add_argument("--geom-sample", action="store_true", help="future goals at geometric offsets")
     t.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
     t.add_argument("--resume", action="store_true")
@@ -50,7 +53,8 @@ def _cmd_gcbc_train(args) -> int:
 
     given = {f: getattr(args, f) for f in ("maze", "steps", "minutes", "batch_size", "lr", "seed", "p_curgoal",
                                            "p_trajgoal", "p_randomgoal", "discount", "checkpoint_every",
-                                           "log_every", "threads", "device")}
+                                           "log_every", "threads", "device", "agent", "alpha", "expectile",
+                                           "tau")}
     given = {k: v for k, v in given.items() if v is not None}
     if args.hidden_dims:
         try:

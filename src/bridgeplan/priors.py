@@ -209,6 +209,7 @@ class WarmPrior:
     name = "warm"
 
     def __init__(self, normalizer: Normalizer, layout: Layout, previous=None, elapsed=None, stride: int = 1):
+        check_in_the_plane(self.name, layout)
         self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
         self.previous = None if previous is None else torch.as_tensor(previous, dtype=torch.float64)
         self.elapsed = None if elapsed is None else torch.as_tensor(elapsed, dtype=torch.int64).reshape(-1)
@@ -286,4 +287,17 @@ def make_prior(name: str, normalizer: Normalizer, layout: Layout, net: torch.nn.
     trained ``net``."""
     if name not in PRIORS:
         raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
+    if name in IN_THE_PLANE:
+        check_in_the_plane(name, layout)
     return PRIORS[name](normalizer, layout, net, stride)
+
+
+IN_THE_PLANE = frozenset({"learned", "coarse", "warm"})
+"""Priors drawn from positions in the plane (a goal's position, a line between positions)."""
+
+
+def check_in_the_plane(name: str, layout: Layout) -> None:
+    """Refuse prior ``name`` of :data:`IN_THE_PLANE` for a layout whose goals are columns of their own."""
+    if layout.goal:
+        raise BridgeplanError(f"prior {name} is drawn from positions in the plane; {layout.name}'s goals are columns "
+                              "of their own (plan from gaussian or line)")

@@ -311,7 +311,7 @@ class PlanSource:
                 self.deadline = t + arrival_index(chosen, goals, planner.layout, self.radius)
         self.previous[episodes] = chosen
         self.previous_at[episodes] = t
-        return planner.layout.states(chosen)
+        return chosen if ex.controller == "actions" else planner.layout.states(chosen)  # the actions: Diffuser's
 
 
 DecisionSource = Callable[[np.ndarray, np.ndarray, np.ndarray, int], np.ndarray]

@@ -1,6 +1,7 @@
 """Reading a dataset in OGBench's npz format: one row per step (``observations``, ``actions``), ``terminals`` 1 at
 each episode's last row; no metadata. Which environment the rows are of is the family's to check
-(:mod:`bridgeplan.envs.ogbench_pointmaze.reading`, :mod:`bridgeplan.envs.goal_env`)."""
+(:mod:`bridgeplan.envs.ogbench_pointmaze.reading`, :mod:`bridgeplan.envs.ogbench_manipulation.reading`,
+:mod:`bridgeplan.envs.goal_env`)."""
 
 from __future__ import annotations
 
@@ -18,8 +19,10 @@ def read_npz(path: str | Path, optional: tuple[str, ...] = ()) -> tuple[dict[str
     """The arrays of :data:`REQUIRED` (and those of ``optional`` the file has), and the names of all its arrays.
 
     One-line BridgeplanErrors: a missing or unreadable file, missing arrays, arrays of unequal length, no rows, a last
-    episode not closed by a terminal."""
+    episode not closed by a terminal; a folder."""
     path = Path(path)
+    if path.is_dir():
+        raise BridgeplanError(f"{path} is a folder, not an npz file (OGBench's datasets are single .npz files)")
     if not path.is_file():
         raise BridgeplanError(f"no dataset file at {path}")
     if not zipfile.is_zipfile(path):

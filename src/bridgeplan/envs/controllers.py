@@ -1,4 +1,5 @@
-"""The controllers that execute plans, one set for every family: ``track`` and ``pursuit`` (:data:`CONTROLLERS`).
+"""The controllers that execute plans, one set for every family: ``track``, ``pursuit`` and ``actions``
+(:data:`CONTROLLERS`).
 
 A plan is a batch of planned states ``[N, S, obs_dim]``, one per environment step (densified from its stride); its
 actions are ignored. What differs between families is the body being steered, a :class:`Body`: how it reaches a
@@ -13,6 +14,9 @@ planned state in one step, and how it drives toward a waypoint. The rules are th
   whose pursuit ``keeps_schedule`` also never takes a waypoint behind the tracking target's index: a plan that cuts
   a wall corner puts a waypoint behind the wall, and a waypoint chosen by distance alone would never change
   (OGBench's point, measured: every episode of a task stuck so).
+- ``actions`` (Diffuser's own form, joint state-action plans): the plan's own action at the step it is at, so a
+  planner's decisions carry their actions (``[N, S, transition_dim]``); from the plan's last state on, ``track``
+  holds that state. Decisions of states alone (the dataset graph, a hierarchy's) cannot be executed so.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import Layout
 
-CONTROLLERS = ("track", "pursuit")
+CONTROLLERS = ("track", "pursuit", "actions")
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,8 @@ class Follower:
 
     def actions(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
         states, layout = np.asarray(states, np.float64), self.body.layout
+        if self.kind == "actions":
+            return self._planned_actions(states, plans, np.asarray(age))
         if self.kind == "track":
             return self.body.track(states, tracking_targets(plans, age, layout))
         planned = layout.state_positions(np.asarray(plans, np.float64))
@@ -98,8 +104,25 @@ class Follower:
         self.passed = pursuit_waypoints(planned, layout.state_positions(states), passed, self.lookahead)
         return self.body.pursue(states, planned[np.arange(len(states)), self.passed])
 
+    def _planned_actions(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
+        layout = self.body.layout
+        plans = np.asarray(plans, np.float64)
+        if plans.shape[-1] != layout.transition_dim:
+            raise BridgeplanError("--controller actions executes a planner's own planned actions; these decisions plan "
+                                  "states alone (use track or pursuit)")
+        last = plans.shape[1] - 1
+        rows = np.arange(len(plans))
+        actions = layout.actions(plans)[rows, np.minimum(age, last)].copy()
+        done = age >= last  # the last state's action leads nowhere in the plan: hold that state
+        if done.any():
+            actions[done] = self.body.track(states[done], tracking_targets(layout.states(plans[done]), age[done],
+                                                                           layout))
+        return actions
+
     def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
         layout = self.body.layout
+        if self.kind == "actions":  # joint plans: their states
+            plans = layout.states(np.asarray(plans, np.float64))
         positions = layout.state_positions(np.asarray(states, np.float64))
         planned = layout.state_positions(np.asarray(plans, np.float64))
         if self.kind == "track":

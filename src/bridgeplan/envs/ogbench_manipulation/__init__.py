@@ -161,9 +161,10 @@ class OGBenchManipulation(Family):
         return {"success_rate": outcome.success_rate, "tasks": {i: t.success_rate for i, t in outcome.tasks.items()}}
 
     def oracle(self, env: str):
-        from bridgeplan.envs.ogbench_manipulation.protocol import OracleAgent
-
-        return OracleAgent(parse_dataset_name(env).name)
+        """Not built: the play oracles plan toward one target at a time in ``data_collection`` mode; a task's several
+        targets at once would need a sequencer of their own."""
+        raise BridgeplanError(f"{parse_dataset_name(env).name}: OGBench manipulation has no noise-free oracle on its "
+                              "evaluation tasks here (its play oracles serve data collection only)")
 
 
 FAMILY = OGBenchManipulation()

@@ -365,8 +365,11 @@ def _step_alone(name: str, episodes: int, episode_steps: int, seed: int) -> None
 
 def measure_overhead(name: str, episodes: int, episode_steps: int, seed: int = 0, rounds: int = 2) -> dict:
     """Steps per second of the recipe (:func:`generate_episodes`) and of the environment and oracles stepping alone
-    (each making its environment, as the recipe does), timed in one process, alternated over ``rounds`` so that a
-    change in the machine's load falls on both; their ratio is the recipe's overhead."""
+    (each making its environment, as the recipe does), timed in one process after an untimed short run of each,
+    alternated over ``rounds`` so that a change in the machine's load falls on both; their ratio is the recipe's
+    overhead."""
+    _step_alone(name, 1, 20, seed)  # untimed: the first environment built in a process pays one-time costs
+    generate_episodes(name, 1, 20, seed)
     alone = recipe = 0.0
     for _ in range(rounds):
         t0 = time.perf_counter()

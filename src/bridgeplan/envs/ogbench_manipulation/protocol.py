@@ -22,15 +22,15 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from bridgeplan.envs.family import Agent, Tasks
+from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
 from bridgeplan.envs.ogbench_manipulation.generate import make_env
 from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, DatasetName, parse_dataset_name
-from bridgeplan.envs.ogbench_pointmaze.protocol import episode_seed
 from bridgeplan.errors import BridgeplanError
 
 TASK_IDS = (1, 2, 3, 4, 5)
@@ -77,57 +77,6 @@ class ManipulationTasks(Tasks):
     def first(self) -> ManipulationTasks:
         return ManipulationTasks(self.env, 1, self.seed, self.episode_steps, episodes_per_task=1,
                                  task_ids=self.task_ids[:1])
-
-
-@dataclass
-class TaskResult:
-    task_id: int
-    task_name: str
-    episodes: int
-    successes: int
-    steps: list[int] = field(default_factory=list)
-    """Steps each episode ran (the step it reached the goal on, or the limit)."""
-
-    @property
-    def success_rate(self) -> float:
-        return self.successes / self.episodes
-
-
-@dataclass
-class ProtocolResult:
-    dataset: str
-    env_id: str
-    episodes_per_task: int
-    seed: int
-    tasks: dict[int, TaskResult]
-    seconds: float = 0.0
-
-    @property
-    def success_rate(self) -> float:
-        """The mean of the per-task rates (OGBench's ``overall_success``)."""
-        return float(np.mean([t.success_rate for t in self.tasks.values()]))
-
-    @property
-    def successes(self) -> int:
-        return sum(t.successes for t in self.tasks.values())
-
-    @property
-    def episodes(self) -> int:
-        return sum(t.episodes for t in self.tasks.values())
-
-    def to_dict(self) -> dict:
-        return {"dataset": self.dataset, "env_id": self.env_id, "episodes_per_task": self.episodes_per_task,
-                "seed": self.seed, "success_rate": self.success_rate, "successes": self.successes,
-                "episodes": self.episodes, "seconds": self.seconds,
-                "tasks": {i: {**asdict(t), "success_rate": t.success_rate} for i, t in self.tasks.items()}}
-
-    def format(self) -> str:
-        lines = [f"{self.dataset} ({self.env_id}): {self.episodes_per_task} episodes per task, seed {self.seed}"]
-        for i, t in self.tasks.items():
-            lines.append(f"  task {i} {t.task_name}: {t.success_rate:6.1%} ({t.successes}/{t.episodes}), "
-                         f"mean steps {np.mean(t.steps):.0f}")
-        lines.append(f"  overall: {self.success_rate:.1%} ({self.successes}/{self.episodes}) in {self.seconds:.1f} s")
-        return "\n".join(lines)
 
 
 def _cube_xyzs(rng: np.random.Generator, bounds: np.ndarray, cubes: int) -> np.ndarray:
@@ -185,15 +134,6 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
     return out
 
 
-class OracleAgent:
-    """Where the family's noise-free expert would act: not built (the play oracles plan toward one target at a time
-    in ``data_collection`` mode; a task's several targets at once need a sequencer of their own)."""
-
-    def __init__(self, name: str):
-        raise BridgeplanError(f"{name}: OGBench manipulation has no noise-free oracle on its evaluation tasks here "
-                              "(its play oracles serve data collection only)")
-
-
 def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) -> ProtocolResult:
     """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), at most
     :data:`BATCH` side by side."""
@@ -219,8 +159,8 @@ def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) ->
     results = {}
     for t in tasks.task_ids:
         rows = [i for i, (task, _) in enumerate(episodes) if task == t]
-        results[int(t)] = TaskResult(int(t), infos[t - 1]["task_name"], len(rows), int(success[rows].sum()),
-                                     steps[rows].tolist())
+        results[int(t)] = TaskResult(task_id=int(t), task_name=infos[t - 1]["task_name"], episodes=len(rows),
+                                     successes=int(success[rows].sum()), steps=steps[rows].tolist())
     return ProtocolResult(spec.name, spec.scene.env_id, tasks.episodes_per_task, tasks.seed, results,
                           time.perf_counter() - t0)
 

@@ -8,16 +8,14 @@ has its own observation width (:attr:`~bridgeplan.envs.ogbench_manipulation.name
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.data.npz import REQUIRED, read_npz
 from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-
-REQUIRED = ("observations", "actions", "terminals")
 
 
 @dataclass
@@ -47,33 +45,17 @@ class DatasetCheck:
 def check_dataset(path: str | Path, name: str) -> DatasetCheck:
     """Check that ``path`` is an OGBench manipulation dataset of ``name`` (``cube-single-play-v0``): one-line
     BridgeplanErrors for a missing or unreadable file, missing arrays, observations of another width, actions that are
-    not 5-D in [-1, 1], arrays of unequal length, a last episode without its terminal."""
+    not 5-D in [-1, 1], arrays of unequal length, a last episode without its terminal (:func:`read_npz`)."""
     spec = parse_dataset_name(name)
     path = Path(path)
-    if not path.is_file():
-        raise BridgeplanError(f"no dataset file at {path}")
-    if not zipfile.is_zipfile(path):
-        raise BridgeplanError(f"{path} is not an npz file")
-    try:
-        with np.load(path) as f:
-            keys = list(f.keys())
-            missing = [k for k in REQUIRED if k not in keys]
-            if missing:
-                raise BridgeplanError(f"{path} is not an OGBench dataset: no {', '.join(missing)} array")
-            obs, actions, terminals = (np.asarray(f[k]) for k in REQUIRED)
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise BridgeplanError(f"{path} is not a readable npz file ({type(e).__name__}: {e})") from None
+    arrays, keys = read_npz(path)
+    obs, actions, terminals = (arrays[k] for k in REQUIRED)
     if obs.ndim != 2 or obs.shape[1] != spec.obs_dim:
         raise BridgeplanError(f"{path} is not a {spec.name} dataset: observations have shape {list(obs.shape)}, "
                               f"{spec.name}'s are [N, {spec.obs_dim}]")
     if actions.ndim != 2 or actions.shape[1] != ACT_DIM or np.abs(actions).max(initial=0) > 1:
         raise BridgeplanError(f"{path} is not a manipulation dataset: actions have shape {list(actions.shape)}, "
                               f"expected [N, {ACT_DIM}] in [-1, 1]")
-    if not len(actions) == len(obs) == len(terminals):
-        raise BridgeplanError(f"{path}: arrays of unequal length (observations {obs.shape}, actions "
-                              f"{actions.shape}, terminals {terminals.shape})")
-    if len(obs) == 0 or not terminals[-1]:
-        raise BridgeplanError(f"{path}: {'empty' if len(obs) == 0 else 'the last episode has no terminal'}")
     ends = np.flatnonzero(terminals)
     lengths = np.diff(np.concatenate([[-1], ends]))
     return DatasetCheck(str(path), spec.name, len(obs), len(ends), sorted({int(n) for n in lengths}), keys,

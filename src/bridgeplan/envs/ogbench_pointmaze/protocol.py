@@ -18,12 +18,13 @@ depend on the batch it ran in. (Swapping the RNG state costs ~0.3 ms, more than 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
 from bridgeplan.envs.family import Tasks
+from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
 from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, check_maze, env_id
 from bridgeplan.errors import BridgeplanError
@@ -69,58 +70,15 @@ class SuiteTasks(Tasks):
                           task_ids=self.task_ids[:1])
 
 
-@dataclass
-class TaskResult:
-    task_id: int
-    task_name: str
+@dataclass(kw_only=True)
+class CellTaskResult(TaskResult):
+    """A pointmaze task's result, with its start and goal cells."""
+
     init_cell: tuple[int, int]
     goal_cell: tuple[int, int]
-    episodes: int
-    successes: int
-    steps: list[int] = field(default_factory=list)
-    """Steps each episode ran (the step it reached the goal on, or the step limit)."""
 
-    @property
-    def success_rate(self) -> float:
-        return self.successes / self.episodes
-
-
-@dataclass
-class ProtocolResult:
-    maze: str
-    env_id: str
-    episodes_per_task: int
-    seed: int
-    tasks: dict[int, TaskResult]
-    seconds: float = 0.0
-
-    @property
-    def success_rate(self) -> float:
-        """The mean of the per-task rates (OGBench's ``overall_success``)."""
-        return float(np.mean([t.success_rate for t in self.tasks.values()]))
-
-    @property
-    def successes(self) -> int:
-        return sum(t.successes for t in self.tasks.values())
-
-    @property
-    def episodes(self) -> int:
-        return sum(t.episodes for t in self.tasks.values())
-
-    def to_dict(self) -> dict:
-        return {"maze": self.maze, "env_id": self.env_id, "episodes_per_task": self.episodes_per_task,
-                "seed": self.seed, "success_rate": self.success_rate, "successes": self.successes,
-                "episodes": self.episodes, "seconds": self.seconds,
-                "tasks": {i: {**asdict(t), "success_rate": t.success_rate} for i, t in self.tasks.items()}}
-
-    def format(self) -> str:
-        lines = [f"{self.env_id}: {self.episodes_per_task} episodes per task, seed {self.seed}"]
-        for i, t in self.tasks.items():
-            lines.append(f"  task {i} {t.init_cell} -> {t.goal_cell}: {t.success_rate:6.1%} "
-                         f"({t.successes}/{t.episodes}), mean steps {np.mean(t.steps):.0f}")
-        lines.append(f"  overall: {self.success_rate:.1%} ({self.successes}/{self.episodes}) "
-                     f"in {self.seconds:.1f} s")
-        return "\n".join(lines)
+    def label(self) -> str:
+        return f"{self.init_cell} -> {self.goal_cell}"
 
 
 def validation_tasks(maze_map: np.ndarray, test_tasks: Sequence[dict]) -> list[dict]:
@@ -146,11 +104,6 @@ def validation_tasks(maze_map: np.ndarray, test_tasks: Sequence[dict]) -> list[d
     chosen = np.random.default_rng(VALIDATION_TASKS_SEED).choice(len(pairs), len(VALIDATION_TASK_IDS), replace=False)
     return [{"task_name": f"validation_task{i}", "init_ij": np.array(pairs[k][0]), "goal_ij": np.array(pairs[k][1])}
             for i, k in zip(VALIDATION_TASK_IDS, sorted(chosen))]
-
-
-def episode_seed(seed: int, task_id: int, index: int) -> int:
-    """The seed of episode ``index`` of task ``task_id``."""
-    return int(np.random.SeedSequence([seed, task_id, index]).generate_state(1)[0])
 
 
 class OracleAgent:
@@ -214,9 +167,10 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
     for t in task_ids:
         rows = [i for i, (task, _) in enumerate(episodes) if task == t]
         info = infos[t - 1]
-        tasks[int(t)] = TaskResult(int(t), info["task_name"], tuple(map(int, info["init_ij"])),
-                                   tuple(map(int, info["goal_ij"])), len(rows), int(success[rows].sum()),
-                                   steps[rows].tolist())
+        tasks[int(t)] = CellTaskResult(task_id=int(t), task_name=info["task_name"], episodes=len(rows),
+                                       successes=int(success[rows].sum()), steps=steps[rows].tolist(),
+                                       init_cell=tuple(map(int, info["init_ij"])),
+                                       goal_cell=tuple(map(int, info["goal_ij"])))
     return ProtocolResult(maze, env_id(maze), episodes_per_task, seed, tasks, time.perf_counter() - t0)
 
 

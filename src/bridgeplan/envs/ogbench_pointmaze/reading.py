@@ -64,8 +64,6 @@ def check_dataset(path: str | Path, maze: str) -> DatasetCheck:
     """
     maze = check_maze(resolve_maze(maze))
     path = Path(path)
-    if path.is_dir():
-        raise BridgeplanError(f"{path} is a folder, not an npz file (OGBench's datasets are single .npz files)")
     arrays, keys = read_npz(path)
     obs, actions, terminals = (arrays[k] for k in REQUIRED)
     if obs.ndim != 2 or obs.shape[1] != 2:
