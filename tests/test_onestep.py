@@ -244,6 +244,21 @@ def test_bad_input(make, message):
     assert "\n" not in str(e.value)
 
 
+def test_mish_forward_mode_derivative_is_torchs():
+    """The fast Mish's jvp (forward-mode AD, which the mean flow's target needs) against torch's own mish."""
+    from torch.autograd import forward_ad
+
+    from bridgeplan.nets.unet import Mish
+
+    x = torch.linspace(-30, 30, 601, dtype=F64)
+    tangent = torch.randn(x.shape, generator=torch.Generator().manual_seed(0), dtype=F64)
+    with forward_ad.dual_level():
+        ours = forward_ad.unpack_dual(Mish()(forward_ad.make_dual(x, tangent)))
+        torchs = forward_ad.unpack_dual(torch.nn.functional.mish(forward_ad.make_dual(x, tangent)))
+    assert torch.allclose(ours.primal, torchs.primal, atol=1e-12)
+    assert torch.allclose(ours.tangent, torchs.tangent, atol=1e-12)
+
+
 def test_a_network_without_an_interval_input_is_unchanged():
     """The second input is built only when asked for: the one-input network has the same parameters and initial
     weights as before it existed, and refuses an interval (as the two-input one refuses its absence)."""

@@ -8,7 +8,8 @@ data x0 at t = 0 to the prior sample x1 at t = 1) over an interval ``[r, t]``,
 and one network call jumps from the prior sample to the data: ``x0 = x1 - u(x1, 0, 1)``. Differentiating
 ``(t - r) u = integral_r^t v`` in t gives the MeanFlow identity ``u = v - (t - r) du/dt``, with ``du/dt`` the
 total derivative along the flow, ``v . d_z u + d_t u`` (r fixed): a Jacobian-vector product of the network with
-tangents ``(v, 0, 1)`` on ``(z, r, t)`` (``torch.func.jvp``). Training regresses ``u_theta(z_t, r, t)`` on
+tangents ``(v, 0, 1)`` on ``(z, r, t)``, by forward-mode AD (``torch.autograd.forward_ad``; the U-Net's fast Mish
+supports it, not ``torch.func``'s transforms, see ``nets/unet.py``). Training regresses ``u_theta(z_t, r, t)`` on
 ``sg(v - (t - r) du_theta/dt)`` with the conditional velocity ``v = x1 - x0`` of the sampled pair; at ``r = t``
 that is flow matching's loss on the instantaneous velocity. The network's interval input is
 ``steps * (t - r)`` (0: the instantaneous velocity), the paper's ``(t, t - r)`` conditioning.
@@ -24,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 import torch
+from torch.autograd import forward_ad
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.processes.jumps import JumpProcess
@@ -82,10 +84,10 @@ class MeanFlow(JumpProcess):
         z = self.path(x0, x1, t, conditions)
         v = x1 - x0  # zero where the conditions hold: x1 is inpainted with x0's own states
 
-        def u_of(z, r, t):
-            return self.average_velocity(model, z, r, t)
-
-        u, dudt = torch.func.jvp(u_of, (z, r, t), (v, torch.zeros_like(r), torch.ones_like(t)))
+        with forward_ad.dual_level():  # tangents (v, 0, 1) on (z, r, t): r is left a plain tensor
+            out = self.average_velocity(model, forward_ad.make_dual(z, v), r,
+                                        forward_ad.make_dual(t, torch.ones_like(t)))
+            u, dudt = forward_ad.unpack_dual(out)
         target = (v - (t - r)[:, None, None] * dudt).detach()
         error = ((u - target) ** 2).flatten(1).mean(1)
         return u, target, error
