@@ -198,3 +198,55 @@ def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int
         if ended:
             agent.end(np.asarray(ended))
     return success, steps
+
+
+class _Timed:
+    """An agent whose ``act`` is timed (seconds summed in :attr:`seconds`) and whose actions are kept in order."""
+
+    def __init__(self, act):
+        self._act, self.seconds, self.actions = act, 0.0, []
+
+    def begin(self, n: int) -> None:
+        pass
+
+    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        t0 = time.perf_counter()
+        out = self._act(states, goals)
+        self.seconds += time.perf_counter() - t0
+        self.actions.append(out)
+        return out
+
+    def end(self, rows: np.ndarray) -> None:
+        pass
+
+
+def measure_evaluation(name: str, episodes_per_task: int = 4, rounds: int = 2, seed: int = 0) -> dict:
+    """Seconds of the protocol (test task 1) with GCBC's policy network at OGBench's size (untrained, on the CPU)
+    against its parts timed apart: the same episodes stepped with the actions the policy chose, replayed (the
+    environments alone, moving as they moved: a still arm steps faster), plus the policy's calls as timed inside the
+    protocol. Alternated over ``rounds`` after an untimed short run."""
+    import torch
+
+    from bridgeplan.nets.policy import GoalPolicy
+
+    spec = parse_dataset_name(name)
+    net = GoalPolicy(spec.obs_dim, spec.obs_dim, ACT_DIM).eval()
+
+    def policy(states, goals):
+        with torch.no_grad():
+            return net.act(torch.as_tensor(states, dtype=torch.float32), torch.as_tensor(goals, dtype=torch.float32))
+
+    tasks = ManipulationTasks.make(spec.name, episodes_per_task, seed, (1,))
+    run_tasks(ManipulationTasks.make(spec.name, 1, seed, (1,)), _Timed(policy))  # untimed
+    alone = whole = calls = 0.0
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        timed = _Timed(policy)
+        run_tasks(tasks, timed)
+        t1 = time.perf_counter()
+        replayed = iter(timed.actions)
+        run_tasks(tasks, _Timed(lambda states, goals: next(replayed)))
+        whole, alone, calls = whole + t1 - t0, alone + time.perf_counter() - t1, calls + timed.seconds
+    return {"dataset": spec.name, "episodes": tasks.episodes, "episode_steps": tasks.episode_steps, "rounds": rounds,
+            "environments_alone_s": alone, "policy_calls_s": calls, "evaluation_s": whole,
+            "evaluation_over_parts": whole / (alone + calls)}
