@@ -415,6 +415,7 @@ def test_distill_through_the_cli(distilled, tiny_runs, capsys):
         assert main(["eval", str(distilled), "--episodes", "4", "--device", "cpu", "--nfe", str(nfe), "--json"]) == 0
         result = json.loads(capsys.readouterr().out)
         assert result["process"] == "distill" and result["nfe"] == nfe and result["method"] == "DDPM distilled"
+        assert result["process_params"]["teacher"] == tiny_runs["ddpm"].name  # no path of this machine
     written = sorted(distilled.rglob("*"))
     assert main(["eval", str(distilled), "--episodes", "2", "--device", "cpu", "--nfe", "3"]) == 2
     assert "nfe must be 1 or 2" in one_error_line(capsys)

@@ -36,7 +36,7 @@ from bridgeplan.files import atomic_write_text, check_writable, code_version
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import DecisionSource, Execution, PlanExecutor, PlanSource, percentiles_ms
-from bridgeplan.runs import RunInfo, load_planner
+from bridgeplan.runs import RunInfo, load_planner, portable_process
 from bridgeplan.trajectory import span
 
 VALIDATION_SEED_OFFSET = 1000
@@ -228,7 +228,7 @@ def planner_entries(planner: Planner, nfe: int, run: RunInfo | None) -> dict:
     return {"run": run.name if run else None, "dataset": run.dataset if run else None,
             "step": run.step if run else None, "train_seconds": run.elapsed_seconds if run else None,
             "method": cfg.method_label(process, planner.prior.name, run.config.hold_share if run else 0.0),
-            "process": process.name, "prior": planner.prior.name, "process_params": process.to_dict(),
+            "process": process.name, "prior": planner.prior.name, "process_params": portable_process(process.to_dict()),
             "diffusion_steps": process.steps, "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
             "plan_span": span(planner.horizon, planner.stride)}
 

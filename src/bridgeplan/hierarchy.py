@@ -37,7 +37,7 @@ from bridgeplan.evaluate import EvalResult, evaluate, execute_plans, prior_floor
 from bridgeplan.graph import DatasetGraph, fixed_length
 from bridgeplan.planner import Planner
 from bridgeplan.replan import Execution, check_replanning, truncate_at_arrival
-from bridgeplan.runs import RunInfo, load_planner
+from bridgeplan.runs import RunInfo, load_planner, portable_process
 from bridgeplan.trajectory import densify, span
 
 COARSE_ARRIVAL = 0.45
@@ -342,9 +342,9 @@ def load_hierarchy(high_run: Path, low_run: Path, high_snapshot: int | None = No
 def level_dict(planner: Planner, info: RunInfo, nfe: int) -> dict:
     """One level's settings in a hierarchy's JSON."""
     return {"run": info.name, "step": info.step, "method": cfg.method_label(planner.process, planner.prior.name),
-            "process": planner.process.name, "prior": planner.prior.name, "process_params": planner.process.to_dict(),
-            "nfe": nfe, "horizon": planner.horizon, "stride": planner.stride,
-            "subgoal_every": planner.subgoal_every, "config": info.portable_config}
+            "process": planner.process.name, "prior": planner.prior.name,
+            "process_params": portable_process(planner.process.to_dict()), "nfe": nfe, "horizon": planner.horizon,
+            "stride": planner.stride, "subgoal_every": planner.subgoal_every, "config": info.portable_config}
 
 
 def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, free, layout) -> dict:

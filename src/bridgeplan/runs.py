@@ -142,9 +142,17 @@ class RunInfo:
         if out.get("prior_run"):
             prior = Path(out["prior_run"])  # a run directory or one of its checkpoint files
             out["prior_run"] = (run_dir_of(prior) if prior.suffix == ".pt" else prior).name
-        if out.get("process", {}).get("teacher"):  # a distilled run's teacher, by its run's name too
-            out["process"] = {**out["process"], "teacher": run_dir_of(Path(out["process"]["teacher"])).name}
+        if out.get("process"):
+            out["process"] = portable_process(out["process"])
         return out
+
+
+def portable_process(process: dict) -> dict:
+    """A process's dict (``Process.to_dict``) as results and evaluation JSONs record it: a distilled run's teacher
+    by its run's name, not by where it lay on the machine that trained the run."""
+    if not process.get("teacher"):
+        return process
+    return {**process, "teacher": run_dir_of(Path(process["teacher"])).name}
 
 
 def load_planner(run: Path, snapshot: int | None = None, device: str = "auto", sampler: str | None = None,
