@@ -77,7 +77,7 @@ def test_study_import_loads_the_committed_rows_so_that_nothing_is_evaluated_agai
 @pytest.mark.slow
 def test_study_report_check_passes_on_the_committed_tree(capsys):
     assert main(["study", "report", "--check", "--root", str(REPO)]) == 0
-    assert ("12 reports, 18 provenance files, the generated blocks in docs/results/README.md, README.md, "
+    assert ("13 reports, 18 provenance files, the generated blocks in docs/results/README.md, README.md, "
             "docs/ogbench_pointmaze.md and 4 bench pages match their studies and benches" in capsys.readouterr().out)
     # a generator's name (as the markers and the errors say it) selects the studies whose reports it makes
     assert main(["study", "report", "cddb", "--check", "--root", str(REPO)]) == 0
