@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -37,7 +38,10 @@ def test_layout_and_goal_columns_are_the_environments(name):
     for _ in range(20):
         ob, *_ = env.step(rng.uniform(-1, 1, 5))
     assert (layout.obs_dim, env.spec.max_episode_steps) == NAMES[name]
-    assert layout.act_dim == env.action_space.shape[0] == 5
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ogbench builds its action space anew at each access, casting float64 bounds
+        space = env.action_space
+    assert layout.act_dim == space.shape[0] == 5 and (space.low == -1).all() and (space.high == 1).all()
     np.testing.assert_allclose(ob[list(layout.goal)], env.unwrapped.compute_oracle_observation(), atol=1e-6)
     assert FAMILY.tasks(name).episode_steps == NAMES[name][1]
 
@@ -246,8 +250,8 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
 
 def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     """GCBC through its one trainer and the family's evaluation: a tiny generated cube-single dataset, 4 steps, then
-    ``bridgeplan eval RUN`` (and ``gcbc eval``) on a test task and a validation task, one episode each; the mistakes
-    are one error line each and write nothing."""
+    ``bridgeplan eval RUN`` (``gcbc eval``'s function) on a test task and a validation task, one episode each; the
+    mistakes are one error line each and write nothing."""
     data = tiny_data
     run = tmp_path / "run"
     train = ["gcbc", "train", str(data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps", "4",
@@ -263,8 +267,6 @@ def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     assert row["tasks"]["6"]["task_name"] == "validation_task6"
     saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0-tasks1_6.json").read_text())
     assert saved == row
-    assert main(["gcbc", "eval", str(run), "--episodes", "1", "--no-progress"]) == 0
-    assert "task 2 task2_vertical1" in capsys.readouterr().out
     # mistakes
     before = sorted(p.name for p in (run / "eval").iterdir())
     assert _error(capsys, ["eval", str(run), "--tasks", "11", "--no-progress"]).startswith(
@@ -285,7 +287,7 @@ def test_a_killed_generation_resumes_to_the_same_data(tmp_path, monkeypatch):
     from bridgeplan.envs.ogbench_manipulation import generate
 
     monkeypatch.setattr(generate, "CHUNK_EPISODES", 2)
-    whole = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "a", seed=5, episodes=4, episode_steps=60,
+    whole = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "a", seed=5, episodes=4, episode_steps=40,
                                       progress=False)
     assert not (tmp_path / "a" / "puzzle-3x3-play-v0.partial").exists()
 
@@ -299,11 +301,11 @@ def test_a_killed_generation_resumes_to_the_same_data(tmp_path, monkeypatch):
     saved = generate.Pieces.save
     monkeypatch.setattr(generate.Pieces, "save", kill_after_first_piece)
     with pytest.raises(Killed):
-        generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+        generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=40,
                                   progress=False)
     assert json.loads((tmp_path / "b" / "puzzle-3x3-play-v0.partial" / "state.json").read_text())["episodes"] == 2
     monkeypatch.setattr(generate.Pieces, "save", saved)
-    resumed = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=60,
+    resumed = generate.generate_dataset("puzzle-3x3-play-v0", tmp_path / "b", seed=5, episodes=4, episode_steps=40,
                                         progress=False)
     assert resumed.record["content_sha256"] == whole.record["content_sha256"]
     assert resumed.record["targets"] == whole.record["targets"]
