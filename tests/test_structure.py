@@ -124,3 +124,32 @@ def test_nothing_outside_envs_tests_an_environments_name(tmp_path):
                                                          '    pass\nif name in ("large", "x"):\n    pass\n')
     assert environment_name_tests(tmp_path / "bridgeplan") == ["bridgeplan.evaluate:1", "bridgeplan.evaluate:1",
                                                                "bridgeplan.evaluate:3"]
+
+
+LAYERS = (
+    ("errors", "files", "paths", "locks", "device", "workers", "shipped"),
+    ("trajectory", "normalizer", "data", "nets", "processes", "checkpoint"),
+    ("envs",),
+    ("priors", "consistency", "planner", "replan", "graph", "config", "runs", "train"),
+    ("evaluate", "hierarchy", "gcbc", "policy", "render"),
+    ("experiments", "analysis", "studies", "bench", "report"),
+    ("commands", "cli", "gcbc_commands"),
+)
+"""The package's layers, lowest first, by the name below ``bridgeplan.`` (a module's own or its folder's)."""
+RUNNER_CALLS_THE_CLI = {("bridgeplan.studies.jobs", "bridgeplan.commands"),
+                        ("bridgeplan.studies.spec", "bridgeplan.commands")}
+"""The imports that run back up today: the study runner writes its evaluations as command lines and parses them with
+the CLI's parser (issue 41, item 3: options declared once, the runner calling functions, would end them)."""
+
+
+def layer(module: str) -> int | None:
+    top = module.split(".")[1] if "." in module else None
+    return next((i for i, names in enumerate(LAYERS) if top in names), None)
+
+
+def test_every_module_has_a_layer_and_stands_on_those_below():
+    graph = import_graph()
+    assert [m for m in graph if m != "bridgeplan" and layer(m) is None] == []
+    back = {(m, t) for m, targets in graph.items() for t in targets
+            if layer(m) is not None and layer(t) is not None and layer(t) > layer(m)}
+    assert back == RUNNER_CALLS_THE_CLI
