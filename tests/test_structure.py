@@ -131,7 +131,7 @@ LAYERS = (
     ("trajectory", "normalizer", "data", "nets", "processes", "checkpoint"),
     ("envs",),
     ("priors", "consistency", "planner", "replan", "graph", "config", "runs", "train"),
-    ("evaluate", "hierarchy", "gcbc", "policy", "render"),
+    ("evaluate", "hierarchy", "gcbc", "gciql", "policy", "render"),
     ("experiments", "analysis", "studies", "bench", "report"),
     ("commands", "cli", "gcbc_commands"),
 )
