@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, label, method
+from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, execution_name, label, method
 from bridgeplan.analysis.load import Point, Results, read_csv
 from bridgeplan.analysis.selection import best, split_mean
 from bridgeplan.analysis.stats import Paired, goal_verdict, paired
@@ -44,14 +44,6 @@ READS = (DDPM, *BRIDGES)
 GOAL_NFE = (1, 2)
 CORRECTED = "cddb-"
 """The prefix of a corrected sampler's tag (``consistency.Correction.tag``)."""
-
-
-def execution_name(execution: Execution) -> str:
-    if execution == OPEN_LOOP:
-        return "tracked"
-    if execution.plans_once and execution.controller == "pursuit":
-        return f"pursued (lookahead {execution.lookahead:g})"
-    return execution.tag()
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, label, tasks_label
+from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, execution_name, label, tasks_label
 from bridgeplan.analysis.keys import method as key
 from bridgeplan.analysis.load import Point, Results, read_csv
 from bridgeplan.analysis.selection import best
@@ -40,14 +40,6 @@ ONE_STEP = (key("distill", steps=N),
 READS = (DDPM, *ONE_STEP)
 """The trained methods the tables read (studies that make this report must train them)."""
 GOAL_NFE = (1, 2)
-
-
-def execution_name(execution: Execution) -> str:
-    if execution == OPEN_LOOP:
-        return "tracked"
-    if execution.plans_once and execution.controller == "pursuit":
-        return f"pursued (lookahead {execution.lookahead:g})"
-    return execution.tag()
 
 
 @dataclass(frozen=True)

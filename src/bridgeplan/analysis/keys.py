@@ -26,6 +26,15 @@ OPEN_LOOP = Execution()
 """The default execution: one plan per episode, tracked by Diffuser's controller (tag '')."""
 
 
+def execution_name(execution: Execution) -> str:
+    """How a report's table titles name an execution: tracked, pursued (lookahead L), else its tag."""
+    if execution == OPEN_LOOP:
+        return "tracked"
+    if execution.plans_once and execution.controller == "pursuit":
+        return f"pursued (lookahead {execution.lookahead:g})"
+    return execution.tag()
+
+
 @dataclass(frozen=True)
 class MethodKey:
     """One evaluated method: what was trained and how it was sampled and executed, on which task set."""
