@@ -108,7 +108,11 @@ def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, caps
             "0"]
     assert main(["bench", "--out", str(tmp_path), *args]) == 0
     capsys.readouterr()
-    rows = json.loads((tmp_path / "bench.json").read_text())["latency"]
+    result = json.loads((tmp_path / "bench.json").read_text())
+    rows = result["latency"]
+    m = result["machine"]
+    assert m["load_1min_start"] >= 0 and m["load_1min_end"] >= 0
+    assert f"load average was {m['load_1min_start']:.1f} at the start" in (tmp_path / "bench.md").read_text()
     assert sorted((r["method"], r["nfe"]) for r in rows) == [
         ("mean flow (line)", 1), ("mean flow (line)", 3), ("mean flow (line)", 20), ("shortcut (line)", 1)]
     assert all(r["plan_ms"] > r["prior_ms"] > 0 for r in rows)
