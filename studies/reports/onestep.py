@@ -25,7 +25,7 @@ from pathlib import Path
 
 from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, execution_name, label, tasks_label
 from bridgeplan.analysis.keys import method as key
-from bridgeplan.analysis.load import Point, Results, read_csv
+from bridgeplan.analysis.load import Point, Results, exported_rows
 from bridgeplan.analysis.selection import best
 from bridgeplan.analysis.stats import goal_verdict, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
@@ -75,11 +75,7 @@ class Part:
 def parts(root: Path) -> list[Part]:
     """The parts of every exported folder of :data:`SOURCES`, in their order; tracked single-task first."""
     found = []
-    for folder in SOURCES:
-        path = Path(root) / folder / "results.csv"
-        if not path.exists():
-            continue
-        rows = read_csv(path)
+    for _, rows in exported_rows(root, SOURCES):
         groups = dict.fromkeys((r.maze, r.key.execution, r.key.multi_task) for r in rows)
         for maze, execution, multi in sorted(groups, key=lambda g: (g[1] != OPEN_LOOP, g[1].tag(), g[2])):
             found.append(Part(maze, execution, multi, Results(
