@@ -26,11 +26,13 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     assert result["bench"]["presets"] == ["cpu-small"] and result["machine"]["device"] == "cpu"
 
     methods = {r["method"] for r in result["latency"]}
-    assert methods == {"DDPM [ancestral]", "DDPM [ddim]", "bridge (gaussian)", "bridge (line)", "bridge (learned)"}
+    one_call = {"mean flow (line)", "shortcut (line)"}
+    assert methods == {"DDPM [ancestral]", "DDPM [ddim]", "bridge (gaussian)", "bridge (line)", "bridge (learned)",
+                       *one_call}
     assert {(r["batch"], r["nfe"]) for r in result["latency"]} == {(1, 1), (1, 2)}
     assert all(r["plan_ms"] > r["prior_ms"] > 0 for r in result["latency"])
     (overhead,) = result["plan_overhead"]
-    assert set(overhead["plan_nfe1_over_forward"]) == methods
+    assert set(overhead["plan_nfe1_over_forward"]) == methods - one_call  # their network has two time inputs
     assert all(0 < v < 100 for v in overhead["plan_nfe1_over_forward"].values())
     (train,) = result["train_overhead"]
     assert (train["batch"], train["grad_accum"]) == (32, 1) and train["train_step_over_bare"] > 0
@@ -97,6 +99,23 @@ def test_bench_times_the_methods_asked_for_at_any_nfe_and_skips_the_overheads(tm
         ("DDPM [ancestral]", 1), ("DDPM [ancestral]", 20), ("bridge (line)", 1), ("bridge (line)", 20)]
     assert result["plan_overhead"] == [] and result["train_overhead"] == []
     assert "Untrained networks with N = 21 for the timings" in (tmp_path / "bench.md").read_text()
+
+
+def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, capsys):
+    """The mean flow and the shortcut model (their network takes a second time input) are timed like the others;
+    the shortcut model only at powers of two, on a network of N a power of two (N = 32 for NFE 20)."""
+    args = [*TINY_BENCH, "--methods", "mean flow (line),shortcut (line)", "--nfes", "1,3,20", "--overhead-repeats",
+            "0"]
+    assert main(["bench", "--out", str(tmp_path), *args]) == 0
+    capsys.readouterr()
+    result = json.loads((tmp_path / "bench.json").read_text())
+    rows = result["latency"]
+    m = result["machine"]
+    assert m["load_1min_start"] >= 0 and m["load_1min_end"] >= 0
+    assert f"load average was {m['load_1min_start']:.1f} at the start" in (tmp_path / "bench.md").read_text()
+    assert sorted((r["method"], r["nfe"]) for r in rows) == [
+        ("mean flow (line)", 1), ("mean flow (line)", 3), ("mean flow (line)", 20), ("shortcut (line)", 1)]
+    assert all(r["plan_ms"] > r["prior_ms"] > 0 for r in rows)
 
 
 def test_bench_refuses_a_missing_snapshot_before_timing_anything(tiny_runs, tmp_path, capsys):

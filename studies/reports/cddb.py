@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, execution_name, label, method
-from bridgeplan.analysis.load import Point, Results, read_csv
+from bridgeplan.analysis.load import Point, Results, exported_rows
 from bridgeplan.analysis.selection import best, split_mean
 from bridgeplan.analysis.stats import Paired, goal_verdict, paired
 from bridgeplan.analysis.tables import bold, fmt_diff, fmt_mean_se, table
@@ -75,11 +75,7 @@ class Part:
 def parts(root: Path) -> list[Part]:
     """The parts of every exported folder of :data:`SOURCES`: by maze, then tracked before the other executions."""
     found = []
-    for folder in SOURCES:
-        path = Path(root) / folder / "results.csv"
-        if not path.exists():
-            continue
-        rows = read_csv(path)
+    for folder, rows in exported_rows(root, SOURCES):
         for maze, execution in dict.fromkeys((r.maze, r.key.execution) for r in rows):
             found.append(Part(folder, maze, execution,
                               Results(r for r in rows if (r.maze, r.key.execution) == (maze, execution))))

@@ -130,6 +130,13 @@ def row_from_csv(r: dict, keys: _Keys | None = None, source: str = "") -> Row:
         raise BridgeplanError(f"{where}: {type(e).__name__}: {e}") from None
 
 
+def exported_rows(root: str | Path, folders) -> list[tuple[str, list[Row]]]:
+    """``(folder, its rows)`` for each of ``folders`` under ``root`` (docs/results) with an exported results.csv, in
+    their order; a study not exported yet is left out."""
+    paths = [(folder, Path(root) / folder / "results.csv") for folder in folders]
+    return [(folder, read_csv(path)) for folder, path in paths if path.exists()]
+
+
 def read_csv(path: str | Path) -> list[Row]:
     """Every row of a results CSV, in the file's order."""
     path = Path(path)

@@ -138,6 +138,8 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
         progress("score per planning budget")
         result["score_per_budget"] = suites.score_per_budget(bench.budget_runs, bench.budget_steps, bench.budgets,
                                                              bench.budget_episodes, bench.device)
+    if "load_1min_start" in result["machine"]:
+        result["machine"]["load_1min_end"] = os.getloadavg()[0]
     out_dir = Path(out_dir)
     atomic_write_text(out_dir / "bench.json", json.dumps(result, indent=2) + "\n")
     atomic_write_text(out_dir / "bench.md", format_bench(result))

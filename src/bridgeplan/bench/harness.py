@@ -75,6 +75,8 @@ def machine(device: torch.device) -> dict:
     out = {"platform": platform.platform(), "processor": platform.processor() or platform.machine(), "cpu": cpu_model(),
            "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(), "torch": torch.__version__,
            "device": str(device), "code_version": code_version()}
+    if hasattr(os, "getloadavg"):  # how busy the cores were: the figures are only as quiet as the machine
+        out["load_1min_start"] = os.getloadavg()[0]
     if device.type == "cuda":
         out["gpu"] = torch.cuda.get_device_name(device)
     return out

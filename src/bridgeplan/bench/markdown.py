@@ -16,6 +16,14 @@ def table(header: list[str], rows: list[list]) -> list[str]:
         "| " + " | ".join(str(c) for c in row) + " |" for row in rows]
 
 
+def load_sentence(m: dict) -> str:
+    """The cores' 1-minute load average at the start and the end (bench JSONs before it was recorded: none)."""
+    if "load_1min_start" not in m:
+        return ""
+    return (f" The 1-minute load average was {m['load_1min_start']:.1f} at the start and {m['load_1min_end']:.1f} at "
+            f"the end ({m['cpu_count']} cores: above 1, other processes shared the cores).")
+
+
 def format_bench(result: dict) -> str:
     m = result["machine"]
     where = m.get("gpu", f"{m.get('cpu') or m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch "
@@ -24,7 +32,7 @@ def format_bench(result: dict) -> str:
              f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
              f"with N = {diffusion_steps(result['bench']['nfes'])} for the timings; medians over "
              f"{result['bench']['repeats']} repeats after 2 warm-up calls, ratios over "
-             f"{result['bench']['overhead_repeats']} interleaved rounds.", "",
+             f"{result['bench']['overhead_repeats']} interleaved rounds.{load_sentence(m)}", "",
              "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
              "of it and shown separately.", ""]
     lines += table(["preset", "method", "batch", "NFE", "plan ms", "of which prior ms"],

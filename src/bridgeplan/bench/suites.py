@@ -22,8 +22,9 @@ from bridgeplan.bench.harness import (
     timed,
 )
 from bridgeplan.config import TrainConfig, preset_config
+from bridgeplan.errors import BridgeplanError
 from bridgeplan.planner import Planner
-from bridgeplan.processes import DDPM, Bridge
+from bridgeplan.processes import DDPM, Bridge, MeanFlow, Shortcut
 from bridgeplan.runs import build_model, build_planner, build_prior_net, windows_of
 
 DIFFUSION_STEPS = 16
@@ -50,7 +51,8 @@ def small_windows(horizon: int, stride: int = 1):
 
 def method_configs(preset: str, steps: int = DIFFUSION_STEPS) -> dict[str, TrainConfig]:
     """One config per method timed, at ``steps`` diffusion steps: DDPM with each sampler, the bridge from each
-    prior."""
+    prior, and the processes built for one call (mean flow, shortcut) from the line: their network takes a second
+    time input, which a one-call decision pays for."""
     base = preset_config("umaze", preset)
     out = {}
     for sampler in DDPM.samplers:
@@ -58,17 +60,33 @@ def method_configs(preset: str, steps: int = DIFFUSION_STEPS) -> dict[str, Train
     for prior in ("gaussian", "line", "learned"):
         config = dataclasses.replace(base, process=Bridge(steps), prior=prior)
         out[config.label()] = config
+    for process in (MeanFlow(steps), Shortcut(1 << (steps - 1).bit_length())):  # the shortcut's N: a power of 2
+        config = dataclasses.replace(base, process=process, prior="line")
+        out[config.label()] = config
     return out
 
 
 def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device, methods=(),
              steps: int = DIFFUSION_STEPS) -> dict[str, Planner]:
-    """Each method's planner (``methods``; empty: every one) around one (untrained) network; the learned prior's
-    net is untrained too."""
+    """Each method's planner (``methods``; empty: every one) around one (untrained) network, ``model``, or, for
+    the processes whose network takes a second time input, one such network of the same preset; the learned
+    prior's net is untrained too."""
     configs = {name: c for name, c in method_configs(preset, steps).items() if not methods or name in methods}
     first = next(iter(configs.values()))
     prior_net = build_prior_net(first.layout, first.horizon).to(device).eval()
-    return {name: build_planner(c, model, normalizer, device, prior_net=prior_net) for name, c in configs.items()}
+    interval_model = next((build_model(c).to(device).eval() for c in configs.values() if c.process.takes_interval),
+                          None)
+    return {name: build_planner(c, interval_model if c.process.takes_interval else model, normalizer, device,
+                                prior_net=prior_net) for name, c in configs.items()}
+
+
+def takes_nfe(process, nfe: int) -> bool:
+    """Whether ``process`` samples in ``nfe`` calls (the shortcut model only in powers of two)."""
+    try:
+        process.validate_nfe(nfe)
+    except BridgeplanError:
+        return False
+    return True
 
 
 def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
@@ -88,7 +106,7 @@ def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.de
             gen = torch.Generator(device=dev).manual_seed(0)
             with torch.inference_mode():
                 prior_s = median_seconds(lambda: planner.prior.sample(cond, config.horizon, batch, gen), repeats, dev)
-            for nfe in (n for n in nfes if n <= planner.process.max_nfe):
+            for nfe in (n for n in nfes if takes_nfe(planner.process, n)):
                 plan_s = median_seconds(lambda: planner.plan(starts, goals, nfe, gen), repeats, dev)
                 rows.append({"preset": preset, "method": name, "batch": batch, "nfe": nfe,
                              "plan_ms": 1000 * plan_s, "prior_ms": 1000 * prior_s})
@@ -96,7 +114,8 @@ def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.de
 
 
 def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device, methods=()) -> dict:
-    """Plan at NFE 1 over one bare forward pass of the same network on an input of the same shape."""
+    """Plan at NFE 1 over one bare forward pass of the same network on an input of the same shape (the methods
+    whose network has one time input: the ratio is over that network's forward)."""
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
@@ -110,7 +129,8 @@ def plan_overhead(preset: str, batch: int, rounds: int, dev: torch.device, metho
             model(x, t)
 
     fns = {"forward": forward} | {name: (lambda p=p: p.plan(starts, goals, 1, gen))
-                                  for name, p in planners(preset, model, normalizer, dev, methods).items()}
+                                  for name, p in planners(preset, model, normalizer, dev, methods).items()
+                                  if not p.process.takes_interval}
     ratios = interleaved_ratios(fns, "forward", rounds, dev)
     return {"preset": preset, "batch": batch, "forward_ms": ratios.pop("forward_ms"), "plan_nfe1_over_forward": ratios}
 
@@ -257,7 +277,7 @@ def score_per_budget(runs, steps, budgets, episodes: int, device: str, selection
             scored = {}
             for sampler in planner.process.usable_samplers() or (None,):
                 sampled = planner.with_sampler(sampler) if sampler else planner
-                for nfe in (k for k in budgets if k <= planner.process.max_nfe):
+                for nfe in (k for k in budgets if takes_nfe(planner.process, k)):
                     for split in tasks:
                         r = evaluate_planner(sampled, tasks[split], nfe, run=info,
                                              precomputed_floors=run_floors[split])
