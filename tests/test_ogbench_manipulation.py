@@ -202,16 +202,75 @@ def test_inverse_dynamics_matches_the_data(tiny_data):
 
 def test_priors_in_the_plane_are_refused():
     from bridgeplan.normalizer import Normalizer
-    from bridgeplan.priors import WarmPrior, make_prior
+    from bridgeplan.priors import make_prior
 
     layout = FAMILY.layout("cube-single-play-v0")
     normalizer = Normalizer.fit(np.random.default_rng(0).normal(size=(50, layout.transition_dim)))
-    for name in ("learned", "coarse", "warm"):
+    for name in ("learned", "coarse"):
         with pytest.raises(BridgeplanError, match=f"prior {name} is drawn from positions in the plane"):
             make_prior(name, normalizer, layout)
-    with pytest.raises(BridgeplanError, match="prior warm"):
-        WarmPrior(normalizer, layout)
     assert make_prior("line", normalizer, layout).name == "line"
+    assert make_prior("warm", normalizer, layout).name == "warm"
+
+
+def _manipulation_conditions(layout, normalizer, start, goal, horizon):
+    import torch
+
+    def norm(s):
+        return torch.as_tensor(normalizer.normalize(s, layout.state_columns))
+
+    return {0: norm(start), horizon - 1: norm(layout.goal_states(goal))}
+
+
+def test_the_line_in_state_space():
+    """The line prior on an arm's states: the goal's columns evenly from the start's to the goal's, every other column
+    (the arm's pose, which the goal does not give) held at the start's, the actions zero."""
+    import torch
+
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    rng = np.random.default_rng(0)
+    normalizer = Normalizer.fit(rng.normal(size=(50, layout.transition_dim)))
+    start, goal = rng.normal(size=(2, 28)), rng.normal(size=(2, 28))
+    conditions = _manipulation_conditions(layout, normalizer, start, goal, 5)
+    x = make_prior("line", normalizer, layout, stride=4).sample(conditions, 5, 2, torch.Generator().manual_seed(0))
+    traj = normalizer.unnormalize(x.double().numpy())
+    states, g = layout.states(traj), list(layout.goal)
+    frac = np.linspace(0, 1, 5)[None, :, None]
+    np.testing.assert_allclose(states[:, :, g], start[:, None, g] + frac * (goal - start)[:, None, g], atol=1e-6)
+    other = [c for c in range(28) if c not in g]
+    np.testing.assert_allclose(states[:, :, other], np.repeat(start[:, None, other], 5, axis=1), atol=1e-6)
+    np.testing.assert_allclose(layout.actions(traj), 0, atol=1e-6)
+
+
+def test_the_warm_prior_in_state_space():
+    """The previous plan shifted by the steps executed (at stride 2, 4 steps: 2 planned states), its tail the line in
+    state space from its last state toward the goal's columns (the others held at that state's)."""
+
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    rng = np.random.default_rng(1)
+    normalizer = Normalizer.fit(rng.normal(size=(50, layout.transition_dim)))
+    horizon, stride = 5, 2
+    previous = rng.normal(size=(1, 9, layout.transition_dim))  # S = (H - 1) * stride + 1 steps
+    start, goal = rng.normal(size=(1, 28)), rng.normal(size=(1, 28))
+    warm = make_prior("warm", normalizer, layout, stride=stride).with_previous(previous, [4])
+    conditions = _manipulation_conditions(layout, normalizer, start, goal, horizon)
+    traj = normalizer.unnormalize(warm.sample(conditions, horizon, 1).double().numpy())[0]
+    np.testing.assert_allclose(layout.states(traj[0]), start[0], atol=1e-6)  # the current state inpainted
+    np.testing.assert_allclose(traj[1:3], previous[0, [6, 8]], atol=1e-6)  # t * stride + elapsed, inside the plan
+    last, g = layout.states(previous[0, -1]), list(layout.goal)
+    # the tail: from the previous plan's end (planned index 2) to the goal at index 4
+    np.testing.assert_allclose(layout.states(traj[3])[g], last[g] + 0.5 * (goal[0, g] - last[g]), atol=1e-6)
+    np.testing.assert_allclose(layout.states(traj[4])[g], goal[0, g], atol=1e-6)
+    other = [c for c in range(28) if c not in g]
+    np.testing.assert_allclose(layout.states(traj[3:])[:, other], np.repeat(last[None, other], 2, axis=0),
+                               atol=1e-6)
+    np.testing.assert_allclose(layout.actions(traj[3:]), 0, atol=1e-6)
 
 
 def test_goal_states_are_the_goal_columns():
@@ -246,6 +305,44 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
                  "--controller", "actions", "--no-floor", "--no-progress", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
+
+
+@pytest.mark.parametrize("process,prior", [("bridge", "gaussian"), ("bridge", "line"), ("flow", "gaussian"),
+                                           ("flow", "line")])
+def test_bridges_and_flows_train_and_plan_on_cube_single(tiny_data, tmp_path, capsys, process, prior):
+    """The I2SB bridge and flow matching, from noise and from the line in state space, through the commands DDPM's
+    test takes (2 steps; one episode of test task 1, replanned every 50 steps, NFE 2); the loaded planner's plans
+    start at the state and end at the goal's columns; from the line, replans from the previous plan (``warm``)."""
+    import torch
+
+    from bridgeplan.runs import load_planner
+
+    run = tmp_path / "run"
+    assert main(["train", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset", "cpu-small",
+                 "--process", process, "--prior", prior, "--steps", "2", "--batch-size", "4", "--dim", "8",
+                 "--checkpoint-every", "2", "--log-every", "1", "--run-dir", str(run), "--device", "cpu",
+                 "--no-progress"]) == 0
+    capsys.readouterr()
+    evaluate = ["eval", str(run), "--episodes", "1", "--tasks", "1", "--nfe", "2", "--replan-every", "50", "--no-floor",
+                "--no-progress", "--json"]
+    assert main(evaluate) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert (row["process"], row["prior"], row["execution"]["first_prior"]) == (process, prior, prior)
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 4
+    assert row["calls_per_episode"] == 8
+    planner, _ = load_planner(run, device="cpu")
+    layout = planner.layout
+    with np.load(tiny_data) as f:
+        start, goal = f["observations"][[0, 150]].astype(np.float64)
+    plan = planner.plan(start[None], goal[None], 2, torch.Generator().manual_seed(0))
+    assert plan.states.shape == (1, 125, 28) and np.isfinite(plan.states).all()
+    np.testing.assert_allclose(plan.states[0, 0], start, atol=1e-5)
+    np.testing.assert_allclose(plan.states[0, -1, list(layout.goal)], goal[list(layout.goal)], atol=1e-5)
+    if prior == "line":
+        assert main([*evaluate, "--prior", "warm"]) == 0
+        row = json.loads(capsys.readouterr().out)
+        assert (row["execution"]["first_prior"], row["execution"]["replan_prior"]) == ("line", "warm")
+        assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 4
 
 
 def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
