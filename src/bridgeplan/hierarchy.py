@@ -352,11 +352,12 @@ def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, free, layout) -> di
     wall map ``free``, which no planner reads): ``in_walls``, the share of their positions inside walls or outside
     the maze, and ``arrival_step``, the mean step at which they first come within :data:`COARSE_ARRIVAL` of the goal
     (S - 1 when never); the first two None where the family has no wall map."""
-    positions = layout.state_positions(dense)
-    near = np.linalg.norm(positions - goals[:, None], axis=2) <= COARSE_ARRIVAL
+    given = layout.given_columns  # the goal's columns (a position, or a manipulation task's objects)
+    near = np.linalg.norm(dense[..., given] - layout.goal_states(goals)[:, None, given], axis=2) <= COARSE_ARRIVAL
     arrival = np.where(near.any(axis=1), near.argmax(axis=1), dense.shape[1] - 1)
     if free is None:
         return {"in_walls": None, "crossing_walls": None, "arrival_step": float(arrival.mean())}
+    positions = layout.state_positions(dense)
     inside = ~free(positions.reshape(-1, 2)).reshape(positions.shape[:2])
     return {"in_walls": float(inside.mean()), "crossing_walls": float(inside.any(axis=1).mean()),
             "arrival_step": float(arrival.mean())}

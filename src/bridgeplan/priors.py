@@ -144,8 +144,9 @@ class CoarsePrior:
     With only the start and the goal conditioned it is the line prior. In training the subgoals are the
     window's own states (``TrainConfig.subgoal_every``), so the prior is the window's coarse version; in
     planning they are a high-level plan's states, so the prior is that coarse plan, densified. Conditions
-    with NaN rows (holds) are inpainted but are not knots; a goal whose rest columns alone are free (a user's
-    environment's) is one.
+    with NaN rows (holds) are inpainted but are not knots; a goal whose given columns are set (``Layout.given_columns``;
+    its rest, a user's environment's or an arm's pose, free) is one. Where the layout names goal columns, each piece is
+    the line in state space (:func:`line_between`).
     """
 
     name = "coarse"
@@ -157,8 +158,8 @@ class CoarsePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, _ = _endpoints(conditions, horizon, batch)
         layout = self.layout
-        knots = sorted(t for t, state in conditions.items()  # a goal's free rest columns do not unmake a knot
-                       if not bool(torch.isnan(layout.state_positions(state)).any()))
+        knots = sorted(t for t, state in conditions.items()  # a goal's free columns do not unmake a knot
+                       if not bool(torch.isnan(state[..., layout.given_columns]).any()))
         states = {t: self.normalizer.unnormalize(conditions[t].double(), layout.state_columns) for t in knots}
         traj = torch.zeros(batch, horizon, layout.transition_dim, dtype=torch.float64, device=start_n.device)
         for a, b in zip(knots[:-1], knots[1:]):
@@ -257,9 +258,10 @@ class WarmPrior:
 
 def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor, layout: Layout) -> torch.Tensor:
     """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``; the last state's
-    rest columns (a user's environment's, which a goal leaves free) are the first's, as :class:`LearnedPrior` plans."""
+    columns that a goal leaves free (a user's environment's rest, an arm's pose) are the first's, as
+    :class:`LearnedPrior` plans."""
     start, goal = layout.states(x0[:, 0]), layout.states(x0[:, -1]).clone()
-    goal[:, layout.rest_columns()] = start[:, layout.rest_columns()]
+    goal[:, layout.free_columns()] = start[:, layout.free_columns()]
     out = net(start, goal)
     return torch.mean((out - x0) ** 2)
 
@@ -287,17 +289,4 @@ def make_prior(name: str, normalizer: Normalizer, layout: Layout, net: torch.nn.
     trained ``net``."""
     if name not in PRIORS:
         raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
-    if name in IN_THE_PLANE:
-        check_in_the_plane(name, layout)
     return PRIORS[name](normalizer, layout, net, stride)
-
-
-IN_THE_PLANE = frozenset({"learned", "coarse"})
-"""Priors drawn from positions in the plane (a goal's position, a line between positions)."""
-
-
-def check_in_the_plane(name: str, layout: Layout) -> None:
-    """Refuse prior ``name`` of :data:`IN_THE_PLANE` for a layout whose goals are columns of their own."""
-    if layout.goal:
-        raise BridgeplanError(f"prior {name} is drawn from positions in the plane; {layout.name}'s goals are columns "
-                              "of their own (plan from gaussian or line)")

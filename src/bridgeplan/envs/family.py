@@ -173,6 +173,13 @@ class Family:
         continuous stream that passes a place again): :func:`bridgeplan.graph.for_stream`."""
         raise NotImplementedError
 
+    def graph_space(self, stream):
+        """Where the dataset graph measures distances (:class:`bridgeplan.graph.GraphSpace`): the layout's
+        position, unscaled, unless the family says otherwise."""
+        from bridgeplan.graph import GraphSpace
+
+        return GraphSpace.plane(stream.layout)
+
     # --- evaluation --------------------------------------------------------------------------------------------
 
     def body(self, env: str) -> Body:

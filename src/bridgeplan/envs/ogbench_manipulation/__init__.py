@@ -21,6 +21,10 @@ from bridgeplan.trajectory import Layout
 SUFFIX = "-play-v0"
 EFFECTOR_XY = 12
 """The effector's x in the observation (after 6 joint positions and 6 joint velocities; y follows)."""
+GRAPH_GOAL_WEIGHT = 10.0
+"""How much more a jump's distance counts in the objects' columns than in the effector's (``graph_space``)."""
+GRAPH = {"keep": 10, "radius": 1.0, "neighbours": 8, "reach": 2.0}
+"""The dataset graph's settings, distances in the graph's space (:meth:`OGBenchManipulation.graph_space`)."""
 
 
 class OGBenchManipulation(Family):
@@ -127,9 +131,18 @@ class OGBenchManipulation(Family):
 
     # --- evaluation --------------------------------------------------------------------------------------------
 
-    def graph_pace(self, stream):
-        raise BridgeplanError("the dataset graph joins states by their distance in the plane; an arm's states have no "
-                              "such distance here (not built for OGBench manipulation)")
+    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+        """:data:`GRAPH`, the data's median step in the graph's space, its episodes apart."""
+        return GRAPH, self.graph_space(stream).pace(stream.states, stream.segment_starts), False
+
+    def graph_space(self, stream):
+        """The effector's position and the goal's columns (the objects), each standardized over the dataset: what a
+        task moves, and the arm that moves it; the arm's joints, velocities and gripper follow from these."""
+        from bridgeplan.graph import GraphSpace
+
+        layout = stream.layout
+        effector = tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3))
+        return GraphSpace.standardized(stream.states, effector + layout.goal, layout.goal, GRAPH_GOAL_WEIGHT)
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body
