@@ -21,7 +21,10 @@ never saw such a path. But the pieces cross one another. Search on the replay bu
 
 The settings are the environment family's (``Family.graph_pace``, :func:`for_stream`): OGBench's kinematic point
 (4-unit cells, its full step, many short episodes), Maze2D (1-unit cells, the data's median step, one continuous
-stream whose loops are closed by jumps within it).
+stream whose loops are closed by jumps within it). So is the space distances are measured in (``Family.graph_space``,
+:class:`GraphSpace`): a point's position in a maze; an arm's effector position and the objects' columns, each
+standardized over the data, the objects' weighted so that a jump moves the arm, not the objects (OGBench
+manipulation), a goal then joining the nodes whose objects are where the goal puts them.
 
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into decisions, and ``bridgeplan
 graph`` scores them on the environment's tasks: what the data's connectivity alone allows, the floor a stitching
