@@ -391,7 +391,7 @@ def test_the_dataset_graph_over_an_arms_states(tiny_data):
     gap = (stream.states[graph.nodes[c.row[jump]]][:, columns] - stream.states[graph.nodes[c.col[jump]]][:, columns])
     assert np.linalg.norm(gap / std * weight, axis=1).max() <= radius + 1e-9
     assert np.linalg.norm(gap[:, cube] / std[cube], axis=1).max() <= radius / GRAPH_GOAL_WEIGHT + 1e-9
-    plain = GraphSpace.standardized(stream.states, columns, (19, 20, 21))
+    plain = GraphSpace.standardized(stream.states, columns, goal=(19, 20, 21))
     unweighted = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout,
                                     step=graph.step, space=plain)
     assert unweighted.jumps > graph.jumps  # unweighted, jumps would move the cube as far as the arm

@@ -93,8 +93,8 @@ class GraphSpace:
         return cls(tuple(range(layout.position, layout.position + layout.goal_dim)), (1.0,) * layout.goal_dim)
 
     @classmethod
-    def standardized(cls, states: np.ndarray, columns: tuple[int, ...], goal: tuple[int, ...],
-                     goal_weight: float = 1.0) -> GraphSpace:
+    def standardized(cls, states: np.ndarray, columns: tuple[int, ...], goal_weight: float = 1.0,
+                     goal: tuple[int, ...] = ()) -> GraphSpace:
         """``columns`` of ``states [T, obs_dim]`` divided by their standard deviation over them (1 where one is
         constant): columns of several kinds (an effector's position, a button's state) made comparable; the ``goal``
         columns' distances then multiplied by ``goal_weight``."""
@@ -332,8 +332,12 @@ def for_stream(stream: Stream, family, settings: dict | None = None) -> tuple[Da
     defaults, step, within = family.graph_pace(stream)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
+    wanted = family.graph_space(stream)
+    space = (GraphSpace.plane(stream.layout) if wanted is None
+             else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal))
+    step = space.pace(stream.states, stream.segment_starts) if step is None else step
     graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout, step=step,
-                               within_episodes=within, space=family.graph_space(stream))
+                               within_episodes=within, space=space)
     return graph, settings
 
 

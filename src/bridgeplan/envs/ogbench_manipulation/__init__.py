@@ -20,7 +20,7 @@ from bridgeplan.trajectory import Layout
 
 SUFFIX = "-play-v0"
 EFFECTOR_XY = 12
-"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y follows)."""
+"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y and z follow)."""
 GRAPH_GOAL_WEIGHT = 30.0
 """How much more a distance counts in the objects' columns than in the effector's, both standardized
 (:meth:`OGBenchManipulation.graph_space`): a jump of the graph's radius 1 moves the effector by up to one standard
@@ -138,18 +138,15 @@ class OGBenchManipulation(Family):
 
     # --- evaluation --------------------------------------------------------------------------------------------
 
-    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+    def graph_pace(self, stream) -> tuple[dict, None, bool]:
         """:data:`GRAPH`, the data's median step in the graph's space, its episodes apart."""
-        return GRAPH, self.graph_space(stream).pace(stream.states, stream.segment_starts), False
+        return GRAPH, None, False
 
-    def graph_space(self, stream):
-        """The effector's position and the goal's columns (the objects), each standardized over the dataset: what a
-        task moves, and the arm that moves it; the arm's joints, velocities and gripper follow from these."""
-        from bridgeplan.graph import GraphSpace
-
-        layout = stream.layout
-        effector = tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3))
-        return GraphSpace.standardized(stream.states, effector + layout.goal, layout.goal, GRAPH_GOAL_WEIGHT)
+    def graph_space(self, stream) -> tuple[tuple[int, ...], float]:
+        """The effector's position and the goal's columns (the objects), each standardized over the dataset, the
+        objects' weighted by :data:`GRAPH_GOAL_WEIGHT`: what a task moves, and the arm that moves it; the arm's joints,
+        velocities and gripper follow from these."""
+        return tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3)) + stream.layout.goal, GRAPH_GOAL_WEIGHT
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body
