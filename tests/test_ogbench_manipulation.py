@@ -323,13 +323,15 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
     assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
 
 
-@pytest.mark.parametrize("process,prior", [("bridge", "gaussian"), ("bridge", "line"), ("flow", "gaussian"),
+@pytest.mark.parametrize("process,prior", [pytest.param("bridge", "gaussian", marks=pytest.mark.slow),
+                                           ("bridge", "line"), pytest.param("flow", "gaussian", marks=pytest.mark.slow),
                                            ("flow", "line"), ("bridge", "learned")])
 def test_bridges_and_flows_train_and_plan_on_cube_single(tiny_data, tmp_path, capsys, process, prior):
     """The I2SB bridge and flow matching, from noise, from the line in state space and (the bridge) from the learned
     prior (``train-prior``, 4 steps), through the commands DDPM's test takes (2 steps; one episode of test task 1,
     replanned every 50 steps, NFE 2); the loaded planner's plans start at the state and end at the goal's columns; from
-    the line, replans from the previous plan (``warm``)."""
+    the line, replans from the previous plan (``warm``). From noise, marked slow: the line's runs take the same paths
+    (the default suite stays fast)."""
     import torch
 
     from bridgeplan.runs import load_planner

@@ -165,10 +165,10 @@ class DatasetGraph:
     """:meth:`to_goal`'s searches, by goal."""
 
     def __post_init__(self):
-        self.space = self.space or GraphSpace.plane(self.layout)
-        if self.space.goal and self.goal_tree is None:
-            self.goal_tree = cKDTree(self.space.goal_part(self.tree.data))
-        self.goal_tree = self.goal_tree or self.tree
+        if self.space is None:
+            self.space = GraphSpace.plane(self.layout)
+        if self.goal_tree is None:
+            self.goal_tree = cKDTree(self.space.goal_part(self.tree.data)) if self.space.goal else self.tree
 
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int, radius: float, neighbours: int,
@@ -194,7 +194,7 @@ class DatasetGraph:
             rows.append(r)
             episode.append(np.full(len(r), e))
         nodes, episode = np.concatenate(rows), np.concatenate(episode)
-        space = space or GraphSpace.plane(layout)
+        space = GraphSpace.plane(layout) if space is None else space
         xy = space.point(observations[nodes])
         same = episode[1:] == episode[:-1]  # consecutive nodes of one episode
         i, j = np.flatnonzero(same), np.flatnonzero(same) + 1
