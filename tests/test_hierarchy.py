@@ -221,7 +221,8 @@ def test_progress_along_a_plan_that_winds_back(rule, expected):
     from bridgeplan.trajectory import KINEMATIC_POINT
 
     low = SimpleNamespace(layout=KINEMATIC_POINT, process=SimpleNamespace(max_nfe=1, validate_nfe=lambda n: None))
-    hierarchy = SimpleNamespace(low=low, subgoals_per_plan=5, progress_rule=rule, resolve_high_nfe=lambda n: 0)
+    hierarchy = SimpleNamespace(low=low, subgoals_per_plan=5, progress_rule=rule, resolve_high_nfe=lambda n: 0,
+                                points=KINEMATIC_POINT.state_positions)
     source = HierarchySource(hierarchy, None, None, None, 1)
     source.coarse = np.array([[[0, 0], [2, 0], [4, 0], [4, 2], [2, 2], [0, 2.0]]])
     source.progress = np.zeros(1, dtype=np.int64)

@@ -200,18 +200,93 @@ def test_inverse_dynamics_matches_the_data(tiny_data):
         assert fitted == pytest.approx(controllers.RESPONSE[axis], rel=0.25)
 
 
-def test_priors_in_the_plane_are_refused():
-    from bridgeplan.normalizer import Normalizer
-    from bridgeplan.priors import WarmPrior, make_prior
+def test_the_learned_prior_learns_from_the_goals_columns():
+    """``train_prior_loss`` gives the net the window's first state and, as a goal, its last state's goal columns with
+    every other column (the arm's pose, which a planner's goal leaves free) the first's: what ``LearnedPrior`` gives
+    it when planning."""
+    import torch
+
+    from bridgeplan.priors import train_prior_loss
 
     layout = FAMILY.layout("cube-single-play-v0")
-    normalizer = Normalizer.fit(np.random.default_rng(0).normal(size=(50, layout.transition_dim)))
-    for name in ("learned", "coarse", "warm"):
-        with pytest.raises(BridgeplanError, match=f"prior {name} is drawn from positions in the plane"):
-            make_prior(name, normalizer, layout)
-    with pytest.raises(BridgeplanError, match="prior warm"):
-        WarmPrior(normalizer, layout)
-    assert make_prior("line", normalizer, layout).name == "line"
+    seen = []
+
+    def net(start, goal):
+        seen.append((start, goal))
+        return torch.zeros(len(start), 4, layout.transition_dim)
+
+    x0 = torch.randn(2, 4, layout.transition_dim)
+    train_prior_loss(net, x0, layout)
+    (start, goal), = seen
+    g = list(layout.goal)
+    torch.testing.assert_close(start, layout.states(x0[:, 0]))
+    torch.testing.assert_close(goal[:, g], layout.states(x0[:, -1])[:, g])
+    free = layout.free_columns()
+    assert len(free) == 25 and set(free).isdisjoint(g)
+    torch.testing.assert_close(goal[:, free], start[:, free])
+
+
+def _manipulation_conditions(layout, normalizer, start, goal, horizon):
+    import torch
+
+    def norm(s):
+        return torch.as_tensor(normalizer.normalize(s, layout.state_columns))
+
+    return {0: norm(start), horizon - 1: norm(layout.goal_states(goal))}
+
+
+def test_the_line_in_state_space():
+    """The line prior on an arm's states: the goal's columns evenly from the start's to the goal's, every other column
+    (the arm's pose, which the goal does not give) held at the start's, the actions zero; the coarse prior alike."""
+    import torch
+
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    rng = np.random.default_rng(0)
+    normalizer = Normalizer.fit(rng.normal(size=(50, layout.transition_dim)))
+    start, goal = rng.normal(size=(2, 28)), rng.normal(size=(2, 28))
+    conditions = _manipulation_conditions(layout, normalizer, start, goal, 5)
+    x = make_prior("line", normalizer, layout, stride=4).sample(conditions, 5, 2, torch.Generator().manual_seed(0))
+    traj = normalizer.unnormalize(x.double().numpy())
+    states, g = layout.states(traj), list(layout.goal)
+    frac = np.linspace(0, 1, 5)[None, :, None]
+    np.testing.assert_allclose(states[:, :, g], start[:, None, g] + frac * (goal - start)[:, None, g], atol=1e-6)
+    other = [c for c in range(28) if c not in g]
+    np.testing.assert_allclose(states[:, :, other], np.repeat(start[:, None, other], 5, axis=1), atol=1e-6)
+    np.testing.assert_allclose(layout.actions(traj), 0, atol=1e-6)
+    # the coarse prior through the start and the goal alone (the goal a knot by its columns) is the line
+    coarse = make_prior("coarse", normalizer, layout, stride=4).sample(conditions, 5, 2)
+    np.testing.assert_allclose(coarse.numpy(), x.numpy(), atol=1e-6)
+
+
+def test_the_warm_prior_in_state_space():
+    """The previous plan shifted by the steps executed (at stride 2, 4 steps: 2 planned states), its tail the line in
+    state space from its last state toward the goal's columns (the others held at that state's)."""
+
+    from bridgeplan.normalizer import Normalizer
+    from bridgeplan.priors import make_prior
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    rng = np.random.default_rng(1)
+    normalizer = Normalizer.fit(rng.normal(size=(50, layout.transition_dim)))
+    horizon, stride = 5, 2
+    previous = rng.normal(size=(1, 9, layout.transition_dim))  # S = (H - 1) * stride + 1 steps
+    start, goal = rng.normal(size=(1, 28)), rng.normal(size=(1, 28))
+    warm = make_prior("warm", normalizer, layout, stride=stride).with_previous(previous, [4])
+    conditions = _manipulation_conditions(layout, normalizer, start, goal, horizon)
+    traj = normalizer.unnormalize(warm.sample(conditions, horizon, 1).double().numpy())[0]
+    np.testing.assert_allclose(layout.states(traj[0]), start[0], atol=1e-6)  # the current state inpainted
+    np.testing.assert_allclose(traj[1:3], previous[0, [6, 8]], atol=1e-6)  # t * stride + elapsed, inside the plan
+    last, g = layout.states(previous[0, -1]), list(layout.goal)
+    # the tail: from the previous plan's end (planned index 2) to the goal at index 4
+    np.testing.assert_allclose(layout.states(traj[3])[g], last[g] + 0.5 * (goal[0, g] - last[g]), atol=1e-6)
+    np.testing.assert_allclose(layout.states(traj[4])[g], goal[0, g], atol=1e-6)
+    other = [c for c in range(28) if c not in g]
+    np.testing.assert_allclose(layout.states(traj[3:])[:, other], np.repeat(last[None, other], 2, axis=0),
+                               atol=1e-6)
+    np.testing.assert_allclose(layout.actions(traj[3:]), 0, atol=1e-6)
 
 
 def test_goal_states_are_the_goal_columns():
@@ -246,6 +321,117 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
                  "--controller", "actions", "--no-floor", "--no-progress", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
+
+
+@pytest.mark.parametrize("process,prior", [pytest.param("bridge", "gaussian", marks=pytest.mark.slow),
+                                           ("bridge", "line"), pytest.param("flow", "gaussian", marks=pytest.mark.slow),
+                                           ("flow", "line"), ("bridge", "learned")])
+def test_bridges_and_flows_train_and_plan_on_cube_single(tiny_data, tmp_path, capsys, process, prior):
+    """The I2SB bridge and flow matching, from noise, from the line in state space and (the bridge) from the learned
+    prior (``train-prior``, 4 steps), through the commands DDPM's test takes (2 steps; one episode of test task 1,
+    replanned every 50 steps, NFE 2); the loaded planner's plans start at the state and end at the goal's columns; from
+    the line, replans from the previous plan (``warm``). From noise, marked slow: the line's runs take the same paths
+    (the default suite stays fast)."""
+    import torch
+
+    from bridgeplan.runs import load_planner
+
+    run, prior_run = tmp_path / "run", []
+    if prior == "learned":
+        assert main(["train-prior", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset",
+                     "cpu-small", "--steps", "4", "--batch-size", "4", "--checkpoint-every", "4", "--log-every", "2",
+                     "--run-dir", str(tmp_path / "prior"), "--device", "cpu", "--no-progress"]) == 0
+        prior_run = ["--prior-run", str(tmp_path / "prior")]
+    assert main(["train", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset", "cpu-small",
+                 "--process", process, "--prior", prior, *prior_run, "--steps", "2", "--batch-size", "4", "--dim", "8",
+                 "--checkpoint-every", "2", "--log-every", "1", "--run-dir", str(run), "--device", "cpu",
+                 "--no-progress"]) == 0
+    capsys.readouterr()
+    evaluate = ["eval", str(run), "--episodes", "1", "--tasks", "1", "--nfe", "2", "--replan-every", "50", "--no-floor",
+                "--no-progress", "--json"]
+    assert main(evaluate) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert (row["process"], row["prior"], row["execution"]["first_prior"]) == (process, prior, prior)
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 4
+    assert row["calls_per_episode"] == 8
+    planner, _ = load_planner(run, device="cpu")
+    layout = planner.layout
+    with np.load(tiny_data) as f:
+        start, goal = f["observations"][[0, 150]].astype(np.float64)
+    plan = planner.plan(start[None], goal[None], 2, torch.Generator().manual_seed(0))
+    assert plan.states.shape == (1, 125, 28) and np.isfinite(plan.states).all()
+    np.testing.assert_allclose(plan.states[0, 0], start, atol=1e-5)
+    np.testing.assert_allclose(plan.states[0, -1, list(layout.goal)], goal[list(layout.goal)], atol=1e-5)
+    if prior == "line":
+        assert main([*evaluate, "--prior", "warm"]) == 0
+        row = json.loads(capsys.readouterr().out)
+        assert (row["execution"]["first_prior"], row["execution"]["replan_prior"]) == ("line", "warm")
+        assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 4
+
+
+def test_the_dataset_graph_over_an_arms_states(tiny_data):
+    """The graph's space is the effector's position and the cube's, standardized over the data, the cube's distances
+    weighted: a jump moves the arm by at most the radius and the cube by at most the radius over the weight (no
+    carrying a cube by jumps); a goal joins the nodes whose cube is at the goal's, wherever their arm is; the path
+    starts at the state and ends at the goal's columns, the arm's as the last node's."""
+    from bridgeplan.envs.ogbench_manipulation import GRAPH, GRAPH_GOAL_WEIGHT
+    from bridgeplan.graph import DatasetGraph, GraphSpace, for_stream
+
+    stream = FAMILY.load_stream(str(tiny_data), "cube-single-play-v0")
+    radius = 6.0  # the tiny data's 3 episodes pass one another rarely
+    graph, settings = for_stream(stream, FAMILY, {"keep": 2, "radius": radius})
+    assert settings == {**GRAPH, "keep": 2, "radius": radius} and len(graph.nodes) == 3 * 101
+    columns, cube = [12, 13, 14, 19, 20, 21], [3, 4, 5]
+    std = stream.states[:, columns].std(axis=0)
+    weight = np.array([1, 1, 1, GRAPH_GOAL_WEIGHT, GRAPH_GOAL_WEIGHT, GRAPH_GOAL_WEIGHT])
+    assert graph.space.columns == tuple(columns) and np.allclose(graph.space.scale, std / weight)
+    moves = np.linalg.norm(np.diff(stream.states[:, columns] / std * weight, axis=0), axis=1)
+    assert graph.step == pytest.approx(np.median(np.delete(moves, [200, 401])))  # within episodes
+    c = graph.costs.tocoo()
+    jump = (graph.episode[c.row] != graph.episode[c.col]) | (np.abs(c.row - c.col) > 1)
+    assert graph.jumps > 0 and jump.sum() == 2 * graph.jumps
+    gap = (stream.states[graph.nodes[c.row[jump]]][:, columns] - stream.states[graph.nodes[c.col[jump]]][:, columns])
+    assert np.linalg.norm(gap / std * weight, axis=1).max() <= radius + 1e-9
+    assert np.linalg.norm(gap[:, cube] / std[cube], axis=1).max() <= radius / GRAPH_GOAL_WEIGHT + 1e-9
+    plain = GraphSpace.standardized(stream.states, columns, goal=(19, 20, 21))
+    unweighted = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout,
+                                    step=graph.step, space=plain)
+    assert unweighted.jumps > graph.jumps  # unweighted, jumps would move the cube as far as the arm
+    start, goal = stream.states[0], stream.states[150].copy()
+    goal[:19] = 1e3  # the arm's columns: no goal's
+    nodes = graph.path_nodes(graph.space.point(start), graph.space.goal_point(goal))
+    last = stream.states[graph.nodes[nodes[-1]]]  # a node whose cube is at the goal's, its arm wherever it was
+    assert np.linalg.norm((last - goal)[[19, 20, 21]] / std[cube] * GRAPH_GOAL_WEIGHT) <= graph.reach
+    path = graph.path(start, goal)
+    np.testing.assert_allclose(path[0], start)
+    goal_columns = list(FAMILY.layout("cube-single-play-v0").goal)
+    np.testing.assert_allclose(path[-1, goal_columns], goal[goal_columns])
+    np.testing.assert_allclose(path[-1, :19], last[:19])
+    assert len(path) > 100 and (np.abs(np.diff(path[:, 19:22], axis=0)) > 1e-3).any()  # the data carries the cube
+
+
+def test_the_dataset_graph_plans_alone_and_as_a_high_level(tiny_data, tmp_path, capsys):
+    """``bridgeplan graph`` on cube-single: its paths executed by the arm's inverse dynamics; then as the high level
+    of a bridge low level trained with ``--subgoal-every`` from the coarse prior (the path's subgoals, joined by lines
+    in state space), which plans through them every 20 steps."""
+    graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
+             "--controller", "track", "--keep", "2", "--no-progress", "--json"]
+    assert main([*graph, "--out", str(tmp_path / "alone.json")]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 1
+    assert row["graph"]["nodes"] == 3 * 101 and row["graph"]["paths_found"] == 1.0
+    assert row["graph"]["path_steps"]["mean"] > 20  # the data's own states, not a straight line to the goal
+    low = tmp_path / "low"
+    assert main(["train", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--preset", "cpu-small",
+                 "--horizon", "16", "--subgoal-every", "5", "--process", "bridge", "--prior", "coarse", "--steps", "2",
+                 "--batch-size", "4", "--dim", "8", "--checkpoint-every", "2", "--log-every", "1", "--run-dir",
+                 str(low), "--device", "cpu", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main([*graph, "--low", str(low), "--nfe-low", "2", "--out", str(tmp_path / "low.json")]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["low"]["prior"] == "coarse" and row["execution"]["replan_every"] == 20
+    assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 10
+    assert row["coarse_plans"]["arrival_step"] < 200  # the path reaches the goal's cube position
 
 
 def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):

@@ -21,7 +21,10 @@ never saw such a path. But the pieces cross one another. Search on the replay bu
 
 The settings are the environment family's (``Family.graph_pace``, :func:`for_stream`): OGBench's kinematic point
 (4-unit cells, its full step, many short episodes), Maze2D (1-unit cells, the data's median step, one continuous
-stream whose loops are closed by jumps within it).
+stream whose loops are closed by jumps within it). So is the space distances are measured in (``Family.graph_space``,
+:class:`GraphSpace`): a point's position in a maze; an arm's effector position and the objects' columns, each
+standardized over the data, the objects' weighted so that a jump moves the arm, not the objects (OGBench
+manipulation), a goal then joining the nodes whose objects are where the goal puts them.
 
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into decisions, and ``bridgeplan
 graph`` scores them on the environment's tasks: what the data's connectivity alone allows, the floor a stitching
@@ -71,6 +74,64 @@ def check_graph_settings(keep: int | None, radius: float | None, neighbours: int
         raise BridgeplanError(f"--reach must be a positive distance, got {reach}")
 
 
+@dataclass(frozen=True)
+class GraphSpace:
+    """Where the graph measures distances: some of the state's columns, each in units of its own (``scale``); a query's
+    goal is a point of the space or, where goals name columns (a manipulation task's objects), a goal observation
+    whose ``goal`` columns are compared with the nodes' alone."""
+
+    columns: tuple[int, ...]
+    """The state's columns searched."""
+    scale: tuple[float, ...]
+    """Each column's unit: the distance the graph counts is ``states[..., columns] / scale``'s."""
+    goal: tuple[int, ...] = ()
+    """The goal observation's columns a goal names, all among ``columns``; empty: a goal is a point of the space."""
+
+    @classmethod
+    def plane(cls, layout: Layout) -> GraphSpace:
+        """The position, unscaled (a point in a maze; a goal is a position)."""
+        return cls(tuple(range(layout.position, layout.position + layout.goal_dim)), (1.0,) * layout.goal_dim)
+
+    @classmethod
+    def standardized(cls, states: np.ndarray, columns: tuple[int, ...], goal_weight: float = 1.0,
+                     goal: tuple[int, ...] = ()) -> GraphSpace:
+        """``columns`` of ``states [T, obs_dim]`` divided by their standard deviation over them (1 where one is
+        constant): columns of several kinds (an effector's position, a button's state) made comparable; the ``goal``
+        columns' distances then multiplied by ``goal_weight``."""
+        std = np.asarray(states, np.float64)[:, list(columns)].std(axis=0)
+        weight = np.where(np.isin(columns, goal), goal_weight, 1.0)
+        return cls(tuple(columns), tuple((np.where(std > 1e-9, std, 1.0) / weight).tolist()), tuple(goal))
+
+    def point(self, states: np.ndarray) -> np.ndarray:
+        """``[..., len(columns)]`` the space's point of states ``[..., obs_dim]``."""
+        return np.asarray(states, np.float64)[..., list(self.columns)] / np.asarray(self.scale)
+
+    @property
+    def _goal_part(self) -> list[int]:
+        return [self.columns.index(c) for c in self.goal] if self.goal else list(range(len(self.columns)))
+
+    def goal_point(self, goals: np.ndarray) -> np.ndarray:
+        """The point a goal fixes: a goal position itself, or a goal observation's ``goal`` columns, scaled."""
+        goals = np.asarray(goals, np.float64)
+        if not self.goal:
+            return goals / np.asarray(self.scale)
+        return goals[..., list(self.goal)] / np.asarray(self.scale)[self._goal_part]
+
+    def goal_part(self, points: np.ndarray) -> np.ndarray:
+        """Of the space's ``points`` the coordinates a goal fixes (all of them where a goal is a point)."""
+        return points[..., self._goal_part]
+
+    def pace(self, states: np.ndarray, starts: np.ndarray) -> float:
+        """The median distance the data moves in the space in one step, within its episodes (``starts``)."""
+        points = self.point(states)
+        moves = np.linalg.norm(np.diff(points, axis=0), axis=1)
+        within = np.ones(len(moves), dtype=bool)
+        within[np.asarray(starts[1:], np.int64) - 1] = False
+        if not within.any():
+            raise BridgeplanError("the dataset has no two consecutive states: no pace to measure")
+        return float(np.median(moves[within]))
+
+
 @dataclass
 class DatasetGraph:
     """The graph over a dataset's states (:meth:`build`); :meth:`path` answers queries."""
@@ -78,7 +139,7 @@ class DatasetGraph:
     observations: np.ndarray
     """``[T, obs_dim]`` every state of the dataset, episodes one after another."""
     layout: Layout
-    """Which state columns are the position (searched) and the velocity (reversed where a path walks back)."""
+    """The states' columns: the velocity's (reversed where a path walks back), a goal's."""
     nodes: np.ndarray
     """``[V]`` the nodes' rows in ``observations``, ascending."""
     episode: np.ndarray
@@ -86,24 +147,37 @@ class DatasetGraph:
     costs: object
     """``[V, V]`` sparse symmetric matrix of edge costs (steps)."""
     tree: cKDTree
-    """Over the nodes' positions."""
+    """Over the nodes' points (:attr:`space`)."""
     step: float
     """The data's pace: distance per step, what a jump (or a line) of a given length costs in steps."""
     reach: float
     jumps: int = 0
     """Edges between nodes not consecutive in one episode."""
+    space: GraphSpace | None = None
+    """Where distances are measured; None: the layout's plane (:meth:`GraphSpace.plane`)."""
+    goal_tree: cKDTree | None = None
+    """Over the nodes' goal parts (:meth:`GraphSpace.goal_part`) where a goal fixes only some of the space; None:
+    :attr:`tree`."""
     queries: list[tuple[int, bool, int]] = field(default_factory=list)
-    """Per :meth:`path` call: the path's positions, whether a path was found (else the straight line), and how
+    """Per :meth:`path` call: the path's states, whether a path was found (else the straight line), and how
     many of the data's episodes it runs through (1: no stitching)."""
     _to_goal: dict = field(default_factory=dict, repr=False)
     """:meth:`to_goal`'s searches, by goal."""
 
+    def __post_init__(self):
+        if self.space is None:
+            self.space = GraphSpace.plane(self.layout)
+        if self.goal_tree is None:
+            self.goal_tree = cKDTree(self.space.goal_part(self.tree.data)) if self.space.goal else self.tree
+
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int, radius: float, neighbours: int,
-              reach: float, layout: Layout, step: float, within_episodes: bool = False) -> DatasetGraph:
+              reach: float, layout: Layout, step: float, within_episodes: bool = False,
+              space: GraphSpace | None = None) -> DatasetGraph:
         """The graph of ``observations [T, obs_dim]`` (``layout``'s states) whose episodes begin at rows ``starts``
-        (ascending, 0 first). ``within_episodes``: jumps may also join two nodes of one episode that are not
-        consecutive (a long continuous stream that passes a place again)."""
+        (ascending, 0 first), its distances in ``space`` (default: the layout's plane). ``within_episodes``: jumps may
+        also join two nodes of one episode that are not consecutive (a long continuous stream that passes a place
+        again)."""
         check_graph_settings(keep, radius, neighbours, reach)
         if not np.isfinite(step) or step <= 0:
             raise BridgeplanError(f"the data's step must be a positive distance, got {step}")
@@ -120,7 +194,8 @@ class DatasetGraph:
             rows.append(r)
             episode.append(np.full(len(r), e))
         nodes, episode = np.concatenate(rows), np.concatenate(episode)
-        xy = layout.state_positions(observations)[nodes]
+        space = GraphSpace.plane(layout) if space is None else space
+        xy = space.point(observations[nodes])
         same = episode[1:] == episode[:-1]  # consecutive nodes of one episode
         i, j = np.flatnonzero(same), np.flatnonzero(same) + 1
         w = (nodes[j] - nodes[i]).astype(np.float64)
@@ -146,7 +221,7 @@ class DatasetGraph:
         n = len(nodes)
         costs = coo_matrix((np.concatenate([w, w]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
                            shape=(n, n)).tocsr()
-        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps)
+        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps, space)
 
     def summary(self) -> dict:
         """The graph's size and what its queries so far found (a result's ``graph`` entry, beside its settings)."""
@@ -159,22 +234,24 @@ class DatasetGraph:
                         "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}})
         return out
 
-    def _ends(self, points: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per point, the nodes it joins (within ``reach``, else the nearest) and the steps to each."""
-        near = self.tree.query_ball_point(points, self.reach)
+    def _ends(self, points: np.ndarray, tree: cKDTree) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per point (of ``tree``'s space), the nodes it joins (within ``reach``, else the nearest) and the steps to
+        each."""
+        near = tree.query_ball_point(points, self.reach)
         out = []
         for p, idx in zip(points, near):
             idx = np.asarray(idx, np.int64)
             if len(idx) == 0:
-                idx = np.array([self.tree.query(p)[1]], np.int64)
-            out.append((idx, np.linalg.norm(self.tree.data[idx] - p, axis=1) / self.step))
+                idx = np.array([tree.query(p)[1]], np.int64)
+            out.append((idx, np.linalg.norm(tree.data[idx] - p, axis=1) / self.step))
         return out
 
     def path_nodes(self, start: np.ndarray, goal: np.ndarray) -> list[int]:
-        """The cheapest node path from position ``start`` to position ``goal`` (``[2]`` each); [] when no path
-        joins them. The search runs once per goal (:meth:`to_goal`); from any start it is then a lookup."""
+        """The cheapest node path from the point ``start`` to the goal point ``goal`` (:attr:`space`'s; in the plane
+        positions, ``[2]`` each); [] when no path joins them. The search runs once per goal (:meth:`to_goal`); from
+        any start it is then a lookup."""
         cost, toward = self.to_goal(goal)
-        (s_idx, s_cost), = self._ends(np.asarray(start, np.float64)[None])
+        (s_idx, s_cost), = self._ends(np.asarray(start, np.float64)[None], self.tree)
         through = cost[s_idx] + s_cost
         if not np.isfinite(through).any():
             return []
@@ -186,13 +263,13 @@ class DatasetGraph:
         return path
 
     def to_goal(self, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every node's cheapest cost to position ``goal`` (steps; inf where none) and its next node on the way
+        """Every node's cheapest cost to the goal point ``goal`` (steps; inf where none) and its next node on the way
         (``len(nodes)``: the goal itself): one search (Dijkstra, the goal one more node joined to its nodes by the
         steps from them), kept for the goal's next queries (replanning from wherever the agent is, other episodes
         to the same goal; at most :data:`GOALS_KEPT` goals, the oldest forgotten)."""
         key = np.asarray(goal, np.float64).tobytes()
         if key not in self._to_goal:
-            (g_idx, g_cost), = self._ends(np.asarray(goal, np.float64)[None])
+            (g_idx, g_cost), = self._ends(np.asarray(goal, np.float64)[None], self.goal_tree)
             n, c = len(self.nodes), self.costs
             with_goal = csr_matrix((np.concatenate([c.data, np.maximum(g_cost, 1e-9)]),
                                     np.concatenate([c.indices, g_idx]), np.append(c.indptr, c.indptr[-1] + len(g_idx))),
@@ -204,18 +281,19 @@ class DatasetGraph:
         return self._to_goal[key]
 
     def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, obs_dim]`` the cheapest path from state ``start`` to position ``goal``, densified (the straight line
-        when none is found), ending at rest at the goal; recorded in :attr:`queries`."""
+        """``[L, obs_dim]`` the cheapest path from state ``start`` to ``goal`` (a position, or a goal observation where
+        the layout names goal columns), densified (the straight line when none is found), ending at the goal (at
+        rest; the columns a goal leaves free the path's last node's); recorded in :attr:`queries`."""
         start = np.asarray(start, np.float64)
-        nodes = self.path_nodes(self.layout.state_positions(start), goal)
-        end = self.layout.at_rest(np.asarray(goal, np.float64))  # the state's rest, if any: held from the path's end
+        nodes = self.path_nodes(self.space.point(start), self.space.goal_point(goal))
+        end = self.layout.goal_states(goal)  # the columns a goal leaves free: held from the path's end
         end = np.where(np.isnan(end), self.observations[self.nodes[nodes[-1]]] if nodes else start, end)
         dense = self.densify(start, end, nodes)
         self.queries.append((len(dense), bool(nodes), len(set(self.episode[nodes].tolist()))))
         return dense
 
     def densify(self, start: np.ndarray, goal: np.ndarray, path: list[int]) -> np.ndarray:
-        """``[L, obs_dim]`` states whose positions are at most ``step`` apart per axis, from state ``start``
+        """``[L, obs_dim]`` states whose points are at most ``step`` apart per axis, from state ``start``
         through ``path`` to state ``goal``: the dataset's states between consecutive nodes of one episode (walked
         back, their velocities reversed), straight lines elsewhere."""
         pieces = [np.asarray(start, np.float64)[None]]
@@ -240,22 +318,26 @@ class DatasetGraph:
         return out
 
     def _line(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """States from ``a`` (excluded) to ``b`` (included), interpolated, positions at most ``step`` apart per
+        """States from ``a`` (excluded) to ``b`` (included), interpolated, their points at most ``step`` apart per
         axis."""
         a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-        gap = self.layout.state_positions(b) - self.layout.state_positions(a)
+        gap = self.space.point(b) - self.space.point(a)
         n = max(1, int(np.ceil(np.abs(gap).max() / self.step)))
         return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
 
 
 def for_stream(stream: Stream, family, settings: dict | None = None) -> tuple[DatasetGraph, dict]:
-    """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's)
-    and pace (``Family.graph_pace``); returns it and the settings it was built with."""
+    """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
+    pace (``Family.graph_pace``) and space (``Family.graph_space``); returns it and the settings it was built with."""
     defaults, step, within = family.graph_pace(stream)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
+    wanted = family.graph_space(stream)
+    space = (GraphSpace.plane(stream.layout) if wanted is None
+             else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal))
+    step = space.pace(stream.states, stream.segment_starts) if step is None else step
     graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout, step=step,
-                               within_episodes=within)
+                               within_episodes=within, space=space)
     return graph, settings
 
 

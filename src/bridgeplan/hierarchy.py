@@ -66,6 +66,10 @@ class Hierarchy:
     def subgoals_per_plan(self) -> int:
         return self.low.subgoals_per_plan
 
+    def points(self, states: np.ndarray) -> np.ndarray:
+        """Where states are along a coarse plan (:meth:`HierarchySource.advance`): their positions."""
+        return self.low.layout.state_positions(states)
+
     def resolve_high_nfe(self, nfe: int | None) -> int:
         """Network calls per coarse plan: ``nfe``, checked, or (None) the high level's process's most."""
         nfe = self.high.process.max_nfe if nfe is None else nfe
@@ -134,6 +138,11 @@ class GraphHierarchy:
     @property
     def subgoals_per_plan(self) -> int:
         return self.low.subgoals_per_plan
+
+    def points(self, states: np.ndarray) -> np.ndarray:
+        """Where states are along a coarse plan: their points in the graph's space (a maze's positions; an arm's
+        effector and objects, standardized)."""
+        return self.graph.space.point(states)
 
     def resolve_high_nfe(self, nfe: int | None) -> int:
         if nfe not in (None, 0):
@@ -267,14 +276,14 @@ class HierarchySource:
         self.high_seconds += seconds
         self.high_plans += len(episodes)
 
-    def advance(self, positions: np.ndarray, episodes: np.ndarray) -> np.ndarray:
-        """Move each episode's progress along its coarse plan, by the hierarchy's ``progress_rule``: ``nearest``,
-        to the coarse state nearest its position among the next ``m + 1``; ``sequential``, one coarse state at a
-        time while the next is no farther than the current (a plan that winds back near itself across a wall,
-        as the data's paths do, is not skipped along)."""
+    def advance(self, states: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+        """Move each episode's progress along its coarse plan, by the hierarchy's ``progress_rule``, measured at the
+        hierarchy's ``points`` of ``states`` and of the plan: ``nearest``, to the coarse state nearest among the next
+        ``m + 1``; ``sequential``, one coarse state at a time while the next is no farther than the current (a plan
+        that winds back near itself across a wall, as the data's paths do, is not skipped along)."""
         coarse, progress = self.coarse[episodes], self.progress[episodes].copy()
-        layout = self.hierarchy.low.layout  # the levels' layouts are one (check_levels)
-        xy, last, rows = layout.state_positions(coarse), coarse.shape[1] - 1, np.arange(len(episodes))
+        positions = self.hierarchy.points(states)
+        xy, last, rows = self.hierarchy.points(coarse), coarse.shape[1] - 1, np.arange(len(episodes))
         if self.hierarchy.progress_rule == "sequential":
             while True:
                 after = np.minimum(progress + 1, last)
@@ -300,7 +309,7 @@ class HierarchySource:
             due = np.flatnonzero(t - self.coarse_at[episodes] >= self.replan_high_every)
             if len(due):
                 self.plan_coarse(states[due], goals[due], episodes[due], t)
-        progress = self.advance(h.low.layout.state_positions(states), episodes)
+        progress = self.advance(states, episodes)
         plan = h.low.plan(states, None, self.nfe_low, self.generator,
                           subgoals=h.subgoals(self.coarse[episodes], progress))
         self.calls[episodes] += self.nfe_low
@@ -352,11 +361,12 @@ def coarse_diagnostics(dense: np.ndarray, goals: np.ndarray, free, layout) -> di
     wall map ``free``, which no planner reads): ``in_walls``, the share of their positions inside walls or outside
     the maze, and ``arrival_step``, the mean step at which they first come within :data:`COARSE_ARRIVAL` of the goal
     (S - 1 when never); the first two None where the family has no wall map."""
-    positions = layout.state_positions(dense)
-    near = np.linalg.norm(positions - goals[:, None], axis=2) <= COARSE_ARRIVAL
+    given = layout.given_columns  # the goal's columns (a position, or a manipulation task's objects)
+    near = np.linalg.norm(dense[..., given] - layout.goal_states(goals)[:, None, given], axis=2) <= COARSE_ARRIVAL
     arrival = np.where(near.any(axis=1), near.argmax(axis=1), dense.shape[1] - 1)
     if free is None:
         return {"in_walls": None, "crossing_walls": None, "arrival_step": float(arrival.mean())}
+    positions = layout.state_positions(dense)
     inside = ~free(positions.reshape(-1, 2)).reshape(positions.shape[:2])
     return {"in_walls": float(inside.mean()), "crossing_walls": float(inside.any(axis=1).mean()),
             "arrival_step": float(arrival.mean())}

@@ -69,6 +69,24 @@ def rest_of(states: torch.Tensor, layout: Layout) -> torch.Tensor:
     return states[:, layout.rest_columns()]
 
 
+def line_between(start: torch.Tensor, goal: torch.Tensor, frac: torch.Tensor, steps: torch.Tensor,
+                 layout: Layout) -> torch.Tensor:
+    """Physical trajectory ``[B, T, D]`` from states ``start`` to goal states ``goal`` (``[B, obs_dim]``, physical; a
+    goal's free columns NaN) at the fractions ``frac`` ``[B or 1, T]`` of the way, covered in ``steps`` ``[B, 1]``
+    environment steps: where the layout's goal is a position, :func:`straight_segment` between the positions (the
+    rest of the state held at the start's); where it names goal columns (a robot moving objects), the line in state
+    space: every column the goal gives from the start's to the goal's, every other column held at the start's (the
+    goal says nothing of the robot's pose, and a line through joint angles toward a guessed pose would only add a
+    guess), the actions zero."""
+    if not layout.goal:
+        return straight_segment(layout.state_positions(start), layout.state_positions(goal), frac, steps, layout,
+                                rest_of(start, layout))
+    end = torch.where(torch.isnan(goal), start, goal)
+    traj = start.new_zeros(len(start), frac.shape[1], layout.transition_dim)
+    layout.states(traj)[...] = start[:, None] + frac[..., None] * (end - start)[:, None]
+    return traj
+
+
 class GaussianPrior:
     """White noise: the bridge from it is a noise-to-data bridge (the thesis's control experiment)."""
 
@@ -95,7 +113,8 @@ class LinePrior:
     the constant action is the unit vector toward the goal (zero when start == goal): the data's actions come
     from a saturating waypoint controller, so their magnitude is about 1, and the tracking controller ignores
     planned actions anyway; the rest of the state, where it has more (a user's environment), at the start's values.
-    The result is normalized with the normalizer of the data, then the start state
+    Where the layout names goal columns (OGBench manipulation), the line in state space instead
+    (:func:`line_between`). The result is normalized with the normalizer of the data, then the start state
     (with its velocity) and the goal state (zero velocity, from the planner) are inpainted.
     """
 
@@ -108,29 +127,13 @@ class LinePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, goal_n = _endpoints(conditions, horizon, batch)
         layout = self.layout
-        if layout.goal:
-            return apply_conditions(self._state_line(start_n, goal_n, horizon), conditions)
-        start_state = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
-        start = layout.state_positions(start_state)
-        goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
+        start = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
+        goal = self.normalizer.unnormalize(goal_n.double(), layout.state_columns)
         frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :]
         steps = float(max(horizon - 1, 1) * self.stride)
         steps = torch.full((batch, 1), steps, dtype=torch.float64, device=start.device)
-        traj = straight_segment(start, goal, frac, steps, layout, rest_of(start_state, layout))
-        x = self.normalizer.normalize(traj).to(start_n.dtype)
+        x = self.normalizer.normalize(line_between(start, goal, frac, steps, layout)).to(start_n.dtype)
         return apply_conditions(x, conditions)
-
-    def _state_line(self, start_n: torch.Tensor, goal_n: torch.Tensor, horizon: int) -> torch.Tensor:
-        """Where the layout names goal columns (a robot moving objects), the line in state space: those columns evenly
-        from the start's to the goal's, every other column held at the start's, the actions zero."""
-        layout = self.layout
-        start = self.normalizer.unnormalize(start_n.double(), layout.state_columns)
-        goal = self.normalizer.unnormalize(goal_n.double(), layout.state_columns)
-        frac = torch.linspace(0, 1, horizon, dtype=torch.float64, device=start.device)[None, :, None]
-        end = torch.where(torch.isnan(goal), start, goal)
-        traj = start.new_zeros(len(start), horizon, layout.transition_dim)
-        layout.states(traj)[...] = start[:, None] + frac * (end - start)[:, None]
-        return self.normalizer.normalize(traj).to(start_n.dtype)
 
 
 class CoarsePrior:
@@ -141,8 +144,9 @@ class CoarsePrior:
     With only the start and the goal conditioned it is the line prior. In training the subgoals are the
     window's own states (``TrainConfig.subgoal_every``), so the prior is the window's coarse version; in
     planning they are a high-level plan's states, so the prior is that coarse plan, densified. Conditions
-    with NaN rows (holds) are inpainted but are not knots; a goal whose rest columns alone are free (a user's
-    environment's) is one.
+    with NaN rows (holds) are inpainted but are not knots; a goal whose given columns are set (``Layout.given_columns``;
+    its rest, a user's environment's or an arm's pose, free) is one. Where the layout names goal columns, each piece is
+    the line in state space (:func:`line_between`).
     """
 
     name = "coarse"
@@ -154,15 +158,14 @@ class CoarsePrior:
                generator: torch.Generator | None = None) -> torch.Tensor:
         start_n, _ = _endpoints(conditions, horizon, batch)
         layout = self.layout
-        knots = sorted(t for t, state in conditions.items()  # a goal's free rest columns do not unmake a knot
-                       if not bool(torch.isnan(layout.state_positions(state)).any()))
+        knots = sorted(t for t, state in conditions.items()  # a goal's free columns do not unmake a knot
+                       if not bool(torch.isnan(state[..., layout.given_columns]).any()))
         states = {t: self.normalizer.unnormalize(conditions[t].double(), layout.state_columns) for t in knots}
         traj = torch.zeros(batch, horizon, layout.transition_dim, dtype=torch.float64, device=start_n.device)
         for a, b in zip(knots[:-1], knots[1:]):
             frac = torch.linspace(0, 1, b - a + 1, dtype=torch.float64, device=start_n.device)[None, :]
             steps = torch.full((batch, 1), float((b - a) * self.stride), dtype=torch.float64, device=start_n.device)
-            traj[:, a:b + 1] = straight_segment(layout.state_positions(states[a]), layout.state_positions(states[b]),
-                                                frac, steps, layout, rest_of(states[a], layout))
+            traj[:, a:b + 1] = line_between(states[a], states[b], frac, steps, layout)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
 
@@ -198,18 +201,17 @@ class WarmPrior:
     one row per environment step (``S = (H - 1) * stride + 1``), and ``elapsed`` ``[B]`` the steps since each
     was made (``with_previous``). The sample at planned index ``t`` is the previous plan at step
     ``t * stride + elapsed`` while that is inside it; after its end (the last ``elapsed`` steps) positions go
-    in a straight line from the previous plan's last position to the goal condition at ``t = H - 1`` (as
-    :func:`straight_segment` draws it, velocity clipped to ``MAX_SPEED``), actions the unit vector toward the goal: the
-    previous plan ended at the goal, so this holds the goal with zero velocity and action, unless the goal has
-    moved. Then the current state is inpainted at ``t = 0`` and the goal at ``t = H - 1``
-    (``apply_conditions``). Built without previous plans (``make_prior("warm", ...)``), it refuses to
-    sample: a first plan has nothing to start from.
+    in a straight line from the previous plan's last state to the goal condition at ``t = H - 1`` as
+    :func:`line_between` draws it (in the plane: velocity clipped to ``MAX_SPEED``, actions the unit vector toward
+    the goal; where the layout names goal columns, those columns toward the goal's, the others held): the previous
+    plan ended at the goal, so this holds the goal, unless the goal has moved. Then the current state is inpainted
+    at ``t = 0`` and the goal at ``t = H - 1`` (``apply_conditions``). Built without previous plans
+    (``make_prior("warm", ...)``), it refuses to sample: a first plan has nothing to start from.
     """
 
     name = "warm"
 
     def __init__(self, normalizer: Normalizer, layout: Layout, previous=None, elapsed=None, stride: int = 1):
-        check_in_the_plane(self.name, layout)
         self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
         self.previous = None if previous is None else torch.as_tensor(previous, dtype=torch.float64)
         self.elapsed = None if elapsed is None else torch.as_tensor(elapsed, dtype=torch.int64).reshape(-1)
@@ -246,10 +248,9 @@ class WarmPrior:
         # line from its last position to the goal
         end = (steps - 1 - elapsed).clamp(min=0).double() / self.stride
         left = (horizon - 1 - end).clamp(min=1e-9)
-        goal = layout.state_positions(self.normalizer.unnormalize(goal_n.double(), layout.state_columns))
-        line = straight_segment(layout.positions(prev[:, -1]), goal, (t - end).clamp(min=0) / left,
-                                (left * self.stride).clamp(min=1), layout,
-                                rest_of(layout.states(prev[:, -1]), layout))
+        goal = self.normalizer.unnormalize(goal_n.double(), layout.state_columns)
+        line = line_between(layout.states(prev[:, -1]), goal, (t - end).clamp(min=0) / left,
+                            (left * self.stride).clamp(min=1), layout)
         traj = torch.where((t > end)[..., None], line, traj)
         x = self.normalizer.normalize(traj).to(start_n.dtype)
         return apply_conditions(x, conditions)
@@ -257,9 +258,10 @@ class WarmPrior:
 
 def train_prior_loss(net: torch.nn.Module, x0: torch.Tensor, layout: Layout) -> torch.Tensor:
     """L2 between the net's trajectory for each window's (first, last) states and the window ``x0``; the last state's
-    rest columns (a user's environment's, which a goal leaves free) are the first's, as :class:`LearnedPrior` plans."""
+    columns that a goal leaves free (a user's environment's rest, an arm's pose) are the first's, as
+    :class:`LearnedPrior` plans."""
     start, goal = layout.states(x0[:, 0]), layout.states(x0[:, -1]).clone()
-    goal[:, layout.rest_columns()] = start[:, layout.rest_columns()]
+    goal[:, layout.free_columns()] = start[:, layout.free_columns()]
     out = net(start, goal)
     return torch.mean((out - x0) ** 2)
 
@@ -287,17 +289,4 @@ def make_prior(name: str, normalizer: Normalizer, layout: Layout, net: torch.nn.
     trained ``net``."""
     if name not in PRIORS:
         raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
-    if name in IN_THE_PLANE:
-        check_in_the_plane(name, layout)
     return PRIORS[name](normalizer, layout, net, stride)
-
-
-IN_THE_PLANE = frozenset({"learned", "coarse", "warm"})
-"""Priors drawn from positions in the plane (a goal's position, a line between positions)."""
-
-
-def check_in_the_plane(name: str, layout: Layout) -> None:
-    """Refuse prior ``name`` of :data:`IN_THE_PLANE` for a layout whose goals are columns of their own."""
-    if layout.goal:
-        raise BridgeplanError(f"prior {name} is drawn from positions in the plane; {layout.name}'s goals are columns "
-                              "of their own (plan from gaussian or line)")

@@ -104,6 +104,18 @@ class Layout:
             raise BridgeplanError(f"the {self.name} layout has no velocity columns (its state is the position)")
         return slice(self.velocity, self.velocity + 2)
 
+    @property
+    def given_columns(self) -> list[int]:
+        """The state's columns a goal gives: those the layout names, else the position's."""
+        return list(self.goal) or list(range(self.position, self.position + self.goal_dim))
+
+    def free_columns(self) -> list[int]:
+        """The state's columns a goal leaves free: where the layout names goal columns every other one, else the rest
+        (:meth:`rest_columns`; a goal position's velocity is given, at rest)."""
+        if self.goal:
+            return [c for c in range(self.obs_dim) if c not in self.goal]
+        return self.rest_columns()
+
     def rest_columns(self) -> list[int]:
         """The state's columns that are neither the position nor the velocity."""
         taken = {*range(self.position, self.position + self.goal_dim),

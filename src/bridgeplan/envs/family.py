@@ -167,11 +167,18 @@ class Family:
         """A dataset file's summary (JSON-ready) and its text, checked to be of ``env`` where given."""
         raise NotImplementedError
 
-    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+    def graph_pace(self, stream) -> tuple[dict, float | None, bool]:
         """The dataset graph's settings for this family (``keep``, ``radius``, ``neighbours``, ``reach``), the
-        data's step (distance per environment step) and whether a jump may join two nodes of one episode (a
-        continuous stream that passes a place again): :func:`bridgeplan.graph.for_stream`."""
+        data's step (distance per environment step; None: its median step in the graph's space) and whether a jump
+        may join two nodes of one episode (a continuous stream that passes a place again):
+        :func:`bridgeplan.graph.for_stream`."""
         raise NotImplementedError
+
+    def graph_space(self, stream) -> tuple[tuple[int, ...], float] | None:
+        """Where the dataset graph measures distances: None, the layout's position, unscaled; or the state's columns,
+        each standardized over the data, and how much more the goal's columns among them count
+        (:meth:`bridgeplan.graph.GraphSpace.standardized`)."""
+        return None
 
     # --- evaluation --------------------------------------------------------------------------------------------
 

@@ -20,7 +20,18 @@ from bridgeplan.trajectory import Layout
 
 SUFFIX = "-play-v0"
 EFFECTOR_XY = 12
-"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y follows)."""
+"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y and z follow)."""
+GRAPH_GOAL_WEIGHT = 30.0
+"""How much more a distance counts in the objects' columns than in the effector's, both standardized
+(:meth:`OGBenchManipulation.graph_space`): a jump of the graph's radius 1 moves the effector by up to one standard
+deviation (about 6 of the data's steps) and a cube by up to 1/30 of one (2 mm in x, 6 mm in y on cube-single), so the
+graph's paths carry cubes by the data's own steps, not by chains of jumps. Chosen on cube-single's validation tasks
+(6-10, 10 episodes each; the graph's paths executed by the inverse dynamics): weight 1 (plain standardization) 0 %
+(its paths teleport the cube: 26 steps long), 10 42 %, 20 74 %, 30 76 %, 100 2 % (too few jumps: paths of 957 steps)."""
+GRAPH = {"keep": 5, "radius": 1.0, "neighbours": 8, "reach": 2.0}
+"""The dataset graph's settings, distances in the graph's space: on cube-single's real dataset (1000 x 1001 steps)
+every 5th state, 201 k nodes, about 0.3 M jumps, built in 2-8 s on this machine; chosen on its validation tasks
+(weight 30; 10 episodes each): keep 5 82 %, keep 10 76 %, keep 20 58 %, radius 0.5 28 % (too few jumps), 1.5 72 %."""
 
 
 class OGBenchManipulation(Family):
@@ -127,9 +138,15 @@ class OGBenchManipulation(Family):
 
     # --- evaluation --------------------------------------------------------------------------------------------
 
-    def graph_pace(self, stream):
-        raise BridgeplanError("the dataset graph joins states by their distance in the plane; an arm's states have no "
-                              "such distance here (not built for OGBench manipulation)")
+    def graph_pace(self, stream) -> tuple[dict, None, bool]:
+        """:data:`GRAPH`, the data's median step in the graph's space, its episodes apart."""
+        return GRAPH, None, False
+
+    def graph_space(self, stream) -> tuple[tuple[int, ...], float]:
+        """The effector's position and the goal's columns (the objects), each standardized over the dataset, the
+        objects' weighted by :data:`GRAPH_GOAL_WEIGHT`: what a task moves, and the arm that moves it; the arm's joints,
+        velocities and gripper follow from these."""
+        return tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3)) + stream.layout.goal, GRAPH_GOAL_WEIGHT
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body
