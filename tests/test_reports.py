@@ -458,3 +458,8 @@ def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(t
     assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) |" in lines
     assert "| ddpm | test | 1 | 50.0 | - |" in lines
     assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines
+    # the README's lines: the test tasks only, readable names, the published number where there is one
+    assert mc.block(tmp_path).splitlines() == [
+        "- cube-single-play-v0, DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps): 50.0% (one run)",
+        "- cube-single-play-v0, GCBC (20 k steps): 6.0 ± 2.0% over 2 training seeds; OGBench published 6 (8 seeds, "
+        "1 M steps)"]

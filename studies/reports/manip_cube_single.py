@@ -22,6 +22,10 @@ READS = ()
 FOLDER = "manip-cube-single"
 PUBLISHED = {"gcbc": "6 (8 seeds, 1 M steps)", "gciql": "68 (8 seeds, 1 M steps)"}
 """OGBench's published success (%) on cube-single-play-v0 (Park et al., ICLR 2025)."""
+LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
+          "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)",
+          "graph-keep5-r1": "the dataset graph (no network: every 5th state, radius 1, replanned every 50 steps)"}
+"""The README's names of the study's methods (the files' names are the report's)."""
 
 
 def rows(root: Path) -> list[dict]:
@@ -34,6 +38,26 @@ def rows(root: Path) -> list[dict]:
         validation = any(int(t) > 5 for t in d["tasks"])
         out.append({**d, "method": name.split("-s")[0], "validation": validation})
     return out
+
+
+def test_rates(found: list[dict]) -> dict[str, list[float]]:
+    """Each method's success (%) on the test tasks, one per training seed (the graph: one)."""
+    out: dict[str, list[float]] = {}
+    for r in found:
+        if not r["validation"]:
+            out.setdefault(r["method"], []).append(100 * r["success_rate"])
+    return dict(sorted(out.items()))
+
+
+def block(root: Path) -> str:
+    """The README's lines: each method's success on the 5 test tasks, beside the published number."""
+    found = rows(root)
+    if not found:
+        return "- cube-single-play-v0: no rows yet (`bridgeplan study run manip-cube-single`)."
+    return "\n".join(f"- cube-single-play-v0, {LABELS.get(method, method)}: {fmt_mean_se(rates, one_seed='mean')}% "
+                     + (f"over {len(rates)} training seeds" if len(rates) > 1 else "(one run)")
+                     + (f"; OGBench published {PUBLISHED[method]}" if method in PUBLISHED else "")
+                     for method, rates in test_rates(found).items())
 
 
 def render(root: Path) -> str:
