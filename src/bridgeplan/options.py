@@ -1,0 +1,204 @@
+"""Command options declared once: each option a field of an options dataclass with its help (:func:`opt`), groups
+of them shared by several commands as dataclasses of their own (:func:`group`). The CLI's flags are generated from
+them (:func:`add_options`, then :func:`options_from_args`); a study file's ``args`` table fills the same dataclass
+(:func:`options_from_dict`), so the study runner calls the command's function without a command line.
+
+A field's flag is its name with dashes; its annotation gives the argument's type: ``bool`` a switch, ``int``,
+``float``, ``str`` (``X | None`` the same, None when not given), ``Literal[...]`` its choices, ``list[X]`` several
+values. A field without a default is required: a positional argument, or a required flag (``required=True``)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import types
+import typing
+from collections.abc import Iterator, Mapping
+from typing import Any, Literal
+
+from bridgeplan.errors import BridgeplanError
+
+
+def opt(default: Any = dataclasses.MISSING, help: str = "", **argparse_kwargs) -> Any:
+    """An option: its default (none: required), its help, and what argparse needs beyond the annotation
+    (``metavar``, ``action="append"``, ``required=True`` for a required flag rather than a positional)."""
+    metadata = {"help": help, "argparse": argparse_kwargs}
+    if isinstance(default, (list, tuple)):
+        return dataclasses.field(default_factory=lambda: list(default), metadata=metadata)
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def group(options: type, **defaults) -> Any:
+    """A group of options (the dataclass ``options``) inside a command's options; ``defaults``: this command's own
+    defaults for some of its fields (an override visible here, not a second declaration)."""
+    return dataclasses.field(metadata={"group": options, "defaults": defaults})
+
+
+@dataclasses.dataclass(frozen=True)
+class Leaf:
+    """One option as the generator sees it: its field, where it sits and its default in this command."""
+
+    name: str
+    path: tuple[str, ...]
+    """The group fields leading to it."""
+    kind: Any
+    """Its annotation, resolved."""
+    default: Any
+    help: str
+    extra: dict
+    title: str | None
+    """The argument group it is shown in (its group's ``title``), if any."""
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+    @property
+    def positional(self) -> bool:
+        return self.default is dataclasses.MISSING and not self.extra.get("required")
+
+
+def leaves(options: type, path: tuple[str, ...] = (), defaults: Mapping | None = None,
+           title: str | None = None) -> Iterator[Leaf]:
+    """The options of ``options`` and of its groups, depth first."""
+    hints = typing.get_type_hints(options)
+    for f in dataclasses.fields(options):
+        if "group" in f.metadata:
+            inner = f.metadata["group"]
+            yield from leaves(inner, (*path, f.name), {**f.metadata["defaults"], **(defaults or {})},
+                              getattr(inner, "title", None) or title)
+            continue
+        default = f.default if f.default_factory is dataclasses.MISSING else f.default_factory()
+        default = (defaults or {}).get(f.name, default)
+        yield Leaf(f.name, path, hints[f.name], default, f.metadata.get("help", ""),
+                   dict(f.metadata.get("argparse", {})), title)
+
+
+def _check_once(options: type) -> list[Leaf]:
+    """The options of ``options``; a name declared twice in its groups is a programming error."""
+    found = list(leaves(options))
+    seen: dict[str, Leaf] = {}
+    for leaf in found:
+        if leaf.name in seen:
+            where = [".".join((*x.path, x.name)) for x in (seen[leaf.name], leaf)]
+            raise TypeError(f"{options.__name__}: option {leaf.name!r} declared twice ({where[0]}, {where[1]})")
+        seen[leaf.name] = leaf
+    return found
+
+
+def _base(kind: Any) -> tuple[Any, bool]:
+    """``kind`` without ``| None``, and whether it was optional."""
+    if isinstance(kind, types.UnionType) or typing.get_origin(kind) is typing.Union:
+        args = [a for a in typing.get_args(kind) if a is not type(None)]
+        return args[0], True
+    return kind, False
+
+
+def _shape(leaf: Leaf) -> tuple[Any, bool, tuple | None]:
+    """(the type of one value, whether it takes several, its choices)."""
+    kind, _ = _base(leaf.kind)
+    many = typing.get_origin(kind) in (list, tuple)
+    if many:
+        kind = typing.get_args(kind)[0]
+    choices = None
+    if typing.get_origin(kind) is Literal:
+        choices = typing.get_args(kind)
+        kind = type(choices[0])
+    return kind, many, choices
+
+
+def _default_text(value: Any) -> str:
+    return ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+
+
+def add_options(parser: argparse.ArgumentParser, options: type) -> argparse.ArgumentParser:
+    """The arguments of ``options`` (and its groups) added to ``parser``; its help shows each default."""
+    groups: dict[str, Any] = {}
+    for leaf in _check_once(options):
+        kind, many, choices = _shape(leaf)
+        target = parser if leaf.title is None else groups.setdefault(
+            leaf.title, parser.add_argument_group(leaf.title))
+        kwargs = dict(leaf.extra)
+        shown = not any(leaf.default is v for v in (None, False, dataclasses.MISSING)) and leaf.default != []
+        kwargs["help"] = leaf.help + (f" (default: {_default_text(leaf.default)})" if shown else "")
+        if kind is bool and not many:
+            kwargs.setdefault("action", "store_true")
+        else:
+            kwargs["type"] = kind
+            if choices:
+                kwargs["choices"] = choices
+            if many and "action" not in kwargs:
+                kwargs.setdefault("nargs", "+")
+        if leaf.positional:
+            target.add_argument(leaf.name, **kwargs)
+            continue
+        if leaf.default is not dataclasses.MISSING:
+            kwargs["default"] = leaf.default
+        target.add_argument(leaf.flag, dest=leaf.name, **kwargs)
+    return parser
+
+
+def _build(options: type, values: Mapping[str, Any], path: tuple[str, ...] = ()):
+    fields = {}
+    for f in dataclasses.fields(options):
+        if "group" in f.metadata:
+            fields[f.name] = _build(f.metadata["group"], values, (*path, f.name))
+        else:
+            fields[f.name] = values[f.name]
+    return options(**fields)
+
+
+def options_from_args(options: type, args: argparse.Namespace):
+    """``options`` filled from the arguments :func:`add_options` parsed."""
+    return _build(options, vars(args))
+
+
+def options_from_dict(options: type, given: Mapping[str, Any]):
+    """``options`` filled from ``given`` (option name -> value, as a study file's ``args`` table), the rest at
+    their defaults; each value is read as the flag reads its text. An unknown name, a missing required option or
+    a bad value: a :class:`BridgeplanError` naming it."""
+    found = {leaf.name: leaf for leaf in _check_once(options)}
+    unknown = sorted(set(given) - set(found))
+    if unknown:
+        raise BridgeplanError(f"unrecognized option {unknown[0]!r} (valid: {', '.join(sorted(found))})")
+    values = {}
+    for name, leaf in found.items():
+        if name in given:
+            values[name] = _value(leaf, given[name])
+        elif leaf.default is dataclasses.MISSING:
+            raise BridgeplanError(f"missing option {name!r}")
+        else:
+            values[name] = leaf.default
+    return _build(options, values)
+
+
+def _value(leaf: Leaf, value: Any) -> Any:
+    """``value`` read as ``leaf``'s flag reads its text (a switch: a bool)."""
+    kind, many, choices = _shape(leaf)
+    if kind is bool and not many:
+        if not isinstance(value, bool):
+            raise BridgeplanError(f"option {leaf.name}: a switch takes true or false, got {value!r}")
+        return value
+    if value is None and _base(leaf.kind)[1]:
+        return None
+    if many:
+        return [_one(leaf, kind, choices, v) for v in (value if isinstance(value, (list, tuple)) else [value])]
+    return _one(leaf, kind, choices, value)
+
+
+def _one(leaf: Leaf, kind: type, choices: tuple | None, value: Any) -> Any:
+    try:
+        out = kind(str(value))
+    except ValueError:
+        raise BridgeplanError(f"argument {leaf.flag}: invalid {kind.__name__} value: {str(value)!r}") from None
+    if choices and out not in choices:
+        raise BridgeplanError(f"argument {leaf.flag}: invalid choice: {out!r} (choose from "
+                              f"{', '.join(map(repr, choices))})")
+    return out
+
+
+def add_command(sub, name: str, options: type, run, **parser_kwargs) -> argparse.ArgumentParser:
+    """The subcommand ``name``: its flags from ``options``; running it calls ``run(options)``."""
+    parser = add_options(sub.add_parser(name, **parser_kwargs), options)
+    parser.set_defaults(func=lambda args: run(options_from_args(options, args)))
+    return parser
