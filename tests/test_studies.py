@@ -551,7 +551,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
                                                                         monkeypatch):
     import json
 
-    import bridgeplan.commands
+    import bridgeplan.studies.jobs
     import bridgeplan.studies.plan
 
     root = tmp_path / "repo"
@@ -581,8 +581,8 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert multi["multi_task"] and multi["execution"]["replan_every"] == 24 and multi["nfe"] == 2
     assert (root / "results" / "tiny" / "runs" / "low-s0" / "checkpoint.pt").exists()
     calls, datasets = [], []
-    real = bridgeplan.commands.main
-    monkeypatch.setattr(bridgeplan.commands, "main", lambda argv: calls.append(argv) or real(argv))
+    real = bridgeplan.studies.jobs.run_job
+    monkeypatch.setattr(bridgeplan.studies.jobs, "run_job", lambda *a: calls.append(a) or real(*a))
     real_dataset = bridgeplan.studies.plan.ensure_dataset
     monkeypatch.setattr(bridgeplan.studies.plan, "ensure_dataset", lambda *a, **k: datasets.append(a) or
                         real_dataset(*a, **k))
@@ -650,13 +650,10 @@ splits = ["test", "validation"]
 def test_an_ogbench_validation_split_runs_the_validation_tasks_unless_pinned(tmp_path, evaluation, tasks):
     path = tmp_path / "s.toml"
     path.write_text(OGBENCH_SPLITS.format(evaluation=evaluation, command="eval", args="nfe = 1"))
-    test, validation = jobs(parse_study(path), tmp_path / "results", tmp_path / "out", quick=False)
-    assert "--tasks" not in test.argv and test.argv[test.argv.index("--seed") + 1] == "0"
-    assert validation.argv[validation.argv.index("--seed") + 1] == "1000"
-    if tasks is None:  # the earlier draw: the test tasks, other noise
-        assert "--tasks" not in validation.argv
-    else:
-        assert validation.argv[validation.argv.index("--tasks") + 1] == tasks
+    test, validation = (job.options() for job in jobs(parse_study(path), tmp_path / "results", tmp_path / "out",
+                                                      quick=False))
+    assert test.tasks.tasks is None and test.tasks.seed == 0 and validation.tasks.seed == 1000
+    assert validation.tasks.tasks == tasks  # None: the earlier draw, the test tasks with other noise
 
 
 def test_the_committed_ogbench_studies_pin_the_validation_draw_their_rows_were_made_with():

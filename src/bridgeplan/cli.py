@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 
 from bridgeplan import commands
-from bridgeplan.commands import positive
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.options import positive
 
 
 def _add_study_commands(sub) -> None:

@@ -14,15 +14,11 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
+from bridgeplan import eval_commands as _ec
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.options import add_command, group, int_tuple, opt, positive, shared
 
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
-
-
-def positive(name: str, value: int) -> int:
-    if value <= 0:
-        raise BridgeplanError(f"{name} must be positive, got {value}")
-    return value
 
 
 def _add_data_commands(sub) -> None:
@@ -231,7 +227,7 @@ def _cmd_train(args) -> int:
         process["name"] = args.process
     model = {"dim": args.dim} if args.dim is not None else {}
     if args.dim_mults is not None:
-        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
+        model["dim_mults"] = int_tuple(args.dim_mults, "--dim-mults")
     config = cfg.replace(base, dataset=_dataset_ref(args.dataset), process=process, model=model, **over)
     run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
     train(config, run_dir, resume=args.resume, progress=not args.no_progress)
@@ -273,409 +269,53 @@ def _cmd_train_prior(args) -> int:
     return 0
 
 
-def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
-    if not values or min(values) < minimum:
-        kind = "positive integers" if minimum == 1 else f"integers >= {minimum}"
-        raise BridgeplanError(f"{flag} takes {kind}, got {text!r}")
-    return values
-
-
 def _add_eval_commands(sub) -> None:
-    p = sub.add_parser("eval", help="evaluate a trained run (any environment family) on its environment's tasks",
-                       description="Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: "
-                                   "its 5-task protocol, the success rate; your own environment (a spec file): its "
-                                   "seeded resets, the success rate. Beside the score: the straight line alone, "
-                                   "the cost and the decision latency.")
-    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
-                               "(`bridgeplan planners list`)")
-    p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
-    p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
-    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
-    p.add_argument("--sampler", default=None,
-                   help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
-                        "flow euler (default) or stochastic; bridge posterior (default) or mean (no noise)")
-    p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
-    _correction_flags(p)
-    p.add_argument("--compile", action="store_true",
-                   help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
-    p.add_argument("--no-floor", action="store_true",
-                   help="skip the floors (the same episodes from the straight line alone, no network)")
-    _task_flags(p)
-    _execution_flags(p, "track")
-    _output_flags(p, "RUN/eval/<settings>.json")
-    p.set_defaults(func=_cmd_eval)
-
-    p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
-    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
-    p.add_argument("--episodes", type=int, default=8)
-    p.add_argument("--nfe", type=int, default=None)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--multi-task", action="store_true")
-    p.add_argument("--out", default=None, help="PNG path (default RUN/render/...)")
-    p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
-    p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
-    p.add_argument("--device", default="auto")
-    _execution_flags(p, "track")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_render)
-
-
-TASKS_HELP = ("OGBench: comma-separated task ids: 1-5 its test tasks (the default), 6-10 bridgeplan's validation tasks "
-              "(other cells; protocol.validation_tasks)")
-
-
-def _task_flags(p) -> None:
-    g = p.add_argument_group("tasks (the environment family's)")
-    g.add_argument("--episodes", type=int, default=None,
-                   help="episodes per task: Maze2D's episodes (its fixed goal, or Multi2D's random ones; default "
-                        "200), each of OGBench's tasks' (default 50, as OGBench)")
-    g.add_argument("--seed", type=int, default=0, help="the tasks' seed (and the planning generator's)")
-    g.add_argument("--multi-task", action="store_true", help="Maze2D: random goals too (Multi2D)")
-    g.add_argument("--tasks", default=None, help=TASKS_HELP)
-
-
-def _tasks(args, env: str):
-    from bridgeplan.evaluate import make_tasks
-
-    return make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-
-
-def _task_ids(text: str | None) -> tuple[int, ...] | None:
-    return None if text is None else _int_tuple(text, "--tasks")
-
-
-def _output_flags(p, default_out: str) -> None:
-    p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help=f"JSON path (default {default_out})")
-    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
-    p.add_argument("--no-progress", action="store_true")
-    _threads_flag(p)
-
-
-def _correction_flags(p) -> None:
-    g = p.add_argument_group("consistency correction of every x0 prediction (CDDB; default: none)")
-    g.add_argument("--correction", action="append", metavar="RESIDUAL=STEP",
-                   help="move each x0 prediction down the gradient of a residual, STEP (>= 0) its step size "
-                        "(repeatable, one per residual): dynamics (PointMaze's point mass), kinematics (positions "
-                        "integrate velocities) or conditions (start/goal, deep form only)")
-    g.add_argument("--correction-form", default=None, metavar="FORM",
-                   help="x0 (CDDB: the gradient in x0 space; default) or deep (CDDB-deep: the gradient w.r.t. the "
-                        "network's input, one backward pass per call)")
-
-
-def _correction(args):
-    from bridgeplan.consistency import Correction
-
-    if not args.correction:
-        if args.correction_form is not None:
-            raise BridgeplanError("--correction-form needs --correction RESIDUAL=STEP")
-        return None
-    return Correction.parse(args.correction, args.correction_form or "x0")
-
-
-def _execution_flags(p, controller: str, plans: bool = True) -> None:
-    """How plans are executed; ``plans``: also the flags of how a planner's plans are made (candidates, warm start,
-    arrival), which a hierarchy's and the dataset graph's decisions do not take."""
-    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode)")
-    g.add_argument("--replan-every", type=int, default=None, metavar="K",
-                   help="plan again from the current state every K environment steps (1..episode length)")
-    g.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
-                   help="also plan again, for the episodes concerned only, when the position is more than D from "
-                        "where the plan put it (default: off)")
-    if plans:
-        g.add_argument("--candidates", type=int, default=1, metavar="M",
-                       help="plans sampled per decision, in one batch; --select picks one (default 1)")
-        g.add_argument("--select", default="arrival",
-                       help="arrival (earliest within the goal radius; default), agreement (the candidate closest to "
-                            "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
-        g.add_argument("--prior", default=None,
-                       help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
-                            "replanning; the first plan uses the run's own prior)")
-        g.add_argument("--arrival", default=None,
-                       help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
-                            "the goal radius, then hold the goal) or keep (truncate, and replans hold the goal from "
-                            "the step the previous plan arrived at); default: the family's (Maze2D truncate, OGBench "
-                            "end: its episodes end at the goal) when replanning or with candidates, else end")
-    g = p.add_argument_group("controller (how a plan is executed)")
-    g.add_argument("--controller", default=controller,
-                   help=f"track (Diffuser's: the planned states in time), pursuit (the plan's path at the expert's "
-                        f"pace: toward the first planned position --lookahead away) or actions (a planner's own "
-                        f"planned actions, Diffuser's joint state-action plans); default {controller}")
-    g.add_argument("--lookahead", type=float, default=None, metavar="R",
-                   help="pursuit: distance to the planned position driven toward (default: the family's, Maze2D 1.0, "
-                        "OGBench 2.0)")
-
-
-def _execution(args, plans: bool = True):
-    from bridgeplan.replan import Execution
-
-    if args.lookahead is not None and args.controller != "pursuit":
-        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
-    if not plans:
-        return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, controller=args.controller,
-                         lookahead=args.lookahead)
-    if args.prior is not None and args.prior != "warm":
-        raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
-                              f"the run's own prior), got {args.prior!r}")
-    return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
-                     select=args.select, warm=args.prior == "warm", arrival=args.arrival,
-                     controller=args.controller, lookahead=args.lookahead)
-
-
-def _out(args, folder: Path, name: str) -> Path:
-    """``--out``, else ``folder/name-<task settings>.json``."""
-    tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
-    episodes = "" if args.episodes is None else f"-ep{args.episodes}"
-    return Path(args.out) if args.out else folder / (f"{name}{episodes}-seed{args.seed}{tasks}"
-                                                     + ("-multi" if args.multi_task else "") + ".json")
-
-
-def _show(result, args, out: Path) -> int:
-    from bridgeplan.evaluate import format_table, write_and_show
-
-    d = result.to_dict()
-    write_and_show(d, out, args.json, format_table(d))
-    return 0
-
-
-def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import check_result_path, evaluate_run
-    from bridgeplan.gcbc import is_gcbc_run
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import run_dir_of
-
-    if is_gcbc_run(args.run):
-        return _eval_gcbc(args)
-
-    execution = _execution(args)
-    correction = _correction(args)
-    check_result_path(args.out, eval_dir(run_dir_of(Path(args.run))))
-    result = evaluate_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
-                          multi_task=args.multi_task, task_ids=_task_ids(args.tasks), batch_size=args.batch_size,
-                          snapshot=args.snapshot, device=args.device, sampler=args.sampler, eta=args.eta,
-                          compile=args.compile, execution=execution, correction=correction, floor=not args.no_floor)
-    d = result.to_dict()
-    name = "-".join(part for part in (
-        f"step{d['step']}-nfe{d['nfe']}", args.sampler and f"{args.sampler}{args.eta:g}",
-        args.compile and "compiled", execution.resolved(result.family, result.tasks.env).tag(),
-        correction and correction.file_tag()) if part)
-    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.run))), name))
-
-
-def _eval_gcbc(args) -> int:
-    """``eval`` of a GCBC run: its policy (``--snapshot``: that step's) on its environment's tasks; the flags about
-    plans do not apply and are refused."""
-    from bridgeplan.files import atomic_write_text, check_writable
-    from bridgeplan.gcbc import evaluate_gcbc
-
-    planning = [f"--{k.replace('_', '-')}" for k in ("nfe", "sampler", "replan_every", "replan_tolerance")
-                if getattr(args, k, None) is not None] + (["--multi-task"] if args.multi_task else [])
-    if planning:
-        raise BridgeplanError(f"{args.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
-    if args.out:
-        check_writable(args.out, "evaluation JSON")
-    row = evaluate_gcbc(args.run, steps=None if args.snapshot is None else [args.snapshot],
-                        episodes=args.episodes or 0, seed=args.seed, progress=not args.no_progress,
-                        task_ids=_task_ids(args.tasks))[0]
-    text = row.pop("text")
-    if args.out:
-        atomic_write_text(Path(args.out), json.dumps(row, indent=2) + "\n")
-    print(json.dumps(row, indent=2) if args.json else text)
-    return 0
-
-
-def _cmd_render(args) -> int:
-    from bridgeplan.files import check_writable
-    from bridgeplan.render import render_run
-
-    execution = _execution(args)
-    if args.out:
-        check_writable(args.out, "picture")
-    for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
-                           multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
-                           device=args.device, execution=execution):
-        print(f"wrote {path}")
-    return 0
-
-
-def _add_hierarchy_commands(sub) -> None:
+    add_command(sub, "eval", _ec.EvalOptions, _ec.eval_run, description=_ec.EVAL_DESCRIPTION,
+                help="evaluate a trained run (any environment family) on its environment's tasks")
+    add_command(sub, "render", RenderOptions, _cmd_render, description="Writes PNGs under RUN/render/ unless --out.",
+                help="draw planned and executed trajectories (PNG), optionally a video")
     p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
                                          "level (bridgeplan.hierarchy)")
     h = p.add_subparsers(dest="hierarchy_command", required=True)
-    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any "
-                                  "environment family",
-                     description="The high level plans once per episode; the low level plans from the current "
-                                 "state through the coarse plan's next states every --replan-every steps.")
-    e.add_argument("high", help="the high level's run directory (a long --stride)")
-    e.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
-                               "the high level's stride)")
-    e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
-    e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
-    _low_level_flags(e, "the high level plans again from the current state every K steps (default: once per "
-                        "episode)")
-    _task_flags(e)
-    _execution_flags(e, "pursuit", plans=False)
-    _output_flags(e, "LOW/eval/hierarchy-<settings>.json")
-    e.set_defaults(func=_cmd_hierarchy_eval)
+    add_command(h, "eval", _ec.HierarchyEvalOptions, _ec.hierarchy_eval, description=_ec.HIERARCHY_DESCRIPTION,
+                help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any environment "
+                     "family")
+    add_command(sub, "graph", _ec.GraphOptions, _ec.graph_eval, description=_ec.GRAPH_DESCRIPTION,
+                help="the dataset graph (the data's own states; no network, no map) on an environment's tasks, alone "
+                     "or as a low level's high level")
+    add_command(sub, "oracle", _ec.OracleOptions, _ec.oracle,
+                help="the environment family's expert, noise-free, on its evaluation tasks (what the reports show "
+                     "beside the planners)")
 
 
-def _low_level_flags(p, replan_high_help: str) -> None:
-    p.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
-    p.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
-    p.add_argument("--replan-high-every", type=int, default=None, metavar="K", help=replan_high_help)
+@dataclasses.dataclass(kw_only=True)
+class RenderOptions:
+    run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
+    episodes: int | None = shared(_ec.Tasks, "episodes", default=8)
+    nfe: int | None = shared(_ec.EvalOptions, "nfe")
+    seed: int = shared(_ec.Tasks, "seed")
+    multi_task: bool = shared(_ec.Tasks, "multi_task")
+    out: str | None = shared(_ec.Output, "out")
+    pairs: bool = opt(False, "also draw prior/target pairs from the training data")
+    video: bool = opt(False, "also write an animated GIF of the first episode (MuJoCo)")
+    device: _ec.Device = group(_ec.Device)
+    replanning: _ec.Replanning = group(_ec.Replanning)
+    plans: _ec.PlanChoice = group(_ec.PlanChoice)
+    controller: _ec.Controller = group(_ec.Controller)
+    threads: _ec.Threads = group(_ec.Threads)
 
 
-def _cmd_hierarchy_eval(args) -> int:
-    from bridgeplan.envs.controllers import check_controller
-    from bridgeplan.evaluate import check_result_path, run_tasks
-    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import run_dir_of
+def _cmd_render(o: RenderOptions) -> int:
+    from bridgeplan.eval_commands import execution
+    from bridgeplan.files import check_writable
+    from bridgeplan.render import render_run
 
-    if args.episodes is not None:
-        positive("--episodes", args.episodes)
-    execution = _execution(args, plans=False)
-    check_controller(execution.controller, execution.lookahead)
-    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))  # before anything is loaded
-    hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
-                                          args.device)
-    if execution.replan_every is None:
-        execution = dataclasses.replace(execution, replan_every=hierarchy.spacing)
-    tasks = run_tasks(low, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution,
-                                args.replan_high_every, progress=not args.no_progress)
-    d = result.to_dict()
-    name = (f"hierarchy-{high.name}-step{high.step}-nfe{d['high']['nfe']}-step{low.step}-nfe{d['low']['nfe']}-"
-            f"{execution.resolved(result.family, tasks.env).tag()}"
-            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
-    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.low))), name))
-
-
-def _add_graph_command(sub) -> None:
-    g = sub.add_parser("graph", help="the dataset graph (the data's own states; no network, no map) on an "
-                                     "environment's tasks, alone or as a low level's high level",
-                       description="The data's states joined along their episodes and by short jumps between them "
-                                   "(bridgeplan.graph); alone, its shortest paths are executed as plans; with --low, "
-                                   "its path, one state every J x stride steps, is the subgoals a low level plans "
-                                   "through every --replan-every steps.")
-    g.add_argument("--maze", default=None, help="the environment (default: the low level's)")
-    g.add_argument("--dataset", default=None,
-                   help="the dataset the graph is made of (default: the low level's own training data)")
-    g.add_argument("--low", default=None, metavar="RUN",
-                   help="a low level (trained with --subgoal-every J) that plans through the graph's path (default: "
-                        "the path alone)")
-    _low_level_flags(g, "with --low: search the graph again from the current state every K steps (default: once per "
-                        "episode)")
-    s = g.add_argument_group("the graph (defaults: the environment family's)")
-    s.add_argument("--keep", type=int, default=None, help="every keep-th state of an episode is a node (10)")
-    s.add_argument("--radius", type=float, default=None,
-                   help="nodes of other episodes (or farther along one stream) within this distance are joined: below "
-                        "a wall's thickness (Maze2D 0.2, OGBench 0.5)")
-    s.add_argument("--neighbours", type=int, default=None, help="at most this many such joins per node (8)")
-    s.add_argument("--reach", type=float, default=None,
-                   help="the start and the goal join the nodes within this distance, else the nearest (Maze2D 0.5, "
-                        "OGBench 2.0)")
-    _task_flags(g)
-    _execution_flags(g, "pursuit", plans=False)
-    _output_flags(g, "LOW/eval/graph-<settings>.json, or results/graph/MAZE/graph-<settings>.json")
-    g.set_defaults(func=_cmd_graph)
-
-
-def _cmd_graph(args) -> int:
-    from bridgeplan.envs import family_of
-    from bridgeplan.envs.controllers import check_controller
-    from bridgeplan.evaluate import check_result_path, make_tasks
-    from bridgeplan.graph import check_graph_settings
-    from bridgeplan.hierarchy import evaluate_graph
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import load_planner, resolve_run, run_dir_of
-
-    if args.low is not None:  # the run named first, before the flags and files that go with it
-        resolve_run(Path(args.low))
-    if args.episodes is not None:
-        positive("--episodes", args.episodes)
-    execution = _execution(args, plans=False)
-    check_controller(execution.controller, execution.lookahead)
-    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
-    check_graph_settings(**settings)
-    env, dataset = args.maze, args.dataset
-    if args.low is not None:
-        _, low = load_planner(Path(args.low), snapshot=args.low_snapshot, device="cpu")
-        env = env or low.config.maze
-        dataset = dataset or low.config.dataset
-    if env is None:
-        raise BridgeplanError("give the environment (--maze NAME) or a low level (--low RUN)")
-    if dataset is None:
-        raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
-    if not Path(dataset).exists():
-        raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
-    folder = (eval_dir(run_dir_of(Path(args.low))) if args.low
-              else Path("results") / "graph" / family_of(env).label(env))
-    check_result_path(args.out, folder)
-    tasks = make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-    result = evaluate_graph(tasks, dataset, settings, execution,
-                            Path(args.low) if args.low else None, args.nfe_low, args.replan_high_every,
-                            args.low_snapshot, args.device, progress=not args.no_progress)
-    d = result.to_dict()
-    g = d["graph"]
-    tag = execution.resolved(result.family, env).tag()
-    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if args.low else "") + (
-        f"-{tag}" if tag else "") + (f"-high{args.replan_high_every}" if args.replan_high_every else "")
-    return _show(result, args, _out(args, folder, name))
-
-
-def _add_oracle_command(sub) -> None:
-    o = sub.add_parser("oracle", help="the environment family's expert, noise-free, on its evaluation tasks (what "
-                                      "the reports show beside the planners)")
-    o.add_argument("maze", nargs="+", help="environments (Maze2D mazes, OGBench dataset names: the maze's tasks)")
-    o.add_argument("--seeds", default="0", help="comma-separated task seeds (default 0)")
-    o.add_argument("--task-sets", default="single",
-                   help="comma-separated: single (the family's tasks), multi (Maze2D: Multi2D's random goals)")
-    o.add_argument("--episodes", type=int, default=None, help="episodes per task (default: the family's)")
-    o.add_argument("--tasks", default=None, help=TASKS_HELP)
-    o.add_argument("--out", default=None, help="also write the rows to this JSON file")
-    o.add_argument("--json", action="store_true", help="print the JSON instead of a line per row")
-    o.add_argument("--no-progress", action="store_true")
-    _threads_flag(o)
-    o.set_defaults(func=_cmd_oracle)
-
-
-def _cmd_oracle(args) -> int:
-    from bridgeplan.envs import family_of
-    from bridgeplan.evaluate import make_tasks
-    from bridgeplan.files import atomic_write_text, check_writable, code_version
-
-    seeds = _int_tuple(args.seeds, "--seeds", minimum=0)
-    if args.out:
-        check_writable(args.out, "JSON file")
-    sets = args.task_sets.split(",")
-    rows = []
-    for env in args.maze:
-        family = family_of(env)
-        for task_set in sets:
-            if task_set not in family.task_sets:
-                raise BridgeplanError(f"--task-sets: {family.title} has {', '.join(family.task_sets)}, not "
-                                      f"{task_set!r}")
-            for seed in seeds:
-                tasks = make_tasks(env, args.episodes, seed, task_set == "multi", _task_ids(args.tasks))
-                agent = family.oracle(env)
-                agent_outcome = family.run(tasks, agent, progress=not args.no_progress)
-                rows.append({**tasks.fields(), "policy": "oracle", **family.score(tasks, agent_outcome)})
-                row = rows[-1]
-                rate = row["success_rate"]["mean"] if isinstance(row["success_rate"], dict) else row["success_rate"]
-                score = f"{row['score']['minari']['mean']:.1f} (Minari), " if "score" in row else ""
-                if not args.json:
-                    print(f"{env} {task_set} seed {seed}: {score}success {rate:.3f}")
-    text = json.dumps({"code_version": code_version(), "rows": rows}, indent=2)
-    if args.json:
-        print(text)
-    if args.out:
-        atomic_write_text(Path(args.out), text + "\n")
-        print(f"wrote {args.out}")
+    plan = execution(o.replanning, o.controller, o.plans)
+    if o.out:
+        check_writable(o.out, "picture")
+    for path in render_run(Path(o.run), episodes=o.episodes, nfe=o.nfe, seed=o.seed, multi_task=o.multi_task,
+                           out=o.out, pairs=o.pairs, video=o.video, device=o.device.device, execution=plan):
+        print(f"wrote {path}")
     return 0
 
 
@@ -752,7 +392,7 @@ def _cmd_bench(args) -> int:
              "compile": False if args.no_compile else None}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
         text = getattr(args, name)
-        given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
+        given[name] = text and int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
     check_writable(args.out, "bench folder", folder=True)
     path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -820,8 +460,7 @@ def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argpars
     parser = argparse.ArgumentParser(prog="bridgeplan", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (_add_data_commands, _add_reference_commands, _add_train_commands, _add_eval_commands,
-                _add_hierarchy_commands, _add_graph_command, _add_oracle_command, _add_gcbc_commands,
-                _add_report_command, _add_bench_command, _add_demo_command, *more):
+                _add_gcbc_commands, _add_report_command, _add_bench_command, _add_demo_command, *more):
         add(sub)
     return parser
 

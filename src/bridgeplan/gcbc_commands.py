@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.eval_commands import GCBC_EVAL_DESCRIPTION, GCBCEvalOptions, gcbc_eval
+from bridgeplan.options import add_command
 
 
 def add_gcbc_commands(sub) -> None:
@@ -32,18 +33,9 @@ def add_gcbc_commands(sub) -> None:
     t.add_argument("--resume", action="store_true")
     t.add_argument("--no-progress", action="store_true")
     t.set_defaults(func=_cmd_gcbc_train)
-    e = og.add_parser("eval", help="a GCBC run's snapshots on OGBench's 5-task evaluation protocol (one snapshot on "
-                                   "any tasks, validation's too: `bridgeplan eval RUN --tasks 6,7,8,9,10`)")
-    e.add_argument("run", help="a `gcbc train` run directory")
-    e.add_argument("--maze", help="default: the environment the run was trained with")
-    e.add_argument("--steps", help="comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
-    e.add_argument("--episodes", type=int, default=0, help="episodes per task (default 50, as OGBench)")
-    e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--json", action="store_true")
-    e.add_argument("--out", default=None, help="also write the JSON to this path (one step only)")
-    e.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: 1 on a CPU device)")
-    e.add_argument("--no-progress", action="store_true")
-    e.set_defaults(func=_cmd_gcbc_eval)
+    add_command(og, "eval", GCBCEvalOptions, gcbc_eval, description=GCBC_EVAL_DESCRIPTION,
+                help="a GCBC run's snapshots on OGBench's 5-task evaluation protocol (one snapshot on any tasks, "
+                     "validation's too: `bridgeplan eval RUN --tasks 6,7,8,9,10`)")
 
 
 def _cmd_gcbc_train(args) -> int:
@@ -66,37 +58,4 @@ def _cmd_gcbc_train(args) -> int:
     run = train_gcbc(GCBCConfig(dataset=args.dataset, **given), Path(args.run_dir), resume=args.resume,
                      progress=not args.no_progress)
     print(f"trained {run} (step {load_checkpoint(checkpoint_path(run))['step']})")
-    return 0
-
-
-def _cmd_gcbc_eval(args) -> int:
-    from bridgeplan.gcbc import evaluate_gcbc, policy_snapshots
-
-    steps = None
-    if args.steps == "all":
-        steps = [s for s, _ in policy_snapshots(args.run)]
-    elif args.steps:
-        try:
-            steps = [int(v) for v in args.steps.split(",")]
-        except ValueError:
-            raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {args.steps!r}") from None
-    if args.out and (steps is None or len(steps) != 1):
-        raise BridgeplanError("--out takes one evaluation: give one snapshot with --steps N")
-    if args.out:
-        from bridgeplan.files import check_writable
-
-        check_writable(args.out, "JSON file")
-    if args.threads is not None:
-        from bridgeplan.device import configure_threads
-
-        configure_threads(args.threads)
-    rows = evaluate_gcbc(args.run, args.maze or "", steps, args.episodes, args.seed, progress=not args.no_progress)
-    for row in rows:
-        text = row.pop("text")
-        print(json.dumps(row, indent=2) if args.json else f"step {row['step']}: {text}")
-    if args.out:
-        from bridgeplan.files import atomic_write_text
-
-        atomic_write_text(Path(args.out), json.dumps(rows[0], indent=2) + "\n")
-        print(f"wrote {args.out}")
     return 0

@@ -28,6 +28,17 @@ def opt(default: Any = dataclasses.MISSING, help: str = "", **argparse_kwargs) -
     return dataclasses.field(default=default, metadata=metadata)
 
 
+def shared(options: type, name: str, **default) -> Any:
+    """The option ``name`` of the group ``options``, taken alone into another command's options (declared there, not
+    again here); ``default=``: this command's own default."""
+    f = next(f for f in dataclasses.fields(options) if f.name == name)
+    if "default" in default:
+        return dataclasses.field(default=default["default"], metadata=f.metadata)
+    if f.default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=f.default_factory, metadata=f.metadata)
+    return dataclasses.field(default=f.default, metadata=f.metadata)
+
+
 def group(options: type, **defaults) -> Any:
     """A group of options (the dataclass ``options``) inside a command's options; ``defaults``: this command's own
     defaults for some of its fields (an override visible here, not a second declaration)."""
@@ -202,3 +213,21 @@ def add_command(sub, name: str, options: type, run, **parser_kwargs) -> argparse
     parser = add_options(sub.add_parser(name, **parser_kwargs), options)
     parser.set_defaults(func=lambda args: run(options_from_args(options, args)))
     return parser
+
+
+def positive(name: str, value: int) -> int:
+    if value <= 0:
+        raise BridgeplanError(f"{name} must be positive, got {value}")
+    return value
+
+
+def int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
+    """``text``, comma-separated integers (each >= ``minimum``), as the option ``flag`` takes them."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
+    if not values or min(values) < minimum:
+        kind = "positive integers" if minimum == 1 else f"integers >= {minimum}"
+        raise BridgeplanError(f"{flag} takes {kind}, got {text!r}")
+    return values

@@ -33,23 +33,31 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import READS_THE_DATASET, TAKES_TASKS, NamedRun, command_argv
+from bridgeplan.eval_commands import STUDY_COMMANDS
+from bridgeplan.studies.spec import NamedRun, command_options
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
 @dataclass(frozen=True)
 class Job:
-    """One JSON: the command line that writes it."""
+    """One JSON: the command that writes it, its runs' directories and its options (:data:`STUDY_COMMANDS`)."""
 
     path: Path
-    argv: tuple[str, ...]
+    run_dirs: tuple[str, ...]
+    args: tuple[tuple[str, Any], ...]
     """Without the study's dataset file, which :func:`run_seed` adds for a command that reads it."""
     seed: int
     runs: tuple[str, ...]
     command: str
-    reads_dataset: bool = False
+
+    def options(self, dataset: Path | None = None, progress: bool = False):
+        """The command's options (``dataset``: the study's file, for a command that reads it)."""
+        given = dict(self.args) | ({} if progress else {"no_progress": True})
+        if STUDY_COMMANDS[self.command].reads_dataset and dataset is not None:
+            given["dataset"] = str(dataset)
+        return command_options(self.command, list(self.run_dirs), given)
 
 
 def run_dir(results: Path, run: str, seed: int) -> Path:
@@ -110,16 +118,17 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if quick:
                         cap = study.dataset.family.quick_episodes
                         episodes = cap if episodes is None else min(episodes, cap)
-                    dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
+                    command = STUDY_COMMANDS[e.command]
+                    if command.reads_dataset:
+                        args.setdefault("maze", study.dataset.maze)
                     validation_tasks = study.dataset.family.validation_tasks
-                    if (split == "validation" and validation_tasks and e.command in TAKES_TASKS and "tasks" not in args
+                    if (split == "validation" and validation_tasks and command.takes_tasks and "tasks" not in args
                             and study.evaluation.validation == "other-tasks"):
                         args["tasks"] = ",".join(map(str, validation_tasks))  # not the test tasks, reseeded
-                    argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
-                                          tuple(sorted(args.items())), dataset),
-                            *(["--episodes", str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
-                            *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
-                    out.append(Job(path, tuple(argv), seed, e.runs, e.command, e.command in READS_THE_DATASET))
+                    args |= {**({"episodes": episodes} if episodes is not None else {}), command.seed: eval_seed,
+                             **({"multi_task": True} if tasks == "multi" else {}), "threads": 1, "out": str(path)}
+                    out.append(Job(path, tuple(str(run_dir(results, r, seed)) for r in e.runs),
+                                   tuple(sorted(args.items())), seed, e.runs, e.command))
     return out
 
 
@@ -144,7 +153,6 @@ def needed_runs(study, results: Path, needed: set[tuple[str, int]] | None = None
 
 def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, progress: bool) -> int:
     """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands; the JSONs written."""
-    from bridgeplan.commands import main
     from bridgeplan.device import configure_threads
     from bridgeplan.experiments.runner import train_to
     from bridgeplan.gcbc import train_gcbc
@@ -164,11 +172,14 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
-        quiet = [] if progress else ["--no-progress"]
-        if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else []), *quiet]) != 0:
-            raise BridgeplanError(f"bridgeplan {' '.join(job.argv)} failed (its error above)")
+        run_job(job, dataset, progress)
         written += 1
     return written
+
+
+def run_job(job: Job, dataset: Path, progress: bool) -> None:
+    """Write ``job``'s JSON: its command's function on its options."""
+    STUDY_COMMANDS[job.command].run(job.options(dataset, progress))
 
 
 def work_units(todo: list[Job]) -> list[tuple[int, list[Job]]]:
