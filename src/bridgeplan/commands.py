@@ -16,68 +16,83 @@ from pathlib import Path
 
 from bridgeplan import eval_commands as _ec
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.options import add_command, group, int_tuple, opt, positive, shared
+from bridgeplan.options import REQUIRED, add_command, group, int_tuple, opt, positive, shared, values
 
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
+
+
+@dataclasses.dataclass(kw_only=True)
+class DataGenerateOptions:
+    environment: _ec.Environment = group(_ec.Environment, maze=REQUIRED)
+    steps: int | None = opt(None, "Maze2D: transitions (default 1 M)")
+    piece_steps: int | None = opt(None, "Maze2D: independent pieces of N steps, each from a random start, instead of "
+                                        "one stream per worker: a stitching dataset (as OGBench's stitch; default "
+                                        "directory <maze>-<steps>-piecesN)", metavar="N")
+    workers: int = opt(1, "Maze2D: parallel processes, each generating its own independently seeded stream")
+    episodes: int | None = opt(None, "OGBench: training episodes (default: the recipe's)")
+    episode_steps: int | None = opt(None, "OGBench: steps per episode (default: the recipe's)")
+    seed: int | None = opt(None, "the data's seed (default 123 (Maze2D), 0 (OGBench, as its scripts))")
+    out: str | None = shared(_ec.Output, "out")
+    force: bool = opt(False, "overwrite an existing dataset")
+    progress: _ec.Progress = group(_ec.Progress)
+
+
+@dataclasses.dataclass(kw_only=True)
+class DataInfoOptions:
+    path: str = opt(help="a Minari directory or id, a D4RL maze2d hdf5 file or an OGBench npz file")
+    environment: _ec.Environment = group(_ec.Environment)
+    json: bool = shared(_ec.Output, "json")
 
 
 def _add_data_commands(sub) -> None:
     p = sub.add_parser("data", help="generate, inspect offline datasets (any environment family)")
     data = p.add_subparsers(dest="data_command", required=True)
-    g = data.add_parser("generate", help="a dataset by the environment's family's recipe: Maze2D's noisy expert "
-                                         "stream (Minari format, Minari's D4RL recipe), OGBench's (its npz format)")
-    g.add_argument("--maze", required=True, help="the environment: open, umaze, medium or large; or an OGBench "
-                                                 "dataset name (pointmaze-{medium,large,giant,teleport}-"
-                                                 "{navigate,stitch}-v0)")
-    g.add_argument("--steps", type=int, default=None, help="Maze2D: transitions (default 1 M)")
-    g.add_argument("--piece-steps", type=int, default=None, metavar="N",
-                   help="Maze2D: independent pieces of N steps, each from a random start, instead of one stream per "
-                        "worker: a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
-    g.add_argument("--workers", type=int, default=1,
-                   help="Maze2D: parallel processes, each generating its own independently seeded stream (default 1)")
-    g.add_argument("--episodes", type=int, default=None, help="OGBench: training episodes (default: the recipe's)")
-    g.add_argument("--episode-steps", type=int, default=None, help="OGBench: steps per episode (default: the "
-                                                                   "recipe's)")
-    g.add_argument("--seed", type=int, default=None, help="default 123 (Maze2D), 0 (OGBench, as its scripts)")
-    g.add_argument("--out", default=None,
-                   help="dataset directory (Maze2D; default datasets/<maze>-<steps>) or folder of NAME.npz and "
-                        "NAME-val.npz (OGBench; default datasets/ogbench), under $BRIDGEPLAN_DATASETS when set")
-    g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
-    g.add_argument("--no-progress", action="store_true")
-    g.set_defaults(func=_cmd_data_generate)
-    i = data.add_parser("info", help="check and summarize a dataset (Minari directory or id, D4RL maze2d hdf5, "
-                                     "OGBench npz)")
-    i.add_argument("path")
-    i.add_argument("--maze", default=None, help="the environment it should be of (needed for an OGBench file; a "
-                                                "Minari dataset names its maze)")
-    i.add_argument("--json", action="store_true")
-    i.set_defaults(func=_cmd_data_info)
+    add_command(data, "generate", DataGenerateOptions, _cmd_data_generate,
+                help="a dataset by the environment's family's recipe: Maze2D's noisy expert stream (Minari format, "
+                     "Minari's D4RL recipe), OGBench's (its npz format)",
+                description="--out: the dataset directory (Maze2D; default datasets/<maze>-<steps>) or folder of "
+                            "NAME.npz and NAME-val.npz (OGBench; default datasets/ogbench), under $BRIDGEPLAN_DATASETS "
+                            "when set.")
+    add_command(data, "info", DataInfoOptions, _cmd_data_info,
+                help="check and summarize a dataset (Minari directory or id, D4RL maze2d hdf5, OGBench npz)",
+                description="--maze: the environment it should be of (needed for an OGBench file; a Minari dataset "
+                            "names its maze).")
 
 
-def _cmd_data_generate(args) -> int:
+def _cmd_data_generate(o: DataGenerateOptions) -> int:
     from bridgeplan.envs import family_of
 
-    family = family_of(args.maze)
+    maze = o.environment.maze
+    family = family_of(maze)
     for flag in ("steps", "workers", "episodes", "episode_steps"):
-        if getattr(args, flag) is not None:
-            positive("--" + flag.replace("_", "-"), getattr(args, flag))
-    out = family.generate_dataset(args.maze, Path(args.out) if args.out else None,
-                                  seed=family.data_seed if args.seed is None else args.seed,
-                                  steps=args.steps, piece_steps=args.piece_steps, episodes=args.episodes,
-                                  episode_steps=args.episode_steps, workers=args.workers, force=args.force,
-                                  progress=not args.no_progress)
-    print(family.dataset_info(str(out), args.maze)[1])
+        if getattr(o, flag) is not None:
+            positive("--" + flag.replace("_", "-"), getattr(o, flag))
+    out = family.generate_dataset(maze, Path(o.out) if o.out else None,
+                                  seed=family.data_seed if o.seed is None else o.seed,
+                                  steps=o.steps, piece_steps=o.piece_steps, episodes=o.episodes,
+                                  episode_steps=o.episode_steps, workers=o.workers, force=o.force,
+                                  progress=not o.progress.no_progress)
+    print(family.dataset_info(str(out), maze)[1])
     print(f"wrote {out}")
     return 0
 
 
-def _cmd_data_info(args) -> int:
+def _cmd_data_info(o: DataInfoOptions) -> int:
     from bridgeplan.envs import family_of, family_of_dataset
 
-    family = family_of(args.maze) if args.maze else family_of_dataset(args.path)
-    info, text = family.dataset_info(args.path, args.maze)
-    print(json.dumps(info, indent=2) if args.json else text)
+    maze = o.environment.maze
+    family = family_of(maze) if maze else family_of_dataset(o.path)
+    info, text = family.dataset_info(o.path, maze)
+    print(json.dumps(info, indent=2) if o.json else text)
     return 0
+
+
+@dataclasses.dataclass(kw_only=True)
+class ReferenceOptions:
+    environment: _ec.Environment = group(_ec.Environment)
+    episodes: int | None = shared(_ec.Tasks, "episodes", default=100)
+    seed: int = shared(_ec.Tasks, "seed", default=123)
+    out: str | None = shared(_ec.Output, "out")
 
 
 def _add_reference_commands(sub) -> None:
@@ -85,12 +100,10 @@ def _add_reference_commands(sub) -> None:
     ref = p.add_subparsers(dest="reference_command", required=True)
     s = ref.add_parser("show", help="the shipped reference returns")
     s.set_defaults(func=_cmd_reference_show)
-    m = ref.add_parser("measure", help="measure them again in this environment")
-    m.add_argument("--maze", default=None, help="one maze (default: all)")
-    m.add_argument("--episodes", type=int, default=100)
-    m.add_argument("--seed", type=int, default=123)
-    m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
-    m.set_defaults(func=_cmd_reference_measure)
+    add_command(ref, "measure", ReferenceOptions, _cmd_reference_measure,
+                help="measure them again in this environment",
+                description="--maze: one maze (default: all); --out: also write the measured values to this JSON "
+                            "file.")
 
 
 def _reference_table(ref: dict) -> str:
@@ -109,145 +122,142 @@ def _cmd_reference_show(args) -> int:
     return 0
 
 
-def _cmd_reference_measure(args) -> int:
+def _cmd_reference_measure(o: ReferenceOptions) -> int:
     from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
     from bridgeplan.envs.maze2d.reference import measure_reference_returns
     from bridgeplan.files import atomic_write_text, check_writable
 
-    names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
-    positive("--episodes", args.episodes)
-    if args.out:
-        check_writable(args.out, "JSON file")
-    measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
+    names = [get_maze(o.environment.maze).name] if o.environment.maze else list(MAZE_NAMES)
+    positive("--episodes", o.episodes)
+    if o.out:
+        check_writable(o.out, "JSON file")
+    measured = {n: measure_reference_returns(n, o.episodes, o.seed) for n in names}
     print(_reference_table(measured))
-    if args.out:
-        atomic_write_text(Path(args.out), json.dumps(measured, indent=2) + "\n")
-        print(f"wrote {args.out}")
+    if o.out:
+        atomic_write_text(Path(o.out), json.dumps(measured, indent=2) + "\n")
+        print(f"wrote {o.out}")
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class RunDir:
+    run_dir: str | None = opt(None, "the run's directory (default: RUNS_ROOT/<name derived from the config>)")
+    resume: bool = opt(False, "continue the run in --run-dir")
+
+
+@dataclasses.dataclass(kw_only=True)
+class Training:
+    """How long and how a model is trained (defaults: the config's)."""
+
+    steps: int | None = opt(None, "optimizer steps")
+    minutes: float | None = opt(None, "wall-clock budget (stops at steps or minutes)")
+    batch_size: int | None = opt(None, "windows per gradient (default: the config's, for a planner its preset's for "
+                                       "the maze)")
+    lr: float | None = opt(None, "Adam's learning rate (default as --batch-size)")
+    checkpoint_every: int | None = opt(None, "write the checkpoint (and a snapshot) every this many steps")
+    log_every: int | None = opt(None, "log every this many steps")
+    seed: int | None = opt(None, "the training seed")
+
+
+@dataclasses.dataclass(kw_only=True)
+class TrainCommon:
+    """What a planner's and the learned prior's training take."""
+
+    environment: _ec.Environment = group(_ec.Environment, maze=REQUIRED)
+    dataset: _ec.Dataset = group(_ec.Dataset, dataset=REQUIRED)
+    run: RunDir = group(RunDir)
+    runs_root: str = opt("runs", "where a run's directory goes unless --run-dir")
+    preset: str = opt("diffuser", "the defaults per maze: diffuser (Diffuser's Maze2D settings) or cpu-small; a "
+                                  "learned prior takes its planners' horizon and stride")
+    horizon: int | None = opt(None, "planned states (default: the preset's for the maze)")
+    stride: int | None = opt(None, "environment steps between planned states (default: the preset's for the maze)")
+    training: Training = group(Training)
+    device: _ec.Device = group(_ec.Device, device=None)
+    threads: _ec.Threads = group(_ec.Threads)
+    progress: _ec.Progress = group(_ec.Progress)
+
+
+@dataclasses.dataclass(kw_only=True)
+class TrainOptions:
+    common: TrainCommon = group(TrainCommon)
+    process: str | None = opt(None, "ddpm, bridge or flow (default ddpm)")
+    process_param: list[str] | None = opt(None, "any field of the process's dataclass, e.g. beta_max=0.3 "
+                                                "(repeatable)", action="append", metavar="FIELD=VALUE")
+    prior: str | None = opt(None, "bridge prior: gaussian, line, learned or coarse (a low level's: the line through "
+                                  "its subgoals) (default gaussian)")
+    prior_run: str | None = opt(None, "run directory of `bridgeplan train-prior` (learned prior)")
+    diffusion_steps: int | None = opt(None, "diffusion steps N")
+    beta_max: float | None = opt(None, "bridge: largest beta of the schedule")
+    ot_ode: bool = opt(False, "bridge: noise-free marginal and sampler")
+    consistent: bool = opt(False, "bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
+                                  "differ at small N)")
+    dim: int | None = opt(None, "U-Net base width")
+    dim_mults: str | None = opt(None, "U-Net channel multipliers, e.g. 1,4,8")
+    grad_accum: int | None = opt(None, "gradient accumulation steps per optimizer step")
+    ema_decay: float | None = opt(None, "decay of the EMA weights")
+    ema_every: int | None = opt(None, "update the EMA weights every this many optimizer steps")
+    ema_start: int | None = opt(None, "before this step the EMA weights are a plain copy of the model")
+    hold_share: float | None = opt(None, "share of training windows that arrive early and wait still at their end, so "
+                                         "plans may reach the goal before the horizon's end (default 0, Diffuser's)")
+    subgoal_every: int | None = opt(None, "train a hierarchy's low level: every J-th planned state is a condition (a "
+                                          "high level's subgoals when planning; `bridgeplan hierarchy eval`)")
+    precision: str | None = opt(None, "bf16: forward and backward under bfloat16 autocast (refused where the device "
+                                      "lacks it)")
+    compile: bool | None = opt(None, "train through the torch.compile'd network (compiles at the first step)",
+                               action="store_true")
+
+
 def _add_train_commands(sub) -> None:
-    p = sub.add_parser("train", help="train a planner (DDPM, the I2SB bridge or flow matching)",
-                       description="Train a planner. Defaults come from --preset per maze; flags override them.")
-    _common_train_flags(p)
-    p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
-    p.add_argument("--process", default=None, help="ddpm, bridge or flow (default ddpm)")
-    _process_param_flag(p)
-    p.add_argument("--prior", default=None,
-                   help="bridge prior: gaussian, line, learned or coarse (a low level's: the line through its "
-                        "subgoals) (default gaussian)")
-    p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
-    p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
-    p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
-    p.add_argument("--ot-ode", action="store_true", help="bridge: noise-free marginal and sampler")
-    p.add_argument("--consistent", action="store_true",
-                   help="bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
-                        "differ at small N)")
-    p.add_argument("--dim", type=int, default=None, help="U-Net base width")
-    p.add_argument("--dim-mults", default=None, help="U-Net channel multipliers, e.g. 1,4,8")
-    p.add_argument("--grad-accum", type=int, default=None)
-    p.add_argument("--ema-decay", type=float, default=None)
-    p.add_argument("--ema-every", type=int, default=None)
-    p.add_argument("--ema-start", type=int, default=None)
-    _hold_share_flag(p)
-    p.add_argument("--subgoal-every", type=int, default=None,
-                   help="train a hierarchy's low level: every J-th planned state is a condition (a high level's "
-                        "subgoals when planning; `bridgeplan hierarchy eval`)")
-    p.add_argument("--precision", default=None,
-                   help="bf16: forward and backward under bfloat16 autocast (refused where the device lacks it)")
-    p.add_argument("--compile", action="store_true", default=None,
-                   help="train through the torch.compile'd network (compiles at the first step)")
-    p.set_defaults(func=_cmd_train)
-
-    p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
-    _common_train_flags(p)
-    p.add_argument("--preset", default="diffuser",
-                   help="the planner preset the prior serves: its horizon and stride are the defaults")
-    p.set_defaults(func=_cmd_train_prior)
+    add_command(sub, "train", TrainOptions, _cmd_train, help="train a planner (DDPM, the I2SB bridge or flow matching)",
+                description="Train a planner. Defaults come from --preset per maze; flags override them.")
+    add_command(sub, "train-prior", TrainCommon, _cmd_train_prior,
+                help="train the learned prior (MLP on start and goal)")
 
 
-def _common_train_flags(p) -> None:
-    p.add_argument("--maze", required=True, help="the environment: a Maze2D maze (umaze), an OGBench dataset name "
-                                                 "(pointmaze-medium-navigate-v0) or your own's spec file (NAME.toml)")
-    p.add_argument("--dataset", required=True, help="dataset directory (Minari), legacy D4RL hdf5 file or OGBench "
-                                                    "npz file")
-    p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
-    p.add_argument("--runs-root", default="runs")
-    p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
-    p.add_argument("--horizon", type=int, default=None, help="planned states (default: the preset's for the maze)")
-    p.add_argument("--stride", type=int, default=None,
-                   help="environment steps between planned states (default: the preset's for the maze)")
-    p.add_argument("--steps", type=int, default=None, help="optimizer steps")
-    p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
-    p.add_argument("--batch-size", type=int, default=None,
-                   help="windows per gradient (default: the config's, for a planner its preset's for the maze)")
-    p.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default as --batch-size)")
-    p.add_argument("--checkpoint-every", type=int, default=None)
-    p.add_argument("--log-every", type=int, default=None)
-    p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--device", default=None, help="auto (CUDA if present), cpu, cuda, ...")
-    _threads_flag(p)
-    p.add_argument("--no-progress", action="store_true")
-
-
-def _process_param_flag(p) -> None:
-    p.add_argument("--process-param", action="append", metavar="FIELD=VALUE",
-                   help="any field of the process's dataclass, e.g. beta_max=0.3 (repeatable)")
-
-
-def _hold_share_flag(p) -> None:
-    p.add_argument("--hold-share", type=float, default=None,
-                   help="share of training windows that arrive early and wait still at their end, so plans may "
-                        "reach the goal before the horizon's end (default 0, Diffuser's)")
-
-
-def _threads_flag(p) -> None:
-    p.add_argument("--threads", type=int, default=None,
-                   help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
-                        "processes share the cores; more only warns beyond the machine's cores)")
-
-
-def _overrides(args, names) -> dict:
-    return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+def _given(options, names) -> dict:
+    """The options among ``names`` that were given (not None)."""
+    given = values(options)
+    return {n: given[n] for n in names if given[n] is not None}
 
 
 _COMMON = ("horizon", "stride", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
            "device", "threads")
 
 
-def _cmd_train(args) -> int:
+def _cmd_train(o: TrainOptions) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train
 
-    base = cfg.preset_config(args.maze, args.preset)
-    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
-                                       "hold_share", "precision", "compile", "subgoal_every"))
-    process = _process_params(args, args.process or base.process.name)
-    if args.process is not None:
-        process["name"] = args.process
-    model = {"dim": args.dim} if args.dim is not None else {}
-    if args.dim_mults is not None:
-        model["dim_mults"] = int_tuple(args.dim_mults, "--dim-mults")
-    config = cfg.replace(base, dataset=_dataset_ref(args.dataset), process=process, model=model, **over)
-    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
-    train(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    c = o.common
+    base = cfg.preset_config(c.environment.maze, c.preset)
+    over = _given(o, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
+                                "hold_share", "precision", "compile", "subgoal_every"))
+    process = _process_params(o, o.process or base.process.name)
+    if o.process is not None:
+        process["name"] = o.process
+    model = {"dim": o.dim} if o.dim is not None else {}
+    if o.dim_mults is not None:
+        model["dim_mults"] = int_tuple(o.dim_mults, "--dim-mults")
+    config = cfg.replace(base, dataset=_dataset_ref(c.dataset.dataset), process=process, model=model, **over)
+    run_dir = Path(c.run.run_dir) if c.run.run_dir else Path(c.runs_root) / config.run_name()
+    train(config, run_dir, resume=c.run.resume, progress=not c.progress.no_progress)
     print(f"run: {run_dir}")
     return 0
 
 
-def _process_params(args, name: str) -> dict:
+def _process_params(o: TrainOptions, name: str) -> dict:
     """The process fields given on the command line (checked by the process itself): ``--process-param``
     for any field, and shortcuts for the common ones."""
     from bridgeplan.processes import parse_process_params
 
-    params = parse_process_params(name, args.process_param or [])
-    params |= _overrides(args, ("beta_max",))
-    if args.diffusion_steps is not None:
-        params["steps"] = args.diffusion_steps
+    params = parse_process_params(name, o.process_param or [])
+    params |= _given(o, ("beta_max",))
+    if o.diffusion_steps is not None:
+        params["steps"] = o.diffusion_steps
     if params.get("teacher"):  # a distillation's teacher run, found from anywhere (as the dataset is)
         params["teacher"] = _dataset_ref(params["teacher"])
     for flag in ("ot_ode", "consistent"):
-        if getattr(args, flag):
+        if getattr(o, flag):
             params[flag] = True
     return params
 
@@ -257,14 +267,14 @@ def _dataset_ref(dataset: str) -> str:
     return str(Path(dataset).resolve()) if Path(dataset).exists() else dataset
 
 
-def _cmd_train_prior(args) -> int:
+def _cmd_train_prior(o: TrainCommon) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train_prior
 
-    config = cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset),
-                                  **_overrides(args, _COMMON + ("preset",)))
-    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
-    train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    config = cfg.PriorTrainConfig(maze=o.environment.maze, dataset=_dataset_ref(o.dataset.dataset),
+                                  **_given(o, _COMMON + ("preset",)))
+    run_dir = Path(o.run.run_dir) if o.run.run_dir else Path(o.runs_root) / config.run_name()
+    train_prior(config, run_dir, resume=o.run.resume, progress=not o.progress.no_progress)
     print(f"run: {run_dir}")
     return 0
 
@@ -319,101 +329,115 @@ def _cmd_render(o: RenderOptions) -> int:
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class ReportOptions:
+    results: str = opt("results", "the results folder (its store)")
+    out: str | None = shared(_ec.Output, "out")
+    csv: str | None = opt(None, "also export every result row to this CSV file")
+
+
 def _add_report_command(sub) -> None:
-    p = sub.add_parser("report", help="figures and a Markdown page from the results store")
-    p.add_argument("--results", default="results")
-    p.add_argument("--out", default=None, help="output directory (default RESULTS/report)")
-    p.add_argument("--csv", default=None, help="also export every result row to this CSV file")
-    p.set_defaults(func=_cmd_report)
+    add_command(sub, "report", ReportOptions, _cmd_report, help="figures and a Markdown page from the results store",
+                description="--out: the output directory (default RESULTS/report).")
 
 
-def _cmd_report(args) -> int:
+def _cmd_report(o: ReportOptions) -> int:
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.files import check_writable
     from bridgeplan.paths import report_dir, store_path
     from bridgeplan.report import write_report
 
-    store = store_path(args.results)
+    store = store_path(o.results)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
-    check_writable(args.out or report_dir(args.results), "report folder", folder=True)
-    if args.csv:
-        check_writable(args.csv, "CSV file")
-    path = write_report(Path(args.results), Path(args.out) if args.out else None)
+    check_writable(o.out or report_dir(o.results), "report folder", folder=True)
+    if o.csv:
+        check_writable(o.csv, "CSV file")
+    path = write_report(Path(o.results), Path(o.out) if o.out else None)
     print(f"wrote {path}")
-    if args.csv:
-        n = ResultsStore(store).export_csv(Path(args.csv))
-        print(f"wrote {args.csv} ({n} rows)")
+    if o.csv:
+        n = ResultsStore(store).export_csv(Path(o.csv))
+        print(f"wrote {o.csv} ({n} rows)")
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class BenchOptions:
+    out: str | None = shared(_ec.Output, "out", default="bench")
+    presets: str | None = opt(None, "comma-separated presets to time")
+    batch_sizes: str | None = opt(None, "comma-separated plans per call")
+    nfes: str | None = opt(None, "comma-separated network calls per plan (latency table)")
+    methods: str | None = opt(None, "comma-separated methods of the latency and overhead tables, named as there "
+                                    "(default: all)")
+    repeats: int | None = opt(None, "timed repeats per latency figure")
+    overhead_repeats: int | None = opt(None, "interleaved rounds per overhead ratio (0: skip them)")
+    no_compile: bool = opt(False, "skip the torch.compile timings (minutes on a CPU)")
+    eval_run: str | None = opt(None, "a trained run: also time 200 umaze episodes at NFE 1")
+    budget_runs: str | None = opt(None, "comma-separated trained runs, a row each (one per method, at equal training "
+                                        "steps): the score-per-budget table")
+    budget_steps: str | None = opt(None, "comma-separated training steps: evaluate the budget runs' EMA snapshots "
+                                         "there (default: their latest checkpoints)")
+    budgets: str | None = opt(None, "comma-separated network-call budgets K")
+    budget_episodes: int | None = opt(None, "episodes per evaluation of the budget table")
+    busy_steps: int | None = opt(None, "training steps per rate of the busy-core figure (0: skip)")
+    throughput_seconds: float | None = opt(None, "seconds of training per figure of the training-throughput table "
+                                                 "(0: skip)")
+    throughput_batch_sizes: str | None = opt(None, "comma-separated batches of the training-throughput table")
+    side_by_side_seconds: float | None = opt(None, "seconds of training per figure of the two-jobs table (0: skip)")
+    device: _ec.Device = group(_ec.Device, device=None)
+    threads: _ec.Threads = group(_ec.Threads)
+
+
 def _add_bench_command(sub) -> None:
-    p = sub.add_parser("bench", help="planning latency, overheads, torch.compile, evaluation throughput and score "
-                                     "per planning budget (JSON + Markdown)",
-                       description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and "
-                                   "diffuser networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes).")
-    p.add_argument("--out", default="bench", help="output directory (bench.json, bench.md)")
-    p.add_argument("--presets", help="comma-separated presets to time")
-    p.add_argument("--batch-sizes", help="comma-separated plans per call")
-    p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
-    p.add_argument("--methods", help="comma-separated methods of the latency and overhead tables, named as there "
-                                     "(default: all)")
-    p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
-    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio (0: skip them)")
-    p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
-    p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
-    p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
-                                         "training steps): the score-per-budget table")
-    p.add_argument("--budget-steps", help="comma-separated training steps: evaluate the budget runs' EMA "
-                                          "snapshots there (default: their latest checkpoints)")
-    p.add_argument("--budgets", help="comma-separated network-call budgets K")
-    p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
-    p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
-    p.add_argument("--throughput-seconds", type=float,
-                   help="seconds of training per figure of the training-throughput table (0: skip)")
-    p.add_argument("--throughput-batch-sizes", help="comma-separated batches of the training-throughput table")
-    p.add_argument("--side-by-side-seconds", type=float,
-                   help="seconds of training per figure of the two-jobs table (0: skip)")
-    p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_bench)
+    add_command(sub, "bench", BenchOptions, _cmd_bench,
+                help="planning latency, overheads, torch.compile, evaluation throughput and score per planning budget "
+                     "(JSON + Markdown)",
+                description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and diffuser "
+                            "networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes). --out: the output "
+                            "directory (bench.json, bench.md).")
 
 
-def _cmd_bench(args) -> int:
+def _cmd_bench(o: BenchOptions) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
     from bridgeplan.files import check_writable
 
-    given = {"presets": args.presets and tuple(args.presets.split(",")),
-             "methods": args.methods and tuple(args.methods.split(",")),
-             "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
-             "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
-             "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
-             "throughput_seconds": args.throughput_seconds, "side_by_side_seconds": args.side_by_side_seconds,
-             "compile": False if args.no_compile else None}
+    given = {"presets": o.presets and tuple(o.presets.split(",")),
+             "methods": o.methods and tuple(o.methods.split(",")),
+             "budget_runs": o.budget_runs and tuple(r for r in o.budget_runs.split(",") if r),
+             "repeats": o.repeats, "overhead_repeats": o.overhead_repeats, "eval_run": o.eval_run,
+             "budget_episodes": o.budget_episodes, "device": o.device.device, "busy_steps": o.busy_steps,
+             "throughput_seconds": o.throughput_seconds, "side_by_side_seconds": o.side_by_side_seconds,
+             "compile": False if o.no_compile else None}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
-        text = getattr(args, name)
+        text = getattr(o, name)
         given[name] = text and int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
-    check_writable(args.out, "bench folder", folder=True)
-    path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    check_writable(o.out, "bench folder", folder=True)
+    path = run_bench(Path(o.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(path.read_text())
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class DemoOptions:
+    environment: _ec.Environment = group(_ec.Environment, maze="umaze")
+    out: str | None = shared(_ec.Output, "out", default="demo")
+    dataset_steps: int = opt(200_000, "transitions generated")
+    steps: int | None = shared(Training, "steps", default=1500)
+    episodes: int | None = shared(_ec.Tasks, "episodes", default=100)
+    seed: int | None = shared(Training, "seed", default=0)
+    threads: _ec.Threads = group(_ec.Threads)
+
+
 def _add_demo_command(sub) -> None:
-    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report",
-                       description="Generates a small dataset, trains a DDPM planner and a bridge from the straight "
-                                   "line for a few minutes on a CPU, scores both on the maze's test episodes at "
-                                   "their full NFE and at NFE 1, prints the scores and writes a report with "
-                                   "figures. Resumable: run again, only what is missing is done.")
-    p.add_argument("--maze", default="umaze", help="umaze (default), medium or large")
-    p.add_argument("--out", default="demo", help="output folder (default demo/, ignored by git)")
-    p.add_argument("--dataset-steps", type=int, default=200_000, help="transitions generated (default 200 000)")
-    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run (default 1500)")
-    p.add_argument("--episodes", type=int, default=100, help="test episodes per evaluation (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="the runs' training seed (default 0)")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_demo)
+    add_command(sub, "demo", DemoOptions, _cmd_demo,
+                help="the main job on a small default: data, DDPM and bridge runs, eval, report",
+                description="Generates a small dataset, trains a DDPM planner and a bridge from the straight line for "
+                            "a few minutes on a CPU, scores both on the maze's test episodes at their full NFE and at "
+                            "NFE 1, prints the scores and writes a report with figures. Resumable: run again, only "
+                            "what is missing is done. --maze: umaze, medium or large; --out: the output folder "
+                            "(ignored by git); --steps: per run; --episodes: test episodes per evaluation; --seed: "
+                            "the runs' training seed.")
 
 
 DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge starts from the straight line to the goal, "
@@ -421,7 +445,7 @@ DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge start
                 "its full NFE and more training than this (at NFE 1 it scores about as a random policy).")
 
 
-def _cmd_demo(args) -> int:
+def _cmd_demo(o: DemoOptions) -> int:
     """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
     from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.envs.maze2d.reference import load_reference_returns
@@ -432,20 +456,20 @@ def _cmd_demo(args) -> int:
     from bridgeplan.paths import store_path
     from bridgeplan.report import last_snapshot_table, write_report
 
-    maze = get_maze(args.maze).name
+    maze = get_maze(o.environment.maze).name
     for flag in ("--dataset-steps", "--steps", "--episodes"):
-        positive(flag, getattr(args, flag[2:].replace("-", "_")))
-    check_writable(args.out, "demo folder", folder=True)
+        positive(flag, getattr(o, flag[2:].replace("-", "_")))
+    check_writable(o.out, "demo folder", folder=True)
     print(_reference_table({maze: load_reference_returns()[maze]}))
     demo = get_experiment("demo")  # studies/demo.toml runs the same grid: the README's expected range
-    settings = SweepSettings(maze=maze, dataset_steps=args.dataset_steps, preset="cpu-small",
-                             train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
-                             episodes=args.episodes, seeds=(args.seed,), results_dir=args.out,
-                             overrides=_overrides(args, ("threads",)))
+    settings = SweepSettings(maze=maze, dataset_steps=o.dataset_steps, preset="cpu-small",
+                             train_steps=o.steps, checkpoint_every=max(1, o.steps // 3),
+                             episodes=o.episodes, seeds=(o.seed,), results_dir=o.out,
+                             overrides=_given(o, ("threads",)))
     added = run_sweep([demo], settings)
-    report = write_report(Path(args.out))
-    print(f"\n{last_snapshot_table(ResultsStore(store_path(args.out)), demo.name)}\n{DEMO_READING}")
-    print(f"demo: {added} new results in {store_path(args.out)}; every snapshot and figure: {report}")
+    report = write_report(Path(o.out))
+    print(f"\n{last_snapshot_table(ResultsStore(store_path(o.out)), demo.name)}\n{DEMO_READING}")
+    print(f"demo: {added} new results in {store_path(o.out)}; every snapshot and figure: {report}")
     return 0
 
 

@@ -56,7 +56,11 @@ class Threads:
 class Output:
     out: str | None = opt(None, "the file written (default: the command's, in its description)")
     json: bool = opt(False, "print the JSON to stdout instead of the table")
-    no_progress: bool = opt(False, "no progress bar")
+
+
+@dataclass(kw_only=True)
+class Progress:
+    no_progress: bool = opt(False, "no progress bars")
 
 
 @dataclass(kw_only=True)
@@ -177,6 +181,7 @@ class EvalOptions:
     controller: Controller = group(Controller)
     device: Device = group(Device)
     output: Output = group(Output)
+    progress: Progress = group(Progress)
     threads: Threads = group(Threads)
 
 
@@ -230,7 +235,7 @@ def _eval_gcbc(o: EvalOptions) -> int:
     if o.output.out:
         check_writable(o.output.out, "evaluation JSON")
     row = evaluate_gcbc(o.run, steps=None if o.snapshot is None else [o.snapshot], episodes=o.tasks.episodes or 0,
-                        seed=o.tasks.seed, progress=not o.output.no_progress, task_ids=o.tasks.ids)[0]
+                        seed=o.tasks.seed, progress=not o.progress.no_progress, task_ids=o.tasks.ids)[0]
     text = row.pop("text")
     if o.output.out:
         atomic_write_text(Path(o.output.out), json.dumps(row, indent=2) + "\n")
@@ -253,6 +258,7 @@ class HierarchyEvalOptions:
     controller: Controller = group(Controller, controller="pursuit")
     device: Device = group(Device)
     output: Output = group(Output)
+    progress: Progress = group(Progress)
     threads: Threads = group(Threads)
 
 
@@ -281,7 +287,7 @@ def hierarchy_eval(o: HierarchyEvalOptions) -> int:
         plan = dataclasses.replace(plan, replan_every=hierarchy.spacing)
     tasks = run_tasks(low, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
     result = evaluate_hierarchy(hierarchy, high, low, tasks, o.nfe_high, low_level.nfe_low, plan,
-                                low_level.replan_high_every, progress=not o.output.no_progress)
+                                low_level.replan_high_every, progress=not o.progress.no_progress)
     d = result.to_dict()
     name = (f"hierarchy-{high.name}-step{high.step}-nfe{d['high']['nfe']}-step{low.step}-nfe{d['low']['nfe']}-"
             f"{plan.resolved(result.family, tasks.env).tag()}"
@@ -324,6 +330,7 @@ class GraphOptions:
     controller: Controller = group(Controller, controller="pursuit")
     device: Device = group(Device)
     output: Output = group(Output)
+    progress: Progress = group(Progress)
     threads: Threads = group(Threads)
 
 
@@ -369,7 +376,7 @@ def graph_eval(o: GraphOptions) -> int:
     tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
-                            progress=not o.output.no_progress)
+                            progress=not o.progress.no_progress)
     d = result.to_dict()
     g = d["graph"]
     tag = plan.resolved(result.family, env).tag()
@@ -389,6 +396,7 @@ class OracleOptions:
     episodes: int | None = shared(Tasks, "episodes")
     tasks: str | None = shared(Tasks, "tasks")
     output: Output = group(Output)
+    progress: Progress = group(Progress)
     threads: Threads = group(Threads)
 
 
@@ -412,7 +420,7 @@ def oracle(o: OracleOptions) -> int:
             for seed in seeds:
                 tasks = make_tasks(env, o.episodes, seed, task_set == "multi", task_ids(o.tasks))
                 agent = family.oracle(env)
-                agent_outcome = family.run(tasks, agent, progress=not o.output.no_progress)
+                agent_outcome = family.run(tasks, agent, progress=not o.progress.no_progress)
                 rows.append({**tasks.fields(), "policy": "oracle", **family.score(tasks, agent_outcome)})
                 row = rows[-1]
                 rate = row["success_rate"]["mean"] if isinstance(row["success_rate"], dict) else row["success_rate"]
@@ -437,6 +445,7 @@ class GCBCEvalOptions:
     episodes: int | None = shared(Tasks, "episodes")
     seed: int = shared(Tasks, "seed")
     output: Output = group(Output)
+    progress: Progress = group(Progress)
     threads: Threads = group(Threads)
 
 
@@ -467,7 +476,7 @@ def gcbc_eval(o: GCBCEvalOptions) -> int:
 
         configure_threads(o.threads.threads)
     rows = evaluate_gcbc(o.run, o.environment.maze or "", steps, o.episodes or 0, o.seed,
-                         progress=not o.output.no_progress)
+                         progress=not o.progress.no_progress)
     for row in rows:
         text = row.pop("text")
         print(json.dumps(row, indent=2) if o.output.json else f"step {row['step']}: {text}")

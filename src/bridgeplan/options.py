@@ -18,6 +18,9 @@ from typing import Any, Literal
 
 from bridgeplan.errors import BridgeplanError
 
+REQUIRED = dataclasses.MISSING
+"""A command's override (:func:`group`) that makes an option required there (a required flag)."""
+
 
 def opt(default: Any = dataclasses.MISSING, help: str = "", **argparse_kwargs) -> Any:
     """An option: its default (none: required), its help, and what argparse needs beyond the annotation
@@ -80,9 +83,12 @@ def leaves(options: type, path: tuple[str, ...] = (), defaults: Mapping | None =
                               getattr(inner, "title", None) or title)
             continue
         default = f.default if f.default_factory is dataclasses.MISSING else f.default_factory()
-        default = (defaults or {}).get(f.name, default)
-        yield Leaf(f.name, path, hints[f.name], default, f.metadata.get("help", ""),
-                   dict(f.metadata.get("argparse", {})), title)
+        extra = dict(f.metadata.get("argparse", {}))
+        if f.name in (defaults or {}):
+            default = defaults[f.name]
+            if default is REQUIRED:
+                extra["required"] = True
+        yield Leaf(f.name, path, hints[f.name], default, f.metadata.get("help", ""), extra, title)
 
 
 def _check_once(options: type) -> list[Leaf]:
@@ -157,6 +163,15 @@ def _build(options: type, values: Mapping[str, Any], path: tuple[str, ...] = ())
         else:
             fields[f.name] = values[f.name]
     return options(**fields)
+
+
+def values(options) -> dict[str, Any]:
+    """The options ``options`` holds (its groups' too), by name."""
+    out = {}
+    for f in dataclasses.fields(options):
+        value = getattr(options, f.name)
+        out |= values(value) if "group" in f.metadata else {f.name: value}
+    return out
 
 
 def options_from_args(options: type, args: argparse.Namespace):
