@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bridgeplan import eval_commands as _ec
+from bridgeplan import option_groups as og
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.options import REQUIRED, add_command, group, int_tuple, opt, positive, shared, values
 
@@ -23,7 +24,7 @@ DESCRIPTION = "planning with diffusion models and bridges from informative prior
 
 @dataclasses.dataclass(kw_only=True)
 class DataGenerateOptions:
-    environment: _ec.Environment = group(_ec.Environment, maze=REQUIRED)
+    environment: og.Environment = group(og.Environment, maze=REQUIRED)
     steps: int | None = opt(None, "Maze2D: transitions (default 1 M)")
     piece_steps: int | None = opt(None, "Maze2D: independent pieces of N steps, each from a random start, instead of "
                                         "one stream per worker: a stitching dataset (as OGBench's stitch; default "
@@ -32,16 +33,16 @@ class DataGenerateOptions:
     episodes: int | None = opt(None, "OGBench: training episodes (default: the recipe's)")
     episode_steps: int | None = opt(None, "OGBench: steps per episode (default: the recipe's)")
     seed: int | None = opt(None, "the data's seed (default 123 (Maze2D), 0 (OGBench, as its scripts))")
-    out: str | None = shared(_ec.Output, "out")
+    out: str | None = shared(og.Output, "out")
     force: bool = opt(False, "overwrite an existing dataset")
-    progress: _ec.Progress = group(_ec.Progress)
+    progress: og.Progress = group(og.Progress)
 
 
 @dataclasses.dataclass(kw_only=True)
 class DataInfoOptions:
     path: str = opt(help="a Minari directory or id, a D4RL maze2d hdf5 file or an OGBench npz file")
-    environment: _ec.Environment = group(_ec.Environment)
-    json: bool = shared(_ec.Output, "json")
+    environment: og.Environment = group(og.Environment)
+    json: bool = shared(og.Output, "json")
 
 
 def _add_data_commands(sub) -> None:
@@ -89,10 +90,10 @@ def _cmd_data_info(o: DataInfoOptions) -> int:
 
 @dataclasses.dataclass(kw_only=True)
 class ReferenceOptions:
-    environment: _ec.Environment = group(_ec.Environment)
-    episodes: int | None = shared(_ec.Tasks, "episodes", default=100)
-    seed: int = shared(_ec.Tasks, "seed", default=123)
-    out: str | None = shared(_ec.Output, "out")
+    environment: og.Environment = group(og.Environment)
+    episodes: int | None = shared(og.Tasks, "episodes", default=100)
+    seed: int = shared(og.Tasks, "seed", default=123)
+    out: str | None = shared(og.Output, "out")
 
 
 def _add_reference_commands(sub) -> None:
@@ -140,41 +141,21 @@ def _cmd_reference_measure(o: ReferenceOptions) -> int:
 
 
 @dataclasses.dataclass(kw_only=True)
-class RunDir:
-    run_dir: str | None = opt(None, "the run's directory (default: RUNS_ROOT/<name derived from the config>)")
-    resume: bool = opt(False, "continue the run in --run-dir")
-
-
-@dataclasses.dataclass(kw_only=True)
-class Training:
-    """How long and how a model is trained (defaults: the config's)."""
-
-    steps: int | None = opt(None, "optimizer steps")
-    minutes: float | None = opt(None, "wall-clock budget (stops at steps or minutes)")
-    batch_size: int | None = opt(None, "windows per gradient (default: the config's, for a planner its preset's for "
-                                       "the maze)")
-    lr: float | None = opt(None, "Adam's learning rate (default as --batch-size)")
-    checkpoint_every: int | None = opt(None, "write the checkpoint (and a snapshot) every this many steps")
-    log_every: int | None = opt(None, "log every this many steps")
-    seed: int | None = opt(None, "the training seed")
-
-
-@dataclasses.dataclass(kw_only=True)
 class TrainCommon:
     """What a planner's and the learned prior's training take."""
 
-    environment: _ec.Environment = group(_ec.Environment, maze=REQUIRED)
-    dataset: _ec.Dataset = group(_ec.Dataset, dataset=REQUIRED)
-    run: RunDir = group(RunDir)
+    environment: og.Environment = group(og.Environment, maze=REQUIRED)
+    dataset: og.Dataset = group(og.Dataset, dataset=REQUIRED)
+    run: og.RunDir = group(og.RunDir)
     runs_root: str = opt("runs", "where a run's directory goes unless --run-dir")
     preset: str = opt("diffuser", "the defaults per maze: diffuser (Diffuser's Maze2D settings) or cpu-small; a "
                                   "learned prior takes its planners' horizon and stride")
     horizon: int | None = opt(None, "planned states (default: the preset's for the maze)")
     stride: int | None = opt(None, "environment steps between planned states (default: the preset's for the maze)")
-    training: Training = group(Training)
-    device: _ec.Device = group(_ec.Device, device=None)
-    threads: _ec.Threads = group(_ec.Threads)
-    progress: _ec.Progress = group(_ec.Progress)
+    training: og.Training = group(og.Training)
+    device: og.Device = group(og.Device, device=None)
+    threads: og.Threads = group(og.Threads)
+    progress: og.Progress = group(og.Progress)
 
 
 @dataclasses.dataclass(kw_only=True)
@@ -301,18 +282,18 @@ def _add_eval_commands(sub) -> None:
 @dataclasses.dataclass(kw_only=True)
 class RenderOptions:
     run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
-    episodes: int | None = shared(_ec.Tasks, "episodes", default=8)
+    episodes: int | None = shared(og.Tasks, "episodes", default=8)
     nfe: int | None = shared(_ec.EvalOptions, "nfe")
-    seed: int = shared(_ec.Tasks, "seed")
-    multi_task: bool = shared(_ec.Tasks, "multi_task")
-    out: str | None = shared(_ec.Output, "out")
+    seed: int = shared(og.Tasks, "seed")
+    multi_task: bool = shared(og.Tasks, "multi_task")
+    out: str | None = shared(og.Output, "out")
     pairs: bool = opt(False, "also draw prior/target pairs from the training data")
     video: bool = opt(False, "also write an animated GIF of the first episode (MuJoCo)")
-    device: _ec.Device = group(_ec.Device)
-    replanning: _ec.Replanning = group(_ec.Replanning)
-    plans: _ec.PlanChoice = group(_ec.PlanChoice)
-    controller: _ec.Controller = group(_ec.Controller)
-    threads: _ec.Threads = group(_ec.Threads)
+    device: og.Device = group(og.Device)
+    replanning: og.Replanning = group(og.Replanning)
+    plans: og.PlanChoice = group(og.PlanChoice)
+    controller: og.Controller = group(og.Controller)
+    threads: og.Threads = group(og.Threads)
 
 
 def _cmd_render(o: RenderOptions) -> int:
@@ -332,7 +313,7 @@ def _cmd_render(o: RenderOptions) -> int:
 @dataclasses.dataclass(kw_only=True)
 class ReportOptions:
     results: str = opt("results", "the results folder (its store)")
-    out: str | None = shared(_ec.Output, "out")
+    out: str | None = shared(og.Output, "out")
     csv: str | None = opt(None, "also export every result row to this CSV file")
 
 
@@ -363,7 +344,7 @@ def _cmd_report(o: ReportOptions) -> int:
 
 @dataclasses.dataclass(kw_only=True)
 class BenchOptions:
-    out: str | None = shared(_ec.Output, "out", default="bench")
+    out: str | None = shared(og.Output, "out", default="bench")
     presets: str | None = opt(None, "comma-separated presets to time")
     batch_sizes: str | None = opt(None, "comma-separated plans per call")
     nfes: str | None = opt(None, "comma-separated network calls per plan (latency table)")
@@ -384,8 +365,8 @@ class BenchOptions:
                                                  "(0: skip)")
     throughput_batch_sizes: str | None = opt(None, "comma-separated batches of the training-throughput table")
     side_by_side_seconds: float | None = opt(None, "seconds of training per figure of the two-jobs table (0: skip)")
-    device: _ec.Device = group(_ec.Device, device=None)
-    threads: _ec.Threads = group(_ec.Threads)
+    device: og.Device = group(og.Device, device=None)
+    threads: og.Threads = group(og.Threads)
 
 
 def _add_bench_command(sub) -> None:
@@ -420,13 +401,13 @@ def _cmd_bench(o: BenchOptions) -> int:
 
 @dataclasses.dataclass(kw_only=True)
 class DemoOptions:
-    environment: _ec.Environment = group(_ec.Environment, maze="umaze")
-    out: str | None = shared(_ec.Output, "out", default="demo")
+    environment: og.Environment = group(og.Environment, maze="umaze")
+    out: str | None = shared(og.Output, "out", default="demo")
     dataset_steps: int = opt(200_000, "transitions generated")
-    steps: int | None = shared(Training, "steps", default=1500)
-    episodes: int | None = shared(_ec.Tasks, "episodes", default=100)
-    seed: int | None = shared(Training, "seed", default=0)
-    threads: _ec.Threads = group(_ec.Threads)
+    steps: int | None = shared(og.Training, "steps", default=1500)
+    episodes: int | None = shared(og.Tasks, "episodes", default=100)
+    seed: int | None = shared(og.Training, "seed", default=0)
+    threads: og.Threads = group(og.Threads)
 
 
 def _add_demo_command(sub) -> None:
