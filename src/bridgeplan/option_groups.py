@@ -57,7 +57,7 @@ class Threads:
 
 @dataclass(kw_only=True)
 class Output:
-    out: str | None = opt(None, "the file written (default: the command's, in its description)")
+    out: str | None = opt(None, "where the command writes (default: the command's, in its description)")
     json: bool = opt(False, "print the JSON to stdout instead of the table")
 
 

@@ -24,7 +24,8 @@ REQUIRED = dataclasses.MISSING
 
 def opt(default: Any = dataclasses.MISSING, help: str = "", **argparse_kwargs) -> Any:
     """An option: its default (none: required), its help, and what argparse needs beyond the annotation
-    (``metavar``, ``action="append"``, ``required=True`` for a required flag rather than a positional)."""
+    (``metavar``, ``action="append"``, ``required=True`` for a required flag rather than a positional,
+    ``positional=True`` for a positional argument with a default)."""
     metadata = {"help": help, "argparse": argparse_kwargs}
     if isinstance(default, (list, tuple)):
         return dataclasses.field(default_factory=lambda: list(default), metadata=metadata)
@@ -69,7 +70,7 @@ class Leaf:
 
     @property
     def positional(self) -> bool:
-        return self.default is dataclasses.MISSING and not self.extra.get("required")
+        return self.extra.get("positional") or (self.default is dataclasses.MISSING and not self.extra.get("required"))
 
 
 def leaves(options: type, path: tuple[str, ...] = (), defaults: Mapping | None = None,
@@ -136,6 +137,7 @@ def add_options(parser: argparse.ArgumentParser, options: type) -> argparse.Argu
         target = parser if leaf.title is None else groups.setdefault(
             leaf.title, parser.add_argument_group(leaf.title))
         kwargs = dict(leaf.extra)
+        kwargs.pop("positional", None)
         shown = not any(leaf.default is v for v in (None, False, dataclasses.MISSING)) and leaf.default != []
         kwargs["help"] = leaf.help + (f" (default: {_default_text(leaf.default)})" if shown else "")
         if kind is bool and not many:
@@ -147,7 +149,8 @@ def add_options(parser: argparse.ArgumentParser, options: type) -> argparse.Argu
             if many and "action" not in kwargs:
                 kwargs.setdefault("nargs", "+")
         if leaf.positional:
-            target.add_argument(leaf.name, **kwargs)
+            target.add_argument(leaf.name, **kwargs, **({} if leaf.default is dataclasses.MISSING
+                                                        else {"default": leaf.default}))
             continue
         if leaf.default is not dataclasses.MISSING:
             kwargs["default"] = leaf.default
