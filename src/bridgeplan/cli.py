@@ -33,12 +33,14 @@ class StudyReportOptions:
     root: str | None = shared(Root, "root")
 
 
-STUDY_FILE_HELP = "the study file (or a study's name)"
+@dataclass(kw_only=True)
+class StudyFile:
+    file: str = opt(help="the study file (or a study's name)")
 
 
 @dataclass(kw_only=True)
 class StudyRunOptions:
-    file: str = opt(help=STUDY_FILE_HELP)
+    file: str = shared(StudyFile, "file")
     dry_run: bool = opt(False, "list what would be trained and evaluated, and its cost")
     quick: bool = opt(False, "a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
                              "not the committed scale")
@@ -52,7 +54,7 @@ class StudyRunOptions:
 
 @dataclass(kw_only=True)
 class StudyImportOptions:
-    file: str = opt(help=STUDY_FILE_HELP)
+    file: str = shared(StudyFile, "file")
     eval_json: list[str] | None = opt(None, "evaluation JSONs to import instead, each an evaluation that --experiment "
                                             "declares", metavar="FILE")
     experiment: str | None = opt(None, "with --eval-json: the study's experiment they belong to (NAME-validation: its "
@@ -62,7 +64,7 @@ class StudyImportOptions:
 
 @dataclass(kw_only=True)
 class StudyExportOptions:
-    file: str = opt(help=STUDY_FILE_HELP)
+    file: str = shared(StudyFile, "file")
     root: str | None = shared(Root, "root")
 
 

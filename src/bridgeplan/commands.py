@@ -281,7 +281,7 @@ def _add_eval_commands(sub) -> None:
 
 @dataclasses.dataclass(kw_only=True)
 class RenderOptions:
-    run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
+    run: str = shared(_ec.EvalOptions, "run")
     episodes: int | None = shared(og.Tasks, "episodes", default=8)
     nfe: int | None = shared(_ec.EvalOptions, "nfe")
     seed: int = shared(og.Tasks, "seed")
