@@ -9,7 +9,16 @@ from typing import ClassVar, Literal
 import pytest
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.options import add_options, group, opt, options_from_args, options_from_dict
+from bridgeplan.options import (
+    REQUIRED,
+    add_options,
+    group,
+    opt,
+    options_from_args,
+    options_from_dict,
+    shared,
+    values,
+)
 
 
 @dataclass(kw_only=True)
@@ -92,3 +101,26 @@ def test_an_option_declared_twice_is_refused_when_the_parser_is_built():
         parser_of(Twice)
     with pytest.raises(TypeError, match="declared twice"):
         options_from_dict(Twice, {})
+
+
+@dataclass(kw_only=True)
+class Overrides:
+    """A command that takes one option of a group alone, with its own default, and makes another one required."""
+
+    names: list[str] = opt([], "names, maybe none", positional=True, nargs="*")
+    lookahead: float = shared(Example, "lookahead", default=3.0)
+    shared: Shared = group(Shared, seed=REQUIRED)
+
+
+def test_a_command_overrides_a_default_or_makes_an_option_required():
+    parser = parser_of(Overrides)
+    o = options_from_args(Overrides, parser.parse_args(["--seed", "2"]))
+    assert o == Overrides(names=[], lookahead=3.0, shared=Shared(seed=2, controller="track"))
+    assert values(o) == {"names": [], "lookahead": 3.0, "seed": 2, "controller": "track"}
+    assert options_from_args(Overrides, parser.parse_args(["a", "b", "--seed", "2"])).names == ["a", "b"]
+    text = " ".join(parser.format_help().split())
+    assert "a distance (default: 3.0)" in text and "--seed SEED the seed" in text
+    with pytest.raises(SystemExit):  # --seed is required here
+        parser.parse_args([])
+    with pytest.raises(BridgeplanError, match="missing option 'seed'"):
+        options_from_dict(Overrides, {})

@@ -785,3 +785,31 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     assert main(["gcbc", "eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
                  "--out", str(tmp_path / "x.json")]) == 2  # --out takes one evaluation
     assert "--out takes one evaluation" in capsys.readouterr().err
+
+
+def test_every_committed_evaluation_reads_the_same_through_the_cli():
+    """A study's evaluation fills the options dataclass its command's flags fill: each committed job, written as the
+    command line a user would type, parses into the options the runner calls the command with."""
+    from bridgeplan.cli import build_parser
+    from bridgeplan.eval_commands import STUDY_COMMANDS
+    from bridgeplan.options import leaves, options_from_args
+
+    parser = build_parser()
+    checked = Counter()
+    for study in load_studies(REPO).values():
+        for job in jobs(study, Path("results"), Path("out"), quick=False):
+            spec = STUDY_COMMANDS[job.command]
+            given = dict(job.args) | dict(zip(spec.runs, job.run_dirs)) | {"dataset": "data.npz"}
+            positional, flags = [], []
+            for leaf in leaves(spec.options):
+                value = given.get(leaf.name)
+                if leaf.positional:
+                    positional += [str(v) for v in (value if isinstance(value, list) else [value])]
+                elif value is True:
+                    flags.append(leaf.flag)
+                elif value not in (None, False):
+                    flags += [leaf.flag, str(value)]
+            options = options_from_args(spec.options, parser.parse_args([*job.command.split(), *positional, *flags]))
+            assert options == job.options(Path("data.npz"), progress=True), (study.name, job.path)
+            checked[job.command] += 1
+    assert set(checked) == set(STUDY_COMMANDS) and sum(checked.values()) > 500, checked
