@@ -1,7 +1,8 @@
-"""The ``bridgeplan`` subcommands that make data, train, evaluate, draw and measure: everything a study's
-evaluations run (through :func:`main`). :mod:`bridgeplan.cli` adds the commands that run studies and ship their
-planners. Each subcommand maps its flags onto a module's function; user mistakes (BridgeplanError) print one
-``error:`` line and exit 2."""
+"""The ``bridgeplan`` subcommands that make data, train, evaluate, draw and measure (the evaluation commands a study
+runs are :mod:`bridgeplan.eval_commands`'); :mod:`bridgeplan.cli` adds the commands that run studies and ship their
+planners. Each subcommand is an options dataclass (:mod:`bridgeplan.options`; the groups several share:
+:mod:`bridgeplan.option_groups`) and a function of it; user mistakes (BridgeplanError) print one ``error:`` line and
+exit 2."""
 
 from __future__ import annotations
 
@@ -494,8 +495,3 @@ def run(args: argparse.Namespace) -> int:
     except BrokenPipeError:  # the reader closed the pipe (`bridgeplan study list | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``bridgeplan`` restricted to these commands (what a study runs)."""
-    return run(build_parser().parse_args(argv))
