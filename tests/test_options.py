@@ -75,6 +75,7 @@ def test_a_study_table_fills_the_same_dataclass_as_the_flags():
                                                                        "--fast", "--controller", "track"]))
     assert o == parsed and isinstance(o.lookahead, float)
     assert options_from_dict(Example, {"run": "R", "names": "c"}).names == ["c"]
+    assert options_from_dict(Example, {"run": "R"}) == Example(run="R")  # in Python, groups at their defaults too
 
 
 @pytest.mark.parametrize("given, message", [

@@ -11,13 +11,12 @@ import dataclasses
 import json
 import os
 import sys
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 from bridgeplan import eval_commands as _ec
 from bridgeplan import option_groups as og
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, one_line_warnings
 from bridgeplan.options import REQUIRED, add_command, group, int_tuple, opt, positive, shared, values
 
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
@@ -471,14 +470,9 @@ def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argpars
     return parser
 
 
-def _one_line_warning(message, category, filename, lineno, line=None) -> str:
-    return f"warning: {message}\n"
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the parsed command: a user mistake is one ``error:`` line and exit 2, an interrupt exit 130."""
-    warnings.filterwarnings("ignore", module="gymnasium_robotics")
-    warnings.formatwarning = _one_line_warning
+    one_line_warnings()
     try:
         from bridgeplan.device import configure_threads
 

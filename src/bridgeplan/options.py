@@ -45,8 +45,16 @@ def shared(options: type, name: str, **default) -> Any:
 
 def group(options: type, **defaults) -> Any:
     """A group of options (the dataclass ``options``) inside a command's options; ``defaults``: this command's own
-    defaults for some of its fields (an override visible here, not a second declaration)."""
-    return dataclasses.field(metadata={"group": options, "defaults": defaults})
+    defaults for some of its fields (an override visible here, not a second declaration; :data:`REQUIRED`: required
+    here). The group defaults to its defaults unless one of its options is required."""
+    metadata = {"group": options, "defaults": defaults}
+    if any(v is REQUIRED for v in defaults.values()):
+        return dataclasses.field(metadata=metadata)
+    try:
+        options(**defaults)
+    except TypeError:  # an option without a default
+        return dataclasses.field(metadata=metadata)
+    return dataclasses.field(default_factory=lambda: options(**defaults), metadata=metadata)
 
 
 @dataclasses.dataclass(frozen=True)

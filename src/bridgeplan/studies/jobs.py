@@ -11,7 +11,7 @@ line, run by ``study run``)::
     [[evaluations]]
     command = "hierarchy eval"           # eval | hierarchy eval | graph | oracle | gcbc eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
-    args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
+    args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's options
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
     splits = ["test", "validation"]      # the evaluation seed: the training seed, or 1000 + it
     task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; where the family has it)
@@ -21,10 +21,11 @@ A named run from the learned prior (``prior = "learned"``) samples it from the t
 same windows, per training seed, for [training]'s ``prior_steps`` (runs/<maze>-prior-learned-<shape>-s<seed>, shared
 by the runs of one plan shape). ``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single``
 or ``multi``). ``study run`` writes each under the study's results directory (results/NAME/OUT): a JSON there is
-done; it trains what the missing ones need and runs their commands (``--workers`` training seeds side by side, one
-torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
+done; it trains what the missing ones need and calls their commands' functions on the options ``args`` fills (the
+options dataclass the command's flags fill: :data:`bridgeplan.eval_commands.STUDY_COMMANDS`; ``--workers`` training
+seeds side by side, one torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
 import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its low level
-(``runs = ["low"]``, given as ``--low``); the runner gives it the study's dataset. A validation split of a family
+(``runs = ["low"]``, its ``low`` option); the runner gives it the study's dataset. A validation split of a family
 with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier draw.
 """
 
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bridgeplan.errors import one_line_warnings
 from bridgeplan.eval_commands import STUDY_COMMANDS
 from bridgeplan.studies.spec import NamedRun, command_options
 
@@ -159,6 +161,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     from bridgeplan.train import train, train_prior
 
     configure_threads(1)
+    one_line_warnings()  # as the CLI's, in a worker process too
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
         config = train_config(study, runs[name], seed, dataset, results)
