@@ -164,8 +164,7 @@ class TrainOptions:
     process: str | None = opt(None, "ddpm, bridge or flow (default ddpm)")
     process_param: list[str] | None = opt(None, "any field of the process's dataclass, e.g. beta_max=0.3 "
                                                 "(repeatable)", action="append", metavar="FIELD=VALUE")
-    prior: str | None = opt(None, "bridge prior: gaussian, line, learned or coarse (a low level's: the line through "
-                                  "its subgoals) (default gaussian)")
+    prior: str | None = shared(og.PlanChoice, "prior")
     prior_run: str | None = opt(None, "run directory of `bridgeplan train-prior` (learned prior)")
     diffusion_steps: int | None = opt(None, "diffusion steps N")
     beta_max: float | None = opt(None, "bridge: largest beta of the schedule")
@@ -184,8 +183,7 @@ class TrainOptions:
                                           "high level's subgoals when planning; `bridgeplan hierarchy eval`)")
     precision: str | None = opt(None, "bf16: forward and backward under bfloat16 autocast (refused where the device "
                                       "lacks it)")
-    compile: bool | None = opt(None, "train through the torch.compile'd network (compiles at the first step)",
-                               action="store_true")
+    compile: bool | None = shared(_ec.EvalOptions, "compile", default=None)
 
 
 def _add_train_commands(sub) -> None:

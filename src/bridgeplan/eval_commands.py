@@ -82,7 +82,8 @@ class EvalOptions:
                                     "noise)")
     eta: float = opt(0.0, "ddpm with ddim: eta (0: deterministic)")
     correction: Correction = group(Correction)
-    compile: bool = opt(False, "plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
+    compile: bool = opt(False, "through the torch.compile'd network: planning compiles first, untimed (see "
+                               "`bridgeplan bench`); training compiles at the first step")
     no_floor: bool = opt(False, "skip the floors (the same episodes from the straight line alone, no network)")
     tasks: Tasks = group(Tasks)
     replanning: Replanning = group(Replanning)

@@ -88,8 +88,10 @@ class PlanChoice:
     candidates: int = opt(1, "plans sampled per decision, in one batch; --select picks one", metavar="M")
     select: str = opt("arrival", "arrival (earliest within the goal radius), agreement (the candidate closest to the "
                                  "others) or walls (fewest planned positions in walls: uses the maze's wall map)")
-    prior: str | None = opt(None, "warm: replans start from the previous plan, shifted (processes with a prior; needs "
-                                  "replanning; the first plan uses the run's own prior)")
+    prior: str | None = opt(None, "what the process starts from: training a bridge, gaussian (the default), line, "
+                                  "learned or coarse (a low level's: the line through its subgoals); evaluating, warm "
+                                  "(replans start from the previous plan, shifted: processes with a prior, replanning; "
+                                  "the first plan uses the run's own prior)")
     arrival: str | None = opt(None, "end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state "
                                     "within the goal radius, then hold the goal) or keep (truncate, and replans hold "
                                     "the goal from the step the previous plan arrived at); default: the family's "

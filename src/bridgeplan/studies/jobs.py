@@ -23,10 +23,11 @@ by the runs of one plan shape). ``out`` may name ``{seed}`` (training), ``{eval_
 or ``multi``). ``study run`` writes each under the study's results directory (results/NAME/OUT): a JSON there is
 done; it trains what the missing ones need and calls their commands' functions on the options ``args`` fills (the
 options dataclass the command's flags fill: :data:`bridgeplan.eval_commands.STUDY_COMMANDS`; ``--workers`` training
-seeds side by side, one torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
-import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its low level
-(``runs = ["low"]``, its ``low`` option); the runner gives it the study's dataset. A validation split of a family
-with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier draw.
+seeds side by side, one torch thread each). ``study export`` copies them to docs/results/OUT, where the study's
+report reads them; ``study import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its
+low level (``runs = ["low"]``, its ``low`` option); the runner gives it the study's dataset. A validation split of a
+family with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier
+draw.
 """
 
 from __future__ import annotations
