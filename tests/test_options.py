@@ -92,6 +92,12 @@ def test_a_bad_study_table_is_one_error_naming_the_key(given, message):
     assert message in str(e.value) and "\n" not in str(e.value)
 
 
+def test_the_valid_names_leave_out_those_the_caller_sets():
+    with pytest.raises(BridgeplanError, match=r"unrecognized option 'x' \(valid: controller, fast, lookahead, names, "
+                                              r"nfe, seed\)$"):
+        options_from_dict(Example, {"x": 1}, unlisted={"run", "correction"})
+
+
 def test_an_option_declared_twice_is_refused_when_the_parser_is_built():
     @dataclass(kw_only=True)
     class Twice:

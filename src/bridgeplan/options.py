@@ -13,7 +13,7 @@ import argparse
 import dataclasses
 import types
 import typing
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from typing import Any, Literal
 
 from bridgeplan.errors import BridgeplanError
@@ -190,14 +190,16 @@ def options_from_args(options: type, args: argparse.Namespace):
     return _build(options, vars(args))
 
 
-def options_from_dict(options: type, given: Mapping[str, Any]):
+def options_from_dict(options: type, given: Mapping[str, Any], unlisted: Collection[str] = ()):
     """``options`` filled from ``given`` (option name -> value, as a study file's ``args`` table), the rest at
     their defaults; each value is read as the flag reads its text. An unknown name, a missing required option or
-    a bad value: a :class:`BridgeplanError` naming it."""
+    a bad value: a :class:`BridgeplanError` naming it (and the valid names, less ``unlisted``: those the caller
+    sets)."""
     found = {leaf.name: leaf for leaf in _check_once(options)}
     unknown = sorted(set(given) - set(found))
     if unknown:
-        raise BridgeplanError(f"unrecognized option {unknown[0]!r} (valid: {', '.join(sorted(found))})")
+        valid = ", ".join(sorted(set(found) - set(unlisted)))
+        raise BridgeplanError(f"unrecognized option {unknown[0]!r} (valid: {valid})")
     values = {}
     for name, leaf in found.items():
         if name in given:

@@ -540,7 +540,8 @@ def command_options(command: str, runs: list[str], args: tuple[tuple[str, Any], 
     """The options of ``command`` on ``runs`` (filling the options :data:`STUDY_COMMANDS` names) with ``args``; a
     bad one: :class:`BridgeplanError` naming it."""
     spec = STUDY_COMMANDS[command]
-    return options_from_dict(spec.options, {**dict(args), **dict(zip(spec.runs, runs))})
+    return options_from_dict(spec.options, {**dict(args), **dict(zip(spec.runs, runs))},
+                             unlisted=SET_BY_THE_RUNNER | {spec.seed, *spec.runs})
 
 
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
