@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import types
 import typing
 from collections.abc import Collection, Iterator, Mapping
@@ -84,7 +85,7 @@ class Leaf:
 def leaves(options: type, path: tuple[str, ...] = (), defaults: Mapping | None = None,
            title: str | None = None) -> Iterator[Leaf]:
     """The options of ``options`` and of its groups, depth first."""
-    hints = typing.get_type_hints(options)
+    hints = _hints(options)
     for f in dataclasses.fields(options):
         if "group" in f.metadata:
             inner = f.metadata["group"]
@@ -98,6 +99,12 @@ def leaves(options: type, path: tuple[str, ...] = (), defaults: Mapping | None =
             if default is REQUIRED:
                 extra["required"] = True
         yield Leaf(f.name, path, hints[f.name], default, f.metadata.get("help", ""), extra, title)
+
+
+@functools.cache
+def _hints(options: type) -> dict[str, Any]:
+    """The annotations of ``options``, resolved once per class (every parser built reads them)."""
+    return typing.get_type_hints(options)
 
 
 def _check_once(options: type) -> list[Leaf]:
