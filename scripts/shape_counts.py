@@ -13,14 +13,15 @@ import sys
 from pathlib import Path
 
 LAYERS = [
-    ("base", ("errors", "files", "locks", "device", "checkpoint", "workers", "layout", "paths")),
+    ("base", ("errors", "files", "locks", "device", "checkpoint", "workers", "layout", "paths", "options",
+              "option_groups")),
     ("maths", ("trajectory", "normalizer", "nets", "processes")),
     ("data", ("data.stream", "data.windows", "data.npz", "data")),
     ("envs", ("envs", "maze", "ogbench_pointmaze")),
     ("planning", ("priors", "consistency", "planner")),
     ("training", ("config", "runs", "train", "gcbc", "shipped")),
     ("decisions", ("replan", "graph", "hierarchy", "decisions", "evaluate", "render", "policy")),
-    ("results", ("experiments", "analysis", "report", "bench", "studies", "options")),
+    ("results", ("experiments", "analysis", "report", "bench", "studies", "eval_commands")),
     ("commands", ("commands", "gcbc_commands", "cli")),
 ]
 # where the old tree's environment-specific modules lived outside its environment packages: data/ held Maze2D's
@@ -138,6 +139,19 @@ def name_tests(path: Path) -> list[int]:
     return sorted(set(lines))
 
 
+def option_fields(text: str) -> list[str]:
+    """The flags that options dataclasses declare (``name: T = opt(default, ...)``, bridgeplan.options); a field
+    without a default, or ``positional=True``, is a positional argument, not a flag."""
+    out = []
+    for node in ast.walk(ast.parse(text)):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.value, ast.Call)
+                and getattr(node.value.func, "id", None) == "opt"):
+            keywords = {k.arg for k in node.value.keywords}
+            if (node.value.args or "default" in keywords) and "positional" not in keywords:
+                out.append("--" + node.target.id.replace("_", "-"))
+    return out
+
+
 def leaf_commands() -> list[str]:
     """Every leaf subcommand of the ``bridgeplan`` CLI, walked from its argparse parser (the package imported)."""
     import argparse
@@ -173,6 +187,7 @@ def main(src: Path) -> None:
     text = {name: path.read_text() for name, path in mods.items()}
     flags = re.findall(r"add_argument\(\s*\"(--[a-z0-9-]+)\"", "\n".join(text.values()))
     flags += re.findall(r"add_argument\(\s*f?\"(--\{name\})\"", "\n".join(text.values()))
+    flags += [flag for t in text.values() for flag in option_fields(t)]
     evaluation_commands = [c for c in leaf_commands() if re.search(r"eval|oracle|expert|graph", c)]
     evaluate_functions = sorted(f"{n}.{m}" for n, t in text.items()
                                 for m in re.findall(r"^def (evaluate\w*)\(", t, re.M))
@@ -186,7 +201,8 @@ def main(src: Path) -> None:
     print(f"import circles: {len(circles(graph))} {circles(graph)}")
     print(f"evaluation commands: {len(evaluation_commands)} {evaluation_commands}")
     print(f"evaluate* functions: {len(evaluate_functions)} {evaluate_functions}")
-    print(f"add_argument flag declarations: {len(flags)}; flags declared more than once: {len(repeated)} "
+    print(f"flag declarations (add_argument, opt() fields): {len(flags)}; flags declared more than once: "
+          f"{len(repeated)} "
           f"({sum(repeated.values())} declarations) {repeated}")
     lines = sum(len(t.splitlines()) for t in text.values())
     print(f"src lines: {lines} in {len(mods)} modules")

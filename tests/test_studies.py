@@ -552,7 +552,7 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
                                                                         monkeypatch):
     import json
 
-    import bridgeplan.commands
+    import bridgeplan.studies.jobs
     import bridgeplan.studies.plan
 
     root = tmp_path / "repo"
@@ -582,8 +582,8 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     assert multi["multi_task"] and multi["execution"]["replan_every"] == 24 and multi["nfe"] == 2
     assert (root / "results" / "tiny" / "runs" / "low-s0" / "checkpoint.pt").exists()
     calls, datasets = [], []
-    real = bridgeplan.commands.main
-    monkeypatch.setattr(bridgeplan.commands, "main", lambda argv: calls.append(argv) or real(argv))
+    real = bridgeplan.studies.jobs.run_job
+    monkeypatch.setattr(bridgeplan.studies.jobs, "run_job", lambda *a: calls.append(a) or real(*a))
     real_dataset = bridgeplan.studies.plan.ensure_dataset
     monkeypatch.setattr(bridgeplan.studies.plan, "ensure_dataset", lambda *a, **k: datasets.append(a) or
                         real_dataset(*a, **k))
@@ -603,7 +603,8 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
     ('command = "render"\nruns = ["high"]\nout = "x.json"', "evaluations[0].command: unknown command 'render'"),
     ('command = "eval"\nruns = ["nope"]\nout = "x.json"', "evaluations[0].runs: unknown run 'nope'"),
     ('command = "hierarchy eval"\nruns = ["high"]\nout = "x.json"', "evaluations[0].runs: hierarchy eval takes 2"),
-    ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }', "evaluations[0].args: unrecognized"),
+    ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfee = 2 }',
+     "evaluations[0].args: unrecognized option 'nfee' (valid: arrival, batch_size, candidates, compile, controller,"),
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { seed = 2 }', "evaluations[0].args.seed: set by"),
     ('command = "eval"\nruns = ["high"]\nout = "{step}.json"', "evaluations[0].out: names only"),
     ('command = "graph"\nruns = []\nout = "x.json"\nargs = { keep = 0.5 }', "evaluations[0].args: "),
@@ -651,13 +652,10 @@ splits = ["test", "validation"]
 def test_an_ogbench_validation_split_runs_the_validation_tasks_unless_pinned(tmp_path, evaluation, tasks):
     path = tmp_path / "s.toml"
     path.write_text(OGBENCH_SPLITS.format(evaluation=evaluation, command="eval", args="nfe = 1"))
-    test, validation = jobs(parse_study(path), tmp_path / "results", tmp_path / "out", quick=False)
-    assert "--tasks" not in test.argv and test.argv[test.argv.index("--seed") + 1] == "0"
-    assert validation.argv[validation.argv.index("--seed") + 1] == "1000"
-    if tasks is None:  # the earlier draw: the test tasks, other noise
-        assert "--tasks" not in validation.argv
-    else:
-        assert validation.argv[validation.argv.index("--tasks") + 1] == tasks
+    test, validation = (job.options() for job in jobs(parse_study(path), tmp_path / "results", tmp_path / "out",
+                                                      quick=False))
+    assert test.tasks.tasks is None and test.tasks.seed == 0 and validation.tasks.seed == 1000
+    assert validation.tasks.tasks == tasks  # None: the earlier draw, the test tasks with other noise
 
 
 def test_the_committed_ogbench_studies_pin_the_validation_draw_their_rows_were_made_with():
@@ -796,3 +794,31 @@ def test_a_tiny_calibration_study_trains_gcbc_and_writes_the_protocol_jsons(tmp_
     assert main(["gcbc", "eval", str(root / "results" / "cal" / "runs" / "gcbc-s0"), "--steps", "4,4",
                  "--out", str(tmp_path / "x.json")]) == 2  # --out takes one evaluation
     assert "--out takes one evaluation" in capsys.readouterr().err
+
+
+def test_every_committed_evaluation_reads_the_same_through_the_cli():
+    """A study's evaluation fills the options dataclass its command's flags fill: each committed job, written as the
+    command line a user would type, parses into the options the runner calls the command with."""
+    from bridgeplan.cli import build_parser
+    from bridgeplan.eval_commands import STUDY_COMMANDS
+    from bridgeplan.options import leaves, options_from_args
+
+    parser = build_parser()
+    checked = Counter()
+    for study in load_studies(REPO).values():
+        for job in jobs(study, Path("results"), Path("out"), quick=False):
+            spec = STUDY_COMMANDS[job.command]
+            given = dict(job.args) | dict(zip(spec.runs, job.run_dirs)) | {"dataset": "data.npz"}
+            positional, flags = [], []
+            for leaf in leaves(spec.options):
+                value = given.get(leaf.name)
+                if leaf.positional:
+                    positional += [str(v) for v in (value if isinstance(value, list) else [value])]
+                elif value is True:
+                    flags.append(leaf.flag)
+                elif value not in (None, False):
+                    flags += [leaf.flag, str(value)]
+            options = options_from_args(spec.options, parser.parse_args([*job.command.split(), *positional, *flags]))
+            assert options == job.options(Path("data.npz"), progress=True), (study.name, job.path)
+            checked[job.command] += 1
+    assert set(checked) == set(STUDY_COMMANDS) and sum(checked.values()) > 500, checked

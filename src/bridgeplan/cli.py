@@ -6,61 +6,91 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan import commands
-from bridgeplan.commands import positive
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.option_groups import Output, Progress
+from bridgeplan.options import add_command, opt, positive, shared
+
+
+@dataclass(kw_only=True)
+class Root:
+    root: str | None = opt(None, "the repository root (holds studies/ and docs/results/; default: the git top-level of "
+                                 "the current directory, else the current directory)")
+
+
+@dataclass(kw_only=True)
+class StudyListOptions:
+    root: str | None = shared(Root, "root")
+
+
+@dataclass(kw_only=True)
+class StudyReportOptions:
+    names: list[str] = opt([], "studies (names or files; default: all)", positional=True, nargs="*", metavar="NAME")
+    check: bool = opt(False, "write nothing; exit 2 when a committed report differs from what its study generates")
+    root: str | None = shared(Root, "root")
+
+
+@dataclass(kw_only=True)
+class StudyFile:
+    file: str = opt(help="the study file (or a study's name)")
+
+
+@dataclass(kw_only=True)
+class StudyRunOptions:
+    file: str = shared(StudyFile, "file")
+    dry_run: bool = opt(False, "list what would be trained and evaluated, and its cost")
+    quick: bool = opt(False, "a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
+                             "not the committed scale")
+    backend: str = opt("local", "local or ray")
+    workers: int | None = opt(None, "local backend: parallel jobs, a grid's runs or an evaluation study's units (a "
+                                    "training seed and the runs its evaluations read; default: the study's)")
+    ray_address: str | None = opt(None, "the ray cluster's address")
+    no_progress: bool = shared(Progress, "no_progress")
+    root: str | None = shared(Root, "root")
+
+
+@dataclass(kw_only=True)
+class StudyImportOptions:
+    file: str = shared(StudyFile, "file")
+    eval_json: list[str] | None = opt(None, "evaluation JSONs to import instead, each an evaluation that --experiment "
+                                            "declares", metavar="FILE")
+    experiment: str | None = opt(None, "with --eval-json: the study's experiment they belong to (NAME-validation: its "
+                                       "validation split)")
+    root: str | None = shared(Root, "root")
+
+
+@dataclass(kw_only=True)
+class StudyExportOptions:
+    file: str = shared(StudyFile, "file")
+    root: str | None = shared(Root, "root")
 
 
 def _add_study_commands(sub) -> None:
     p = sub.add_parser("study", help="run a study file (studies/NAME.toml) and regenerate its reports",
-                       description="Studies: one declarative file per campaign, at the repository root's studies/. "
-                                   "--root: the repository root (default: the git top-level of the current "
-                                   "directory, else the current directory).")
+                       description="Studies: one declarative file per campaign, at the repository root's studies/.")
     study = p.add_subparsers(dest="study_command", required=True)
-    ls = study.add_parser("list", help="each study: its file, what it trains, the reports it makes and what they feed")
-    r = study.add_parser("report", help="regenerate the studies' reports from the committed results (trains nothing)")
-    r.add_argument("names", nargs="*", metavar="NAME", help="studies (names or files; default: all)")
-    r.add_argument("--check", action="store_true",
-                   help="write nothing; exit 2 when a committed report differs from what its study generates")
-    run = study.add_parser("run", help="train and evaluate what the study's store is missing (resumable)")
-    run.add_argument("file", help="the study file (or a study's name)")
-    run.add_argument("--dry-run", action="store_true", help="list what would be trained and evaluated, and its cost")
-    run.add_argument("--quick", action="store_true",
-                     help="a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
-                          "not the committed scale")
-    run.add_argument("--backend", default="local", help="local or ray")
-    run.add_argument("--workers", type=int, default=None,
-                     help="local backend: parallel jobs, a grid's runs or an evaluation study's units (a training "
-                          "seed and the runs its evaluations read; default: the study's)")
-    run.add_argument("--ray-address", default=None)
-    run.add_argument("--no-progress", action="store_true")
-    imp = study.add_parser("import", help="load a study's committed rows (docs/results/DATA/results.csv, any schema) "
-                                          "into its store, so that `study run` computes only what they lack; or "
-                                          "evaluation JSONs (`eval --json`) as rows of one of its experiments")
-    imp.add_argument("file", help="the study file (or a study's name)")
-    imp.add_argument("--eval-json", nargs="+", default=None, metavar="FILE",
-                     help="evaluation JSONs to import instead, each an evaluation that --experiment declares")
-    imp.add_argument("--experiment", default=None,
-                     help="with --eval-json: the study's experiment they belong to (NAME-validation: its validation "
-                          "split)")
-    exp = study.add_parser("export", help="a study's store (results/NAME) into its committed folder "
-                                          "docs/results/DATA: results.csv, report.md and a figure per experiment")
-    exp.add_argument("file", help="the study file (or a study's name)")
-    for q in (ls, r, run, imp, exp):
-        q.add_argument("--root", default=None, help="the repository root (holds studies/ and docs/results/)")
-    ls.set_defaults(func=_cmd_study_list)
-    r.set_defaults(func=_cmd_study_report)
-    run.set_defaults(func=_cmd_study_run)
-    imp.set_defaults(func=_cmd_study_import)
-    exp.set_defaults(func=_cmd_study_export)
+    add_command(study, "list", StudyListOptions, _cmd_study_list,
+                help="each study: its file, what it trains, the reports it makes and what they feed")
+    add_command(study, "report", StudyReportOptions, _cmd_study_report,
+                help="regenerate the studies' reports from the committed results (trains nothing)")
+    add_command(study, "run", StudyRunOptions, _cmd_study_run,
+                help="train and evaluate what the study's store is missing (resumable)")
+    add_command(study, "import", StudyImportOptions, _cmd_study_import,
+                help="load a study's committed rows (docs/results/DATA/results.csv, any schema) into its store, so "
+                     "that `study run` computes only what they lack; or evaluation JSONs (`eval --json`) as rows of "
+                     "one of its experiments")
+    add_command(study, "export", StudyExportOptions, _cmd_study_export,
+                help="a study's store (results/NAME) into its committed folder docs/results/DATA: results.csv, "
+                     "report.md and a figure per experiment")
 
 
-def _cmd_study_list(args) -> int:
+def _cmd_study_list(o: StudyListOptions) -> int:
     from bridgeplan.studies import find_root, generators, load_studies
 
-    root = find_root(args.root)
+    root = find_root(o.root)
     reports = generators.load(root)
     studies = load_studies(root)
     for s in studies.values():
@@ -87,12 +117,12 @@ def _report_broken(studies, names: list[str]) -> int:
     return 2 if studies.broken else 0
 
 
-def _cmd_study_report(args) -> int:
+def _cmd_study_report(o: StudyReportOptions) -> int:
     from bridgeplan.studies import find_root, load_studies, select
 
-    root = find_root(args.root)
+    root = find_root(o.root)
     studies = load_studies(root)
-    return _reports(root, studies, args.names, select(studies, args.names, root), args.check)
+    return _reports(root, studies, o.names, select(studies, o.names, root), o.check)
 
 
 def _reports(root: Path, studies, names: list[str], chosen: list, check: bool) -> int:
@@ -158,7 +188,7 @@ def _read_or_empty(path: Path) -> str:
     return path.read_text() if path.exists() else ""
 
 
-def _cmd_study_run(args) -> int:
+def _cmd_study_run(o: StudyRunOptions) -> int:
     from bridgeplan.studies import find_root, generators, load_studies, parse_study, select
     from bridgeplan.studies.plan import (
         QUICK_NOTE,
@@ -172,26 +202,26 @@ def _cmd_study_run(args) -> int:
         with_used,
     )
 
-    root = find_root(args.root)
+    root = find_root(o.root)
     studies = load_studies(root)
-    if Path(args.file).is_file() and not any((root / s.file).resolve() == Path(args.file).resolve()
+    if Path(o.file).is_file() and not any((root / s.file).resolve() == Path(o.file).resolve()
                                               for s in studies.values()):
         reports = generators.load(root)
-        study = parse_study(args.file, generators=reports)
+        study = parse_study(o.file, generators=reports)
         check_reports(study, studies, reports)
     else:
-        study = select(studies, [args.file], root)[0]
-    scale = Scale("quick" if args.quick else "committed")
-    if args.workers is not None:
-        positive("--workers", args.workers)
+        study = select(studies, [o.file], root)[0]
+    scale = Scale("quick" if o.quick else "committed")
+    if o.workers is not None:
+        positive("--workers", o.workers)
     chain = with_used(study, studies)  # the studies whose rows its reports read first: one command makes them all
-    check_run(chain, root, scale, args.backend, args.dry_run)
-    if args.dry_run:
+    check_run(chain, root, scale, o.backend, o.dry_run)
+    if o.dry_run:
         print("\n".join(line for s in chain for line in describe_missing(s, root, scale)))
         return 0
     for s in chain:
-        added = run_study(s, root, scale, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                          progress=not args.no_progress, note=lambda text: print(f"note: {text}", file=sys.stderr))
+        added = run_study(s, root, scale, backend=o.backend, workers=o.workers, ray_address=o.ray_address,
+                          progress=not o.no_progress, note=lambda text: print(f"note: {text}", file=sys.stderr))
         if s.experiments or s.evaluations:
             print(f"{s.name}: {added} new results in {results_dir(s, root, scale)}"
                   + ("" if scale.committed else f" [{QUICK_NOTE}]"))
@@ -209,24 +239,24 @@ def _cmd_study_run(args) -> int:
     return 0
 
 
-def _cmd_study_import(args) -> int:
+def _cmd_study_import(o: StudyImportOptions) -> int:
     from bridgeplan.experiments.store import KEY as KEY_NAMES
     from bridgeplan.experiments.store import ResultsStore, key_of, read_csv_rows, read_eval_json_rows
     from bridgeplan.paths import store_path
     from bridgeplan.studies import find_root, load_studies, select
     from bridgeplan.studies.plan import Scale, missing, results_dir
 
-    root = find_root(args.root)
-    study = select(load_studies(root), [args.file], root)[0]
-    if (args.eval_json is None) != (args.experiment is None):
+    root = find_root(o.root)
+    study = select(load_studies(root), [o.file], root)[0]
+    if (o.eval_json is None) != (o.experiment is None):
         raise BridgeplanError("--eval-json and --experiment go together")
-    if args.eval_json is None and not study.experiments and study.evaluations:  # the committed JSONs, copied
+    if o.eval_json is None and not study.experiments and study.evaluations:  # the committed JSONs, copied
         from bridgeplan.studies.export import copy_jsons
 
         written = copy_jsons(study, root / "docs" / "results", results_dir(study, root, Scale()))
         print(f"{study.name}: {len(written)} evaluation JSONs copied into {results_dir(study, root, Scale())}")
         return 0
-    if args.eval_json is None:
+    if o.eval_json is None:
         source = root / "docs" / "results" / study.data_dir / "results.csv"
         if not study.experiments or not source.exists():
             raise BridgeplanError(f"study {study.name} has no committed rows to import "
@@ -235,13 +265,13 @@ def _cmd_study_import(args) -> int:
         source = source.relative_to(root)
     else:
         declared = missing(study, root).declared
-        if args.experiment not in declared:
-            raise BridgeplanError(f"study {study.name} has no experiment {args.experiment!r} (it has: "
+        if o.experiment not in declared:
+            raise BridgeplanError(f"study {study.name} has no experiment {o.experiment!r} (it has: "
                                   f"{', '.join(sorted(declared)) or 'none'})")
-        rows = read_eval_json_rows(args.eval_json, args.experiment)
-        for path, (row, _) in zip(args.eval_json, rows):
-            if key_of(row) not in declared[args.experiment]:
-                raise BridgeplanError(f"{path}: not an evaluation that {args.experiment} of {study.file} declares "
+        rows = read_eval_json_rows(o.eval_json, o.experiment)
+        for path, (row, _) in zip(o.eval_json, rows):
+            if key_of(row) not in declared[o.experiment]:
+                raise BridgeplanError(f"{path}: not an evaluation that {o.experiment} of {study.file} declares "
                                       f"({', '.join(f'{k}={v}' for k, v in zip(KEY_NAMES, key_of(row)))})")
         source = f"{len(rows)} evaluation JSONs"
     store = store_path(results_dir(study, root, Scale()))
@@ -250,14 +280,14 @@ def _cmd_study_import(args) -> int:
     return 0
 
 
-def _cmd_study_export(args) -> int:
+def _cmd_study_export(o: StudyExportOptions) -> int:
     from bridgeplan.studies import find_root, load_studies, select
     from bridgeplan.studies.export import export, exportable
     from bridgeplan.studies.plan import Scale, results_dir, with_used
 
-    root = find_root(args.root)
+    root = find_root(o.root)
     studies = load_studies(root)
-    study = select(studies, [args.file], root)[0]
+    study = select(studies, [o.file], root)[0]
     # the study and those whose rows its reports read, as `study run` made them: each checked before any is written
     chain = exportable(with_used(study, studies), root, lambda s: results_dir(s, root, Scale()))
     for s in chain:
@@ -268,33 +298,41 @@ def _cmd_study_export(args) -> int:
     return code
 
 
+@dataclass(kw_only=True)
+class PlannersListOptions:
+    json: bool = shared(Output, "json")
+
+
+@dataclass(kw_only=True)
+class PlannersExportOptions:
+    study: str = opt("shipped", "the study whose used studies train the shipped planners")
+    root: str | None = shared(Root, "root")
+    out: str | None = shared(Output, "out")
+    only: list[str] = opt([], "remake only these planners; the others keep their files and manifest entries",
+                          metavar="NAME")
+
+
 def _add_planners_commands(sub) -> None:
     p = sub.add_parser("planners", help="the shipped planners: trained weights that come with bridgeplan",
                        description="Shipped planners plan without training: give a name wherever a run directory "
                                    "goes (`bridgeplan eval medium`, `PlannerPolicy.from_run(\"medium\")`). Their "
                                    "scores: docs/results/shipped.md.")
     planners = p.add_subparsers(dest="planners_command")
-    ls = planners.add_parser("list", help="each shipped planner with its manifest's facts (the default)")
-    ls.add_argument("--json", action="store_true", help="the manifest's entries as JSON")
-    ex = planners.add_parser("export", help="(re)make the shipped files and the manifest from a study's runs")
-    ex.add_argument("--study", default="shipped",
-                    help="the study whose used studies train the shipped planners (default: shipped)")
-    ex.add_argument("--root", default=None, help="the repository root (holds studies/, docs/results/ and results/)")
-    ex.add_argument("--out", default=None, help="output folder (default: ROOT/src/bridgeplan/shipped)")
-    ex.add_argument("--only", nargs="+", default=(), metavar="NAME",
-                    help="remake only these planners; the others keep their files and manifest entries")
-    p.set_defaults(func=_cmd_planners_list, json=False)
-    ls.set_defaults(func=_cmd_planners_list)
-    ex.set_defaults(func=_cmd_planners_export)
+    add_command(planners, "list", PlannersListOptions, _cmd_planners_list,
+                help="each shipped planner with its manifest's facts (the default)")
+    add_command(planners, "export", PlannersExportOptions, _cmd_planners_export,
+                help="(re)make the shipped files and the manifest from a study's runs",
+                description="--out: the output folder (default: ROOT/src/bridgeplan/shipped).")
+    p.set_defaults(func=lambda args: _cmd_planners_list(PlannersListOptions()))
 
 
-def _cmd_planners_list(args) -> int:
+def _cmd_planners_list(o: PlannersListOptions) -> int:
     from dataclasses import asdict
 
     from bridgeplan import shipped
 
     entries = list(shipped.manifest().values())
-    if args.json:
+    if o.json:
         print(json.dumps([asdict(e) for e in entries], indent=2))
         return 0
     if not entries:
@@ -307,14 +345,14 @@ def _cmd_planners_list(args) -> int:
     return 0
 
 
-def _cmd_planners_export(args) -> int:
+def _cmd_planners_export(o: PlannersExportOptions) -> int:
     from bridgeplan import shipped
     from bridgeplan.studies import find_root
     from bridgeplan.studies.ship import ship
 
-    root = find_root(args.root)
-    for e in ship(root, args.study, Path(args.out) if args.out else None, tuple(args.only)):
-        if args.only and e.name not in args.only:
+    root = find_root(o.root)
+    for e in ship(root, o.study, Path(o.out) if o.out else None, tuple(o.only)):
+        if o.only and e.name not in o.only:
             print(f"kept {e.file} ({e.name}: as shipped, sha256 {e.sha256[:12]}...)")
             continue
         print(f"wrote {e.file} ({e.name}: {e.method} on {e.maze}, {e.run} step {e.step}, code {e.code_version}, "

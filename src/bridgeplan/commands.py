@@ -1,7 +1,8 @@
-"""The ``bridgeplan`` subcommands that make data, train, evaluate, draw and measure: everything a study's
-evaluations run (through :func:`main`). :mod:`bridgeplan.cli` adds the commands that run studies and ship their
-planners. Each subcommand maps its flags onto a module's function; user mistakes (BridgeplanError) print one
-``error:`` line and exit 2."""
+"""The ``bridgeplan`` subcommands that make data, train, evaluate, draw and measure (the evaluation commands a study
+runs are :mod:`bridgeplan.eval_commands`'); :mod:`bridgeplan.cli` adds the commands that run studies and ship their
+planners. Each subcommand is an options dataclass (:mod:`bridgeplan.options`; the groups several share:
+:mod:`bridgeplan.option_groups`) and a function of it; user mistakes (BridgeplanError) print one ``error:`` line and
+exit 2."""
 
 from __future__ import annotations
 
@@ -10,78 +11,89 @@ import dataclasses
 import json
 import os
 import sys
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan import eval_commands as _ec
+from bridgeplan import option_groups as og
+from bridgeplan.errors import BridgeplanError, one_line_warnings
+from bridgeplan.options import REQUIRED, add_command, group, int_tuple, opt, positive, shared, values
 
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
 
 
-def positive(name: str, value: int) -> int:
-    if value <= 0:
-        raise BridgeplanError(f"{name} must be positive, got {value}")
-    return value
+@dataclasses.dataclass(kw_only=True)
+class DataGenerateOptions:
+    environment: og.Environment = group(og.Environment, maze=REQUIRED)
+    steps: int | None = opt(None, "Maze2D: transitions (default 1 M)")
+    piece_steps: int | None = opt(None, "Maze2D: independent pieces of N steps, each from a random start, instead of "
+                                        "one stream per worker: a stitching dataset (as OGBench's stitch; default "
+                                        "directory <maze>-<steps>-piecesN)", metavar="N")
+    workers: int = opt(1, "Maze2D: parallel processes, each generating its own independently seeded stream")
+    episodes: int | None = opt(None, "OGBench: training episodes (default: the recipe's)")
+    episode_steps: int | None = opt(None, "OGBench: steps per episode (default: the recipe's)")
+    seed: int | None = opt(None, "the data's seed (default 123 (Maze2D), 0 (OGBench, as its scripts))")
+    out: str | None = shared(og.Output, "out")
+    force: bool = opt(False, "overwrite an existing dataset")
+    progress: og.Progress = group(og.Progress)
+
+
+@dataclasses.dataclass(kw_only=True)
+class DataInfoOptions:
+    path: str = opt(help="a Minari directory or id, a D4RL maze2d hdf5 file or an OGBench npz file")
+    environment: og.Environment = group(og.Environment)
+    json: bool = shared(og.Output, "json")
 
 
 def _add_data_commands(sub) -> None:
     p = sub.add_parser("data", help="generate, inspect offline datasets (any environment family)")
     data = p.add_subparsers(dest="data_command", required=True)
-    g = data.add_parser("generate", help="a dataset by the environment's family's recipe: Maze2D's noisy expert "
-                                         "stream (Minari format, Minari's D4RL recipe), OGBench's (its npz format)")
-    g.add_argument("--maze", required=True, help="the environment: open, umaze, medium or large; or an OGBench "
-                                                 "dataset name (pointmaze-{medium,large,giant,teleport}-"
-                                                 "{navigate,stitch}-v0)")
-    g.add_argument("--steps", type=int, default=None, help="Maze2D: transitions (default 1 M)")
-    g.add_argument("--piece-steps", type=int, default=None, metavar="N",
-                   help="Maze2D: independent pieces of N steps, each from a random start, instead of one stream per "
-                        "worker: a stitching dataset (as OGBench's stitch; default directory <maze>-<steps>-piecesN)")
-    g.add_argument("--workers", type=int, default=1,
-                   help="Maze2D: parallel processes, each generating its own independently seeded stream (default 1)")
-    g.add_argument("--episodes", type=int, default=None, help="OGBench: training episodes (default: the recipe's)")
-    g.add_argument("--episode-steps", type=int, default=None, help="OGBench: steps per episode (default: the "
-                                                                   "recipe's)")
-    g.add_argument("--seed", type=int, default=None, help="default 123 (Maze2D), 0 (OGBench, as its scripts)")
-    g.add_argument("--out", default=None,
-                   help="dataset directory (Maze2D; default datasets/<maze>-<steps>) or folder of NAME.npz and "
-                        "NAME-val.npz (OGBench; default datasets/ogbench), under $BRIDGEPLAN_DATASETS when set")
-    g.add_argument("--force", action="store_true", help="overwrite an existing dataset")
-    g.add_argument("--no-progress", action="store_true")
-    g.set_defaults(func=_cmd_data_generate)
-    i = data.add_parser("info", help="check and summarize a dataset (Minari directory or id, D4RL maze2d hdf5, "
-                                     "OGBench npz)")
-    i.add_argument("path")
-    i.add_argument("--maze", default=None, help="the environment it should be of (needed for an OGBench file; a "
-                                                "Minari dataset names its maze)")
-    i.add_argument("--json", action="store_true")
-    i.set_defaults(func=_cmd_data_info)
+    add_command(data, "generate", DataGenerateOptions, _cmd_data_generate,
+                help="a dataset by the environment's family's recipe: Maze2D's noisy expert stream (Minari format, "
+                     "Minari's D4RL recipe), OGBench's (its npz format)",
+                description="--out: the dataset directory (Maze2D; default datasets/<maze>-<steps>) or folder of "
+                            "NAME.npz and NAME-val.npz (OGBench; default datasets/ogbench), under $BRIDGEPLAN_DATASETS "
+                            "when set.")
+    add_command(data, "info", DataInfoOptions, _cmd_data_info,
+                help="check and summarize a dataset (Minari directory or id, D4RL maze2d hdf5, OGBench npz)",
+                description="--maze: the environment it should be of (needed for an OGBench file; a Minari dataset "
+                            "names its maze).")
 
 
-def _cmd_data_generate(args) -> int:
+def _cmd_data_generate(o: DataGenerateOptions) -> int:
     from bridgeplan.envs import family_of
 
-    family = family_of(args.maze)
+    maze = o.environment.maze
+    family = family_of(maze)
     for flag in ("steps", "workers", "episodes", "episode_steps"):
-        if getattr(args, flag) is not None:
-            positive("--" + flag.replace("_", "-"), getattr(args, flag))
-    out = family.generate_dataset(args.maze, Path(args.out) if args.out else None,
-                                  seed=family.data_seed if args.seed is None else args.seed,
-                                  steps=args.steps, piece_steps=args.piece_steps, episodes=args.episodes,
-                                  episode_steps=args.episode_steps, workers=args.workers, force=args.force,
-                                  progress=not args.no_progress)
-    print(family.dataset_info(str(out), args.maze)[1])
+        if getattr(o, flag) is not None:
+            positive("--" + flag.replace("_", "-"), getattr(o, flag))
+    out = family.generate_dataset(maze, Path(o.out) if o.out else None,
+                                  seed=family.data_seed if o.seed is None else o.seed,
+                                  steps=o.steps, piece_steps=o.piece_steps, episodes=o.episodes,
+                                  episode_steps=o.episode_steps, workers=o.workers, force=o.force,
+                                  progress=not o.progress.no_progress)
+    print(family.dataset_info(str(out), maze)[1])
     print(f"wrote {out}")
     return 0
 
 
-def _cmd_data_info(args) -> int:
+def _cmd_data_info(o: DataInfoOptions) -> int:
     from bridgeplan.envs import family_of, family_of_dataset
 
-    family = family_of(args.maze) if args.maze else family_of_dataset(args.path)
-    info, text = family.dataset_info(args.path, args.maze)
-    print(json.dumps(info, indent=2) if args.json else text)
+    maze = o.environment.maze
+    family = family_of(maze) if maze else family_of_dataset(o.path)
+    info, text = family.dataset_info(o.path, maze)
+    print(json.dumps(info, indent=2) if o.json else text)
     return 0
+
+
+@dataclasses.dataclass(kw_only=True)
+class ReferenceOptions:
+    environment: og.Environment = group(og.Environment)
+    episodes: int | None = shared(og.Tasks, "episodes", default=100)
+    seed: int = shared(og.Tasks, "seed", default=123)
+    out: str | None = shared(og.Output, "out")
 
 
 def _add_reference_commands(sub) -> None:
@@ -89,12 +101,10 @@ def _add_reference_commands(sub) -> None:
     ref = p.add_subparsers(dest="reference_command", required=True)
     s = ref.add_parser("show", help="the shipped reference returns")
     s.set_defaults(func=_cmd_reference_show)
-    m = ref.add_parser("measure", help="measure them again in this environment")
-    m.add_argument("--maze", default=None, help="one maze (default: all)")
-    m.add_argument("--episodes", type=int, default=100)
-    m.add_argument("--seed", type=int, default=123)
-    m.add_argument("--out", default=None, help="also write the measured values to this JSON file")
-    m.set_defaults(func=_cmd_reference_measure)
+    add_command(ref, "measure", ReferenceOptions, _cmd_reference_measure,
+                help="measure them again in this environment",
+                description="--maze: one maze (default: all); --out: also write the measured values to this JSON "
+                            "file.")
 
 
 def _reference_table(ref: dict) -> str:
@@ -113,145 +123,120 @@ def _cmd_reference_show(args) -> int:
     return 0
 
 
-def _cmd_reference_measure(args) -> int:
+def _cmd_reference_measure(o: ReferenceOptions) -> int:
     from bridgeplan.envs.maze2d.grids import MAZE_NAMES, get_maze
     from bridgeplan.envs.maze2d.reference import measure_reference_returns
     from bridgeplan.files import atomic_write_text, check_writable
 
-    names = [get_maze(args.maze).name] if args.maze else list(MAZE_NAMES)
-    positive("--episodes", args.episodes)
-    if args.out:
-        check_writable(args.out, "JSON file")
-    measured = {n: measure_reference_returns(n, args.episodes, args.seed) for n in names}
+    names = [get_maze(o.environment.maze).name] if o.environment.maze else list(MAZE_NAMES)
+    positive("--episodes", o.episodes)
+    if o.out:
+        check_writable(o.out, "JSON file")
+    measured = {n: measure_reference_returns(n, o.episodes, o.seed) for n in names}
     print(_reference_table(measured))
-    if args.out:
-        atomic_write_text(Path(args.out), json.dumps(measured, indent=2) + "\n")
-        print(f"wrote {args.out}")
+    if o.out:
+        atomic_write_text(Path(o.out), json.dumps(measured, indent=2) + "\n")
+        print(f"wrote {o.out}")
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class TrainCommon:
+    """What a planner's and the learned prior's training take."""
+
+    environment: og.Environment = group(og.Environment, maze=REQUIRED)
+    dataset: og.Dataset = group(og.Dataset, dataset=REQUIRED)
+    run: og.RunDir = group(og.RunDir)
+    runs_root: str = opt("runs", "where a run's directory goes unless --run-dir")
+    preset: str = opt("diffuser", "the defaults per maze: diffuser (Diffuser's Maze2D settings) or cpu-small; a "
+                                  "learned prior takes its planners' horizon and stride")
+    horizon: int | None = opt(None, "planned states (default: the preset's for the maze)")
+    stride: int | None = opt(None, "environment steps between planned states (default: the preset's for the maze)")
+    training: og.Training = group(og.Training)
+    device: og.Device = group(og.Device, device=None)
+    threads: og.Threads = group(og.Threads)
+    progress: og.Progress = group(og.Progress)
+
+
+@dataclasses.dataclass(kw_only=True)
+class TrainOptions:
+    common: TrainCommon = group(TrainCommon)
+    process: str | None = opt(None, "ddpm, bridge or flow (default ddpm)")
+    process_param: list[str] | None = opt(None, "any field of the process's dataclass, e.g. beta_max=0.3 "
+                                                "(repeatable)", action="append", metavar="FIELD=VALUE")
+    prior: str | None = shared(og.PlanChoice, "prior")
+    prior_run: str | None = opt(None, "run directory of `bridgeplan train-prior` (learned prior)")
+    diffusion_steps: int | None = opt(None, "diffusion steps N")
+    beta_max: float | None = opt(None, "bridge: largest beta of the schedule")
+    ot_ode: bool = opt(False, "bridge: noise-free marginal and sampler")
+    consistent: bool = opt(False, "bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
+                                  "differ at small N)")
+    dim: int | None = opt(None, "U-Net base width")
+    dim_mults: str | None = opt(None, "U-Net channel multipliers, e.g. 1,4,8")
+    grad_accum: int | None = opt(None, "gradient accumulation steps per optimizer step")
+    ema_decay: float | None = opt(None, "decay of the EMA weights")
+    ema_every: int | None = opt(None, "update the EMA weights every this many optimizer steps")
+    ema_start: int | None = opt(None, "before this step the EMA weights are a plain copy of the model")
+    hold_share: float | None = opt(None, "share of training windows that arrive early and wait still at their end, so "
+                                         "plans may reach the goal before the horizon's end (default 0, Diffuser's)")
+    subgoal_every: int | None = opt(None, "train a hierarchy's low level: every J-th planned state is a condition (a "
+                                          "high level's subgoals when planning; `bridgeplan hierarchy eval`)")
+    precision: str | None = opt(None, "bf16: forward and backward under bfloat16 autocast (refused where the device "
+                                      "lacks it)")
+    compile: bool | None = shared(_ec.EvalOptions, "compile", default=None)
+
+
 def _add_train_commands(sub) -> None:
-    p = sub.add_parser("train", help="train a planner (DDPM, the I2SB bridge or flow matching)",
-                       description="Train a planner. Defaults come from --preset per maze; flags override them.")
-    _common_train_flags(p)
-    p.add_argument("--preset", default="diffuser", help="diffuser (Diffuser's Maze2D settings) or cpu-small")
-    p.add_argument("--process", default=None, help="ddpm, bridge or flow (default ddpm)")
-    _process_param_flag(p)
-    p.add_argument("--prior", default=None,
-                   help="bridge prior: gaussian, line, learned or coarse (a low level's: the line through its "
-                        "subgoals) (default gaussian)")
-    p.add_argument("--prior-run", default=None, help="run directory of `bridgeplan train-prior` (learned prior)")
-    p.add_argument("--diffusion-steps", type=int, default=None, help="diffusion steps N")
-    p.add_argument("--beta-max", type=float, default=None, help="bridge: largest beta of the schedule")
-    p.add_argument("--ot-ode", action="store_true", help="bridge: noise-free marginal and sampler")
-    p.add_argument("--consistent", action="store_true",
-                   help="bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
-                        "differ at small N)")
-    p.add_argument("--dim", type=int, default=None, help="U-Net base width")
-    p.add_argument("--dim-mults", default=None, help="U-Net channel multipliers, e.g. 1,4,8")
-    p.add_argument("--grad-accum", type=int, default=None)
-    p.add_argument("--ema-decay", type=float, default=None)
-    p.add_argument("--ema-every", type=int, default=None)
-    p.add_argument("--ema-start", type=int, default=None)
-    _hold_share_flag(p)
-    p.add_argument("--subgoal-every", type=int, default=None,
-                   help="train a hierarchy's low level: every J-th planned state is a condition (a high level's "
-                        "subgoals when planning; `bridgeplan hierarchy eval`)")
-    p.add_argument("--precision", default=None,
-                   help="bf16: forward and backward under bfloat16 autocast (refused where the device lacks it)")
-    p.add_argument("--compile", action="store_true", default=None,
-                   help="train through the torch.compile'd network (compiles at the first step)")
-    p.set_defaults(func=_cmd_train)
-
-    p = sub.add_parser("train-prior", help="train the learned prior (MLP on start and goal)")
-    _common_train_flags(p)
-    p.add_argument("--preset", default="diffuser",
-                   help="the planner preset the prior serves: its horizon and stride are the defaults")
-    p.set_defaults(func=_cmd_train_prior)
+    add_command(sub, "train", TrainOptions, _cmd_train, help="train a planner (DDPM, the I2SB bridge or flow matching)",
+                description="Train a planner. Defaults come from --preset per maze; flags override them.")
+    add_command(sub, "train-prior", TrainCommon, _cmd_train_prior,
+                help="train the learned prior (MLP on start and goal)")
 
 
-def _common_train_flags(p) -> None:
-    p.add_argument("--maze", required=True, help="the environment: a Maze2D maze (umaze), an OGBench dataset name "
-                                                 "(pointmaze-medium-navigate-v0) or your own's spec file (NAME.toml)")
-    p.add_argument("--dataset", required=True, help="dataset directory (Minari), legacy D4RL hdf5 file or OGBench "
-                                                    "npz file")
-    p.add_argument("--run-dir", default=None, help="default: runs/<name derived from the config>")
-    p.add_argument("--runs-root", default="runs")
-    p.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
-    p.add_argument("--horizon", type=int, default=None, help="planned states (default: the preset's for the maze)")
-    p.add_argument("--stride", type=int, default=None,
-                   help="environment steps between planned states (default: the preset's for the maze)")
-    p.add_argument("--steps", type=int, default=None, help="optimizer steps")
-    p.add_argument("--minutes", type=float, default=None, help="wall-clock budget (stops at steps or minutes)")
-    p.add_argument("--batch-size", type=int, default=None,
-                   help="windows per gradient (default: the config's, for a planner its preset's for the maze)")
-    p.add_argument("--lr", type=float, default=None, help="Adam's learning rate (default as --batch-size)")
-    p.add_argument("--checkpoint-every", type=int, default=None)
-    p.add_argument("--log-every", type=int, default=None)
-    p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--device", default=None, help="auto (CUDA if present), cpu, cuda, ...")
-    _threads_flag(p)
-    p.add_argument("--no-progress", action="store_true")
-
-
-def _process_param_flag(p) -> None:
-    p.add_argument("--process-param", action="append", metavar="FIELD=VALUE",
-                   help="any field of the process's dataclass, e.g. beta_max=0.3 (repeatable)")
-
-
-def _hold_share_flag(p) -> None:
-    p.add_argument("--hold-share", type=float, default=None,
-                   help="share of training windows that arrive early and wait still at their end, so plans may "
-                        "reach the goal before the horizon's end (default 0, Diffuser's)")
-
-
-def _threads_flag(p) -> None:
-    p.add_argument("--threads", type=int, default=None,
-                   help="torch CPU threads (default: 1 on a CPU device, which keeps its speed when other "
-                        "processes share the cores; more only warns beyond the machine's cores)")
-
-
-def _overrides(args, names) -> dict:
-    return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+def _given(options, names) -> dict:
+    """The options among ``names`` that were given (not None)."""
+    given = values(options)
+    return {n: given[n] for n in names if given[n] is not None}
 
 
 _COMMON = ("horizon", "stride", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
            "device", "threads")
 
 
-def _cmd_train(args) -> int:
+def _cmd_train(o: TrainOptions) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train
 
-    base = cfg.preset_config(args.maze, args.preset)
-    over = _overrides(args, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
-                                       "hold_share", "precision", "compile", "subgoal_every"))
-    process = _process_params(args, args.process or base.process.name)
-    if args.process is not None:
-        process["name"] = args.process
-    model = {"dim": args.dim} if args.dim is not None else {}
-    if args.dim_mults is not None:
-        model["dim_mults"] = _int_tuple(args.dim_mults, "--dim-mults")
-    config = cfg.replace(base, dataset=_dataset_ref(args.dataset), process=process, model=model, **over)
-    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
-    train(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    c = o.common
+    base = cfg.preset_config(c.environment.maze, c.preset)
+    over = _given(o, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
+                                "hold_share", "precision", "compile", "subgoal_every"))
+    process = _process_params(o, o.process or base.process.name)
+    if o.process is not None:
+        process["name"] = o.process
+    model = {"dim": o.dim} if o.dim is not None else {}
+    if o.dim_mults is not None:
+        model["dim_mults"] = int_tuple(o.dim_mults, "--dim-mults")
+    config = cfg.replace(base, dataset=_dataset_ref(c.dataset.dataset), process=process, model=model, **over)
+    run_dir = Path(c.run.run_dir) if c.run.run_dir else Path(c.runs_root) / config.run_name()
+    train(config, run_dir, resume=c.run.resume, progress=not c.progress.no_progress)
     print(f"run: {run_dir}")
     return 0
 
 
-def _process_params(args, name: str) -> dict:
+def _process_params(o: TrainOptions, name: str) -> dict:
     """The process fields given on the command line (checked by the process itself): ``--process-param``
     for any field, and shortcuts for the common ones."""
     from bridgeplan.processes import parse_process_params
 
-    params = parse_process_params(name, args.process_param or [])
-    params |= _overrides(args, ("beta_max",))
-    if args.diffusion_steps is not None:
-        params["steps"] = args.diffusion_steps
+    params = parse_process_params(name, o.process_param or [])
+    params |= _given(o, ("beta_max",))
+    if o.diffusion_steps is not None:
+        params["steps"] = o.diffusion_steps
     if params.get("teacher"):  # a distillation's teacher run, found from anywhere (as the dataset is)
         params["teacher"] = _dataset_ref(params["teacher"])
     for flag in ("ot_ode", "consistent"):
-        if getattr(args, flag):
+        if getattr(o, flag):
             params[flag] = True
     return params
 
@@ -261,519 +246,177 @@ def _dataset_ref(dataset: str) -> str:
     return str(Path(dataset).resolve()) if Path(dataset).exists() else dataset
 
 
-def _cmd_train_prior(args) -> int:
+def _cmd_train_prior(o: TrainCommon) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train_prior
 
-    config = cfg.PriorTrainConfig(maze=args.maze, dataset=_dataset_ref(args.dataset),
-                                  **_overrides(args, _COMMON + ("preset",)))
-    run_dir = Path(args.run_dir) if args.run_dir else Path(args.runs_root) / config.run_name()
-    train_prior(config, run_dir, resume=args.resume, progress=not args.no_progress)
+    config = cfg.PriorTrainConfig(maze=o.environment.maze, dataset=_dataset_ref(o.dataset.dataset),
+                                  **_given(o, _COMMON + ("preset",)))
+    run_dir = Path(o.run.run_dir) if o.run.run_dir else Path(o.runs_root) / config.run_name()
+    train_prior(config, run_dir, resume=o.run.resume, progress=not o.progress.no_progress)
     print(f"run: {run_dir}")
     return 0
 
 
-def _int_tuple(text: str, flag: str, minimum: int = 1) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise BridgeplanError(f"{flag} takes comma-separated integers, got {text!r}") from None
-    if not values or min(values) < minimum:
-        kind = "positive integers" if minimum == 1 else f"integers >= {minimum}"
-        raise BridgeplanError(f"{flag} takes {kind}, got {text!r}")
-    return values
-
-
 def _add_eval_commands(sub) -> None:
-    p = sub.add_parser("eval", help="evaluate a trained run (any environment family) on its environment's tasks",
-                       description="Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: "
-                                   "its 5-task protocol, the success rate; your own environment (a spec file): its "
-                                   "seeded resets, the success rate. Beside the score: the straight line alone, "
-                                   "the cost and the decision latency.")
-    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name "
-                               "(`bridgeplan planners list`)")
-    p.add_argument("--nfe", type=int, default=None, help="network calls per plan (default: the full count)")
-    p.add_argument("--batch-size", type=int, default=None, help="plans per batch (default: all episodes at once)")
-    p.add_argument("--snapshot", type=int, default=None, help="evaluate the EMA snapshot of this training step")
-    p.add_argument("--sampler", default=None,
-                   help="a process with several samplers: ddpm ancestral (default; strided below N) or ddim; "
-                        "flow euler (default) or stochastic; bridge posterior (default) or mean (no noise)")
-    p.add_argument("--eta", type=float, default=0.0, help="ddpm with ddim: eta (0: deterministic)")
-    _correction_flags(p)
-    p.add_argument("--compile", action="store_true",
-                   help="plan with torch.compile (compiles first, untimed; see `bridgeplan bench`)")
-    p.add_argument("--no-floor", action="store_true",
-                   help="skip the floors (the same episodes from the straight line alone, no network)")
-    _task_flags(p)
-    _execution_flags(p, "track")
-    _output_flags(p, "RUN/eval/<settings>.json")
-    p.set_defaults(func=_cmd_eval)
-
-    p = sub.add_parser("render", help="draw planned and executed trajectories (PNG), optionally a video")
-    p.add_argument("run", help="run directory (or a checkpoint/snapshot file), or a shipped planner's name")
-    p.add_argument("--episodes", type=int, default=8)
-    p.add_argument("--nfe", type=int, default=None)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--multi-task", action="store_true")
-    p.add_argument("--out", default=None, help="PNG path (default RUN/render/...)")
-    p.add_argument("--pairs", action="store_true", help="also draw prior/target pairs from the training data")
-    p.add_argument("--video", action="store_true", help="also write an animated GIF of the first episode (MuJoCo)")
-    p.add_argument("--device", default="auto")
-    _execution_flags(p, "track")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_render)
+    add_command(sub, "eval", _ec.EvalOptions, _ec.eval_run, description=_ec.EVAL_DESCRIPTION,
+                help="evaluate a trained run (any environment family) on its environment's tasks")
+    add_command(sub, "render", RenderOptions, _cmd_render, description="Writes PNGs under RUN/render/ unless --out.",
+                help="draw planned and executed trajectories (PNG), optionally a video")
+    p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
+                                         "level (bridgeplan.hierarchy)")
+    h = p.add_subparsers(dest="hierarchy_command", required=True)
+    add_command(h, "eval", _ec.HierarchyEvalOptions, _ec.hierarchy_eval, description=_ec.HIERARCHY_DESCRIPTION,
+                help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any environment "
+                     "family")
+    add_command(sub, "graph", _ec.GraphOptions, _ec.graph_eval, description=_ec.GRAPH_DESCRIPTION,
+                help="the dataset graph (the data's own states; no network, no map) on an environment's tasks, alone "
+                     "or as a low level's high level")
+    add_command(sub, "oracle", _ec.OracleOptions, _ec.oracle,
+                help="the environment family's expert, noise-free, on its evaluation tasks (what the reports show "
+                     "beside the planners)")
 
 
-TASKS_HELP = ("OGBench: comma-separated task ids: 1-5 its test tasks (the default), 6-10 bridgeplan's validation tasks "
-              "(other cells; protocol.validation_tasks)")
+@dataclasses.dataclass(kw_only=True)
+class RenderOptions:
+    run: str = shared(_ec.EvalOptions, "run")
+    episodes: int | None = shared(og.Tasks, "episodes", default=8)
+    nfe: int | None = shared(_ec.EvalOptions, "nfe")
+    seed: int = shared(og.Tasks, "seed")
+    multi_task: bool = shared(og.Tasks, "multi_task")
+    out: str | None = shared(og.Output, "out")
+    pairs: bool = opt(False, "also draw prior/target pairs from the training data")
+    video: bool = opt(False, "also write an animated GIF of the first episode (MuJoCo)")
+    device: og.Device = group(og.Device)
+    replanning: og.Replanning = group(og.Replanning)
+    plans: og.PlanChoice = group(og.PlanChoice)
+    controller: og.Controller = group(og.Controller)
+    threads: og.Threads = group(og.Threads)
 
 
-def _task_flags(p) -> None:
-    g = p.add_argument_group("tasks (the environment family's)")
-    g.add_argument("--episodes", type=int, default=None,
-                   help="episodes per task: Maze2D's episodes (its fixed goal, or Multi2D's random ones; default "
-                        "200), each of OGBench's tasks' (default 50, as OGBench)")
-    g.add_argument("--seed", type=int, default=0, help="the tasks' seed (and the planning generator's)")
-    g.add_argument("--multi-task", action="store_true", help="Maze2D: random goals too (Multi2D)")
-    g.add_argument("--tasks", default=None, help=TASKS_HELP)
-
-
-def _tasks(args, env: str):
-    from bridgeplan.evaluate import make_tasks
-
-    return make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-
-
-def _task_ids(text: str | None) -> tuple[int, ...] | None:
-    return None if text is None else _int_tuple(text, "--tasks")
-
-
-def _output_flags(p, default_out: str) -> None:
-    p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help=f"JSON path (default {default_out})")
-    p.add_argument("--json", action="store_true", help="print the JSON to stdout instead of the table")
-    p.add_argument("--no-progress", action="store_true")
-    _threads_flag(p)
-
-
-def _correction_flags(p) -> None:
-    g = p.add_argument_group("consistency correction of every x0 prediction (CDDB; default: none)")
-    g.add_argument("--correction", action="append", metavar="RESIDUAL=STEP",
-                   help="move each x0 prediction down the gradient of a residual, STEP (>= 0) its step size "
-                        "(repeatable, one per residual): dynamics (PointMaze's point mass), kinematics (positions "
-                        "integrate velocities) or conditions (start/goal, deep form only)")
-    g.add_argument("--correction-form", default=None, metavar="FORM",
-                   help="x0 (CDDB: the gradient in x0 space; default) or deep (CDDB-deep: the gradient w.r.t. the "
-                        "network's input, one backward pass per call)")
-
-
-def _correction(args):
-    from bridgeplan.consistency import Correction
-
-    if not args.correction:
-        if args.correction_form is not None:
-            raise BridgeplanError("--correction-form needs --correction RESIDUAL=STEP")
-        return None
-    return Correction.parse(args.correction, args.correction_form or "x0")
-
-
-def _execution_flags(p, controller: str, plans: bool = True) -> None:
-    """How plans are executed; ``plans``: also the flags of how a planner's plans are made (candidates, warm start,
-    arrival), which a hierarchy's and the dataset graph's decisions do not take."""
-    g = p.add_argument_group("closed-loop execution (default: open loop, one plan per episode)")
-    g.add_argument("--replan-every", type=int, default=None, metavar="K",
-                   help="plan again from the current state every K environment steps (1..episode length)")
-    g.add_argument("--replan-tolerance", type=float, default=None, metavar="D",
-                   help="also plan again, for the episodes concerned only, when the position is more than D from "
-                        "where the plan put it (default: off)")
-    if plans:
-        g.add_argument("--candidates", type=int, default=1, metavar="M",
-                       help="plans sampled per decision, in one batch; --select picks one (default 1)")
-        g.add_argument("--select", default="arrival",
-                       help="arrival (earliest within the goal radius; default), agreement (the candidate closest to "
-                            "the others) or walls (fewest planned positions in walls: uses the maze's wall map)")
-        g.add_argument("--prior", default=None,
-                       help="warm: replans start from the previous plan, shifted (processes with a prior; needs "
-                            "replanning; the first plan uses the run's own prior)")
-        g.add_argument("--arrival", default=None,
-                       help="end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state within "
-                            "the goal radius, then hold the goal) or keep (truncate, and replans hold the goal from "
-                            "the step the previous plan arrived at); default: the family's (Maze2D truncate, OGBench "
-                            "end: its episodes end at the goal) when replanning or with candidates, else end")
-    g = p.add_argument_group("controller (how a plan is executed)")
-    g.add_argument("--controller", default=controller,
-                   help=f"track (Diffuser's: the planned states in time), pursuit (the plan's path at the expert's "
-                        f"pace: toward the first planned position --lookahead away) or actions (a planner's own "
-                        f"planned actions, Diffuser's joint state-action plans); default {controller}")
-    g.add_argument("--lookahead", type=float, default=None, metavar="R",
-                   help="pursuit: distance to the planned position driven toward (default: the family's, Maze2D 1.0, "
-                        "OGBench 2.0)")
-
-
-def _execution(args, plans: bool = True):
-    from bridgeplan.replan import Execution
-
-    if args.lookahead is not None and args.controller != "pursuit":
-        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
-    if not plans:
-        return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, controller=args.controller,
-                         lookahead=args.lookahead)
-    if args.prior is not None and args.prior != "warm":
-        raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
-                              f"the run's own prior), got {args.prior!r}")
-    return Execution(replan_every=args.replan_every, tolerance=args.replan_tolerance, candidates=args.candidates,
-                     select=args.select, warm=args.prior == "warm", arrival=args.arrival,
-                     controller=args.controller, lookahead=args.lookahead)
-
-
-def _out(args, folder: Path, name: str) -> Path:
-    """``--out``, else ``folder/name-<task settings>.json``."""
-    tasks = "" if args.tasks is None else "-tasks" + args.tasks.replace(",", "")
-    episodes = "" if args.episodes is None else f"-ep{args.episodes}"
-    return Path(args.out) if args.out else folder / (f"{name}{episodes}-seed{args.seed}{tasks}"
-                                                     + ("-multi" if args.multi_task else "") + ".json")
-
-
-def _show(result, args, out: Path) -> int:
-    from bridgeplan.evaluate import format_table, write_and_show
-
-    d = result.to_dict()
-    write_and_show(d, out, args.json, format_table(d))
-    return 0
-
-
-def _cmd_eval(args) -> int:
-    from bridgeplan.evaluate import check_result_path, evaluate_run
-    from bridgeplan.gcbc import is_gcbc_run
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import run_dir_of
-
-    if is_gcbc_run(args.run):
-        return _eval_gcbc(args)
-
-    execution = _execution(args)
-    correction = _correction(args)
-    check_result_path(args.out, eval_dir(run_dir_of(Path(args.run))))
-    result = evaluate_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
-                          multi_task=args.multi_task, task_ids=_task_ids(args.tasks), batch_size=args.batch_size,
-                          snapshot=args.snapshot, device=args.device, sampler=args.sampler, eta=args.eta,
-                          compile=args.compile, execution=execution, correction=correction, floor=not args.no_floor)
-    d = result.to_dict()
-    name = "-".join(part for part in (
-        f"step{d['step']}-nfe{d['nfe']}", args.sampler and f"{args.sampler}{args.eta:g}",
-        args.compile and "compiled", execution.resolved(result.family, result.tasks.env).tag(),
-        correction and correction.file_tag()) if part)
-    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.run))), name))
-
-
-def _eval_gcbc(args) -> int:
-    """``eval`` of a GCBC run: its policy (``--snapshot``: that step's) on its environment's tasks; the flags about
-    plans do not apply and are refused."""
-    from bridgeplan.files import atomic_write_text, check_writable
-    from bridgeplan.gcbc import evaluate_gcbc
-
-    planning = [f"--{k.replace('_', '-')}" for k in ("nfe", "sampler", "replan_every", "replan_tolerance")
-                if getattr(args, k, None) is not None] + (["--multi-task"] if args.multi_task else [])
-    if planning:
-        raise BridgeplanError(f"{args.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
-    if args.out:
-        check_writable(args.out, "evaluation JSON")
-    row = evaluate_gcbc(args.run, steps=None if args.snapshot is None else [args.snapshot],
-                        episodes=args.episodes or 0, seed=args.seed, progress=not args.no_progress,
-                        task_ids=_task_ids(args.tasks))[0]
-    text = row.pop("text")
-    if args.out:
-        atomic_write_text(Path(args.out), json.dumps(row, indent=2) + "\n")
-    print(json.dumps(row, indent=2) if args.json else text)
-    return 0
-
-
-def _cmd_render(args) -> int:
+def _cmd_render(o: RenderOptions) -> int:
+    from bridgeplan.eval_commands import execution
     from bridgeplan.files import check_writable
     from bridgeplan.render import render_run
 
-    execution = _execution(args)
-    if args.out:
-        check_writable(args.out, "picture")
-    for path in render_run(Path(args.run), episodes=args.episodes, nfe=args.nfe, seed=args.seed,
-                           multi_task=args.multi_task, out=args.out, pairs=args.pairs, video=args.video,
-                           device=args.device, execution=execution):
+    plan = execution(o.replanning, o.controller, o.plans)
+    if o.out:
+        check_writable(o.out, "picture")
+    for path in render_run(Path(o.run), episodes=o.episodes, nfe=o.nfe, seed=o.seed, multi_task=o.multi_task,
+                           out=o.out, pairs=o.pairs, video=o.video, device=o.device.device, execution=plan):
         print(f"wrote {path}")
     return 0
 
 
-def _add_hierarchy_commands(sub) -> None:
-    p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
-                                         "level (bridgeplan.hierarchy)")
-    h = p.add_subparsers(dest="hierarchy_command", required=True)
-    e = h.add_parser("eval", help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any "
-                                  "environment family",
-                     description="The high level plans once per episode; the low level plans from the current "
-                                 "state through the coarse plan's next states every --replan-every steps.")
-    e.add_argument("high", help="the high level's run directory (a long --stride)")
-    e.add_argument("low", help="the low level's run directory (trained with --subgoal-every J; J x its stride = "
-                               "the high level's stride)")
-    e.add_argument("--high-snapshot", type=int, default=None, help="the high level's snapshot (training step)")
-    e.add_argument("--nfe-high", type=int, default=None, help="network calls per coarse plan (default: all)")
-    _low_level_flags(e, "the high level plans again from the current state every K steps (default: once per "
-                        "episode)")
-    _task_flags(e)
-    _execution_flags(e, "pursuit", plans=False)
-    _output_flags(e, "LOW/eval/hierarchy-<settings>.json")
-    e.set_defaults(func=_cmd_hierarchy_eval)
-
-
-def _low_level_flags(p, replan_high_help: str) -> None:
-    p.add_argument("--low-snapshot", type=int, default=None, help="the low level's snapshot (training step)")
-    p.add_argument("--nfe-low", type=int, default=None, help="network calls per low-level plan (default: all)")
-    p.add_argument("--replan-high-every", type=int, default=None, metavar="K", help=replan_high_help)
-
-
-def _cmd_hierarchy_eval(args) -> int:
-    from bridgeplan.envs.controllers import check_controller
-    from bridgeplan.evaluate import check_result_path, run_tasks
-    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import run_dir_of
-
-    if args.episodes is not None:
-        positive("--episodes", args.episodes)
-    execution = _execution(args, plans=False)
-    check_controller(execution.controller, execution.lookahead)
-    check_result_path(args.out, eval_dir(run_dir_of(Path(args.low))))  # before anything is loaded
-    hierarchy, high, low = load_hierarchy(Path(args.high), Path(args.low), args.high_snapshot, args.low_snapshot,
-                                          args.device)
-    if execution.replan_every is None:
-        execution = dataclasses.replace(execution, replan_every=hierarchy.spacing)
-    tasks = run_tasks(low, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-    result = evaluate_hierarchy(hierarchy, high, low, tasks, args.nfe_high, args.nfe_low, execution,
-                                args.replan_high_every, progress=not args.no_progress)
-    d = result.to_dict()
-    name = (f"hierarchy-{high.name}-step{high.step}-nfe{d['high']['nfe']}-step{low.step}-nfe{d['low']['nfe']}-"
-            f"{execution.resolved(result.family, tasks.env).tag()}"
-            + (f"-high{args.replan_high_every}" if args.replan_high_every else ""))
-    return _show(result, args, _out(args, eval_dir(run_dir_of(Path(args.low))), name))
-
-
-def _add_graph_command(sub) -> None:
-    g = sub.add_parser("graph", help="the dataset graph (the data's own states; no network, no map) on an "
-                                     "environment's tasks, alone or as a low level's high level",
-                       description="The data's states joined along their episodes and by short jumps between them "
-                                   "(bridgeplan.graph); alone, its shortest paths are executed as plans; with --low, "
-                                   "its path, one state every J x stride steps, is the subgoals a low level plans "
-                                   "through every --replan-every steps.")
-    g.add_argument("--maze", default=None, help="the environment (default: the low level's)")
-    g.add_argument("--dataset", default=None,
-                   help="the dataset the graph is made of (default: the low level's own training data)")
-    g.add_argument("--low", default=None, metavar="RUN",
-                   help="a low level (trained with --subgoal-every J) that plans through the graph's path (default: "
-                        "the path alone)")
-    _low_level_flags(g, "with --low: search the graph again from the current state every K steps (default: once per "
-                        "episode)")
-    s = g.add_argument_group("the graph (defaults: the environment family's)")
-    s.add_argument("--keep", type=int, default=None, help="every keep-th state of an episode is a node (10)")
-    s.add_argument("--radius", type=float, default=None,
-                   help="nodes of other episodes (or farther along one stream) within this distance are joined: below "
-                        "a wall's thickness (Maze2D 0.2, OGBench 0.5)")
-    s.add_argument("--neighbours", type=int, default=None, help="at most this many such joins per node (8)")
-    s.add_argument("--reach", type=float, default=None,
-                   help="the start and the goal join the nodes within this distance, else the nearest (Maze2D 0.5, "
-                        "OGBench 2.0)")
-    _task_flags(g)
-    _execution_flags(g, "pursuit", plans=False)
-    _output_flags(g, "LOW/eval/graph-<settings>.json, or results/graph/MAZE/graph-<settings>.json")
-    g.set_defaults(func=_cmd_graph)
-
-
-def _cmd_graph(args) -> int:
-    from bridgeplan.envs import family_of
-    from bridgeplan.envs.controllers import check_controller
-    from bridgeplan.evaluate import check_result_path, make_tasks
-    from bridgeplan.graph import check_graph_settings
-    from bridgeplan.hierarchy import evaluate_graph
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import load_planner, resolve_run, run_dir_of
-
-    if args.low is not None:  # the run named first, before the flags and files that go with it
-        resolve_run(Path(args.low))
-    if args.episodes is not None:
-        positive("--episodes", args.episodes)
-    execution = _execution(args, plans=False)
-    check_controller(execution.controller, execution.lookahead)
-    settings = {"keep": args.keep, "radius": args.radius, "neighbours": args.neighbours, "reach": args.reach}
-    check_graph_settings(**settings)
-    env, dataset = args.maze, args.dataset
-    if args.low is not None:
-        _, low = load_planner(Path(args.low), snapshot=args.low_snapshot, device="cpu")
-        env = env or low.config.maze
-        dataset = dataset or low.config.dataset
-    if env is None:
-        raise BridgeplanError("give the environment (--maze NAME) or a low level (--low RUN)")
-    if dataset is None:
-        raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
-    if not Path(dataset).exists():
-        raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
-    folder = (eval_dir(run_dir_of(Path(args.low))) if args.low
-              else Path("results") / "graph" / family_of(env).label(env))
-    check_result_path(args.out, folder)
-    tasks = make_tasks(env, args.episodes, args.seed, args.multi_task, _task_ids(args.tasks))
-    result = evaluate_graph(tasks, dataset, settings, execution,
-                            Path(args.low) if args.low else None, args.nfe_low, args.replan_high_every,
-                            args.low_snapshot, args.device, progress=not args.no_progress)
-    d = result.to_dict()
-    g = d["graph"]
-    tag = execution.resolved(result.family, env).tag()
-    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if args.low else "") + (
-        f"-{tag}" if tag else "") + (f"-high{args.replan_high_every}" if args.replan_high_every else "")
-    return _show(result, args, _out(args, folder, name))
-
-
-def _add_oracle_command(sub) -> None:
-    o = sub.add_parser("oracle", help="the environment family's expert, noise-free, on its evaluation tasks (what "
-                                      "the reports show beside the planners)")
-    o.add_argument("maze", nargs="+", help="environments (Maze2D mazes, OGBench dataset names: the maze's tasks)")
-    o.add_argument("--seeds", default="0", help="comma-separated task seeds (default 0)")
-    o.add_argument("--task-sets", default="single",
-                   help="comma-separated: single (the family's tasks), multi (Maze2D: Multi2D's random goals)")
-    o.add_argument("--episodes", type=int, default=None, help="episodes per task (default: the family's)")
-    o.add_argument("--tasks", default=None, help=TASKS_HELP)
-    o.add_argument("--out", default=None, help="also write the rows to this JSON file")
-    o.add_argument("--json", action="store_true", help="print the JSON instead of a line per row")
-    o.add_argument("--no-progress", action="store_true")
-    _threads_flag(o)
-    o.set_defaults(func=_cmd_oracle)
-
-
-def _cmd_oracle(args) -> int:
-    from bridgeplan.envs import family_of
-    from bridgeplan.evaluate import make_tasks
-    from bridgeplan.files import atomic_write_text, check_writable, code_version
-
-    seeds = _int_tuple(args.seeds, "--seeds", minimum=0)
-    if args.out:
-        check_writable(args.out, "JSON file")
-    sets = args.task_sets.split(",")
-    rows = []
-    for env in args.maze:
-        family = family_of(env)
-        for task_set in sets:
-            if task_set not in family.task_sets:
-                raise BridgeplanError(f"--task-sets: {family.title} has {', '.join(family.task_sets)}, not "
-                                      f"{task_set!r}")
-            for seed in seeds:
-                tasks = make_tasks(env, args.episodes, seed, task_set == "multi", _task_ids(args.tasks))
-                agent = family.oracle(env)
-                agent_outcome = family.run(tasks, agent, progress=not args.no_progress)
-                rows.append({**tasks.fields(), "policy": "oracle", **family.score(tasks, agent_outcome)})
-                row = rows[-1]
-                rate = row["success_rate"]["mean"] if isinstance(row["success_rate"], dict) else row["success_rate"]
-                score = f"{row['score']['minari']['mean']:.1f} (Minari), " if "score" in row else ""
-                if not args.json:
-                    print(f"{env} {task_set} seed {seed}: {score}success {rate:.3f}")
-    text = json.dumps({"code_version": code_version(), "rows": rows}, indent=2)
-    if args.json:
-        print(text)
-    if args.out:
-        atomic_write_text(Path(args.out), text + "\n")
-        print(f"wrote {args.out}")
-    return 0
+@dataclasses.dataclass(kw_only=True)
+class ReportOptions:
+    results: str = opt("results", "the results folder (its store)")
+    out: str | None = shared(og.Output, "out")
+    csv: str | None = opt(None, "also export every result row to this CSV file")
 
 
 def _add_report_command(sub) -> None:
-    p = sub.add_parser("report", help="figures and a Markdown page from the results store")
-    p.add_argument("--results", default="results")
-    p.add_argument("--out", default=None, help="output directory (default RESULTS/report)")
-    p.add_argument("--csv", default=None, help="also export every result row to this CSV file")
-    p.set_defaults(func=_cmd_report)
+    add_command(sub, "report", ReportOptions, _cmd_report, help="figures and a Markdown page from the results store",
+                description="--out: the output directory (default RESULTS/report).")
 
 
-def _cmd_report(args) -> int:
+def _cmd_report(o: ReportOptions) -> int:
     from bridgeplan.experiments.store import ResultsStore
     from bridgeplan.files import check_writable
     from bridgeplan.paths import report_dir, store_path
     from bridgeplan.report import write_report
 
-    store = store_path(args.results)
+    store = store_path(o.results)
     if not store.exists():
         raise BridgeplanError(f"no results store at {store}; run `bridgeplan study run` first")
-    check_writable(args.out or report_dir(args.results), "report folder", folder=True)
-    if args.csv:
-        check_writable(args.csv, "CSV file")
-    path = write_report(Path(args.results), Path(args.out) if args.out else None)
+    check_writable(o.out or report_dir(o.results), "report folder", folder=True)
+    if o.csv:
+        check_writable(o.csv, "CSV file")
+    path = write_report(Path(o.results), Path(o.out) if o.out else None)
     print(f"wrote {path}")
-    if args.csv:
-        n = ResultsStore(store).export_csv(Path(args.csv))
-        print(f"wrote {args.csv} ({n} rows)")
+    if o.csv:
+        n = ResultsStore(store).export_csv(Path(o.csv))
+        print(f"wrote {o.csv} ({n} rows)")
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class BenchOptions:
+    out: str | None = shared(og.Output, "out", default="bench")
+    presets: str | None = opt(None, "comma-separated presets to time")
+    batch_sizes: str | None = opt(None, "comma-separated plans per call")
+    nfes: str | None = opt(None, "comma-separated network calls per plan (latency table)")
+    methods: str | None = opt(None, "comma-separated methods of the latency and overhead tables, named as there "
+                                    "(default: all)")
+    repeats: int | None = opt(None, "timed repeats per latency figure")
+    overhead_repeats: int | None = opt(None, "interleaved rounds per overhead ratio (0: skip them)")
+    no_compile: bool = opt(False, "skip the torch.compile timings (minutes on a CPU)")
+    eval_run: str | None = opt(None, "a trained run: also time 200 umaze episodes at NFE 1")
+    budget_runs: str | None = opt(None, "comma-separated trained runs, a row each (one per method, at equal training "
+                                        "steps): the score-per-budget table")
+    budget_steps: str | None = opt(None, "comma-separated training steps: evaluate the budget runs' EMA snapshots "
+                                         "there (default: their latest checkpoints)")
+    budgets: str | None = opt(None, "comma-separated network-call budgets K")
+    budget_episodes: int | None = opt(None, "episodes per evaluation of the budget table")
+    busy_steps: int | None = opt(None, "training steps per rate of the busy-core figure (0: skip)")
+    throughput_seconds: float | None = opt(None, "seconds of training per figure of the training-throughput table "
+                                                 "(0: skip)")
+    throughput_batch_sizes: str | None = opt(None, "comma-separated batches of the training-throughput table")
+    side_by_side_seconds: float | None = opt(None, "seconds of training per figure of the two-jobs table (0: skip)")
+    device: og.Device = group(og.Device, device=None)
+    threads: og.Threads = group(og.Threads)
+
+
 def _add_bench_command(sub) -> None:
-    p = sub.add_parser("bench", help="planning latency, overheads, torch.compile, evaluation throughput and score "
-                                     "per planning budget (JSON + Markdown)",
-                       description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and "
-                                   "diffuser networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes).")
-    p.add_argument("--out", default="bench", help="output directory (bench.json, bench.md)")
-    p.add_argument("--presets", help="comma-separated presets to time")
-    p.add_argument("--batch-sizes", help="comma-separated plans per call")
-    p.add_argument("--nfes", help="comma-separated network calls per plan (latency table)")
-    p.add_argument("--methods", help="comma-separated methods of the latency and overhead tables, named as there "
-                                     "(default: all)")
-    p.add_argument("--repeats", type=int, help="timed repeats per latency figure")
-    p.add_argument("--overhead-repeats", type=int, help="interleaved rounds per overhead ratio (0: skip them)")
-    p.add_argument("--no-compile", action="store_true", help="skip the torch.compile timings (minutes on a CPU)")
-    p.add_argument("--eval-run", help="a trained run: also time 200 umaze episodes at NFE 1")
-    p.add_argument("--budget-runs", help="comma-separated trained runs, a row each (one per method, at equal "
-                                         "training steps): the score-per-budget table")
-    p.add_argument("--budget-steps", help="comma-separated training steps: evaluate the budget runs' EMA "
-                                          "snapshots there (default: their latest checkpoints)")
-    p.add_argument("--budgets", help="comma-separated network-call budgets K")
-    p.add_argument("--budget-episodes", type=int, help="episodes per evaluation of the budget table")
-    p.add_argument("--busy-steps", type=int, help="training steps per rate of the busy-core figure (0: skip)")
-    p.add_argument("--throughput-seconds", type=float,
-                   help="seconds of training per figure of the training-throughput table (0: skip)")
-    p.add_argument("--throughput-batch-sizes", help="comma-separated batches of the training-throughput table")
-    p.add_argument("--side-by-side-seconds", type=float,
-                   help="seconds of training per figure of the two-jobs table (0: skip)")
-    p.add_argument("--device", help="auto (CUDA if present), cpu, cuda, ...")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_bench)
+    add_command(sub, "bench", BenchOptions, _cmd_bench,
+                help="planning latency, overheads, torch.compile, evaluation throughput and score per planning budget "
+                     "(JSON + Markdown)",
+                description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and diffuser "
+                            "networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes). --out: the output "
+                            "directory (bench.json, bench.md).")
 
 
-def _cmd_bench(args) -> int:
+def _cmd_bench(o: BenchOptions) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
     from bridgeplan.files import check_writable
 
-    given = {"presets": args.presets and tuple(args.presets.split(",")),
-             "methods": args.methods and tuple(args.methods.split(",")),
-             "budget_runs": args.budget_runs and tuple(r for r in args.budget_runs.split(",") if r),
-             "repeats": args.repeats, "overhead_repeats": args.overhead_repeats, "eval_run": args.eval_run,
-             "budget_episodes": args.budget_episodes, "device": args.device, "busy_steps": args.busy_steps,
-             "throughput_seconds": args.throughput_seconds, "side_by_side_seconds": args.side_by_side_seconds,
-             "compile": False if args.no_compile else None}
+    given = {"presets": o.presets and tuple(o.presets.split(",")),
+             "methods": o.methods and tuple(o.methods.split(",")),
+             "budget_runs": o.budget_runs and tuple(r for r in o.budget_runs.split(",") if r),
+             "repeats": o.repeats, "overhead_repeats": o.overhead_repeats, "eval_run": o.eval_run,
+             "budget_episodes": o.budget_episodes, "device": o.device.device, "busy_steps": o.busy_steps,
+             "throughput_seconds": o.throughput_seconds, "side_by_side_seconds": o.side_by_side_seconds,
+             "compile": False if o.no_compile else None}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
-        text = getattr(args, name)
-        given[name] = text and _int_tuple(text, "--" + name.replace("_", "-"))
+        text = getattr(o, name)
+        given[name] = text and int_tuple(text, "--" + name.replace("_", "-"))
     bench = BenchConfig(**{k: v for k, v in given.items() if v is not None})
-    check_writable(args.out, "bench folder", folder=True)
-    path = run_bench(Path(args.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+    check_writable(o.out, "bench folder", folder=True)
+    path = run_bench(Path(o.out), bench, progress=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(path.read_text())
     return 0
 
 
+@dataclasses.dataclass(kw_only=True)
+class DemoOptions:
+    environment: og.Environment = group(og.Environment, maze="umaze")
+    out: str | None = shared(og.Output, "out", default="demo")
+    dataset_steps: int = opt(200_000, "transitions generated")
+    steps: int | None = shared(og.Training, "steps", default=1500)
+    episodes: int | None = shared(og.Tasks, "episodes", default=100)
+    seed: int | None = shared(og.Training, "seed", default=0)
+    threads: og.Threads = group(og.Threads)
+
+
 def _add_demo_command(sub) -> None:
-    p = sub.add_parser("demo", help="the main job on a small default: data, DDPM and bridge runs, eval, report",
-                       description="Generates a small dataset, trains a DDPM planner and a bridge from the straight "
-                                   "line for a few minutes on a CPU, scores both on the maze's test episodes at "
-                                   "their full NFE and at NFE 1, prints the scores and writes a report with "
-                                   "figures. Resumable: run again, only what is missing is done.")
-    p.add_argument("--maze", default="umaze", help="umaze (default), medium or large")
-    p.add_argument("--out", default="demo", help="output folder (default demo/, ignored by git)")
-    p.add_argument("--dataset-steps", type=int, default=200_000, help="transitions generated (default 200 000)")
-    p.add_argument("--steps", type=int, default=1500, help="optimizer steps per run (default 1500)")
-    p.add_argument("--episodes", type=int, default=100, help="test episodes per evaluation (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="the runs' training seed (default 0)")
-    _threads_flag(p)
-    p.set_defaults(func=_cmd_demo)
+    add_command(sub, "demo", DemoOptions, _cmd_demo,
+                help="the main job on a small default: data, DDPM and bridge runs, eval, report",
+                description="Generates a small dataset, trains a DDPM planner and a bridge from the straight line for "
+                            "a few minutes on a CPU, scores both on the maze's test episodes at their full NFE and at "
+                            "NFE 1, prints the scores and writes a report with figures. Resumable: run again, only "
+                            "what is missing is done. --maze: umaze, medium or large; --out: the output folder "
+                            "(ignored by git); --steps: per run; --episodes: test episodes per evaluation; --seed: "
+                            "the runs' training seed.")
 
 
 DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge starts from the straight line to the goal, "
@@ -781,7 +424,7 @@ DEMO_READING = ("Reading: 100 is the expert, 0 a random policy. The bridge start
                 "its full NFE and more training than this (at NFE 1 it scores about as a random policy).")
 
 
-def _cmd_demo(args) -> int:
+def _cmd_demo(o: DemoOptions) -> int:
     """Data -> reference scores -> DDPM and bridge (line prior) runs -> evaluation -> a table and a report."""
     from bridgeplan.envs.maze2d.grids import get_maze
     from bridgeplan.envs.maze2d.reference import load_reference_returns
@@ -792,20 +435,20 @@ def _cmd_demo(args) -> int:
     from bridgeplan.paths import store_path
     from bridgeplan.report import last_snapshot_table, write_report
 
-    maze = get_maze(args.maze).name
+    maze = get_maze(o.environment.maze).name
     for flag in ("--dataset-steps", "--steps", "--episodes"):
-        positive(flag, getattr(args, flag[2:].replace("-", "_")))
-    check_writable(args.out, "demo folder", folder=True)
+        positive(flag, getattr(o, flag[2:].replace("-", "_")))
+    check_writable(o.out, "demo folder", folder=True)
     print(_reference_table({maze: load_reference_returns()[maze]}))
     demo = get_experiment("demo")  # studies/demo.toml runs the same grid: the README's expected range
-    settings = SweepSettings(maze=maze, dataset_steps=args.dataset_steps, preset="cpu-small",
-                             train_steps=args.steps, checkpoint_every=max(1, args.steps // 3),
-                             episodes=args.episodes, seeds=(args.seed,), results_dir=args.out,
-                             overrides=_overrides(args, ("threads",)))
+    settings = SweepSettings(maze=maze, dataset_steps=o.dataset_steps, preset="cpu-small",
+                             train_steps=o.steps, checkpoint_every=max(1, o.steps // 3),
+                             episodes=o.episodes, seeds=(o.seed,), results_dir=o.out,
+                             overrides=_given(o, ("threads",)))
     added = run_sweep([demo], settings)
-    report = write_report(Path(args.out))
-    print(f"\n{last_snapshot_table(ResultsStore(store_path(args.out)), demo.name)}\n{DEMO_READING}")
-    print(f"demo: {added} new results in {store_path(args.out)}; every snapshot and figure: {report}")
+    report = write_report(Path(o.out))
+    print(f"\n{last_snapshot_table(ResultsStore(store_path(o.out)), demo.name)}\n{DEMO_READING}")
+    print(f"demo: {added} new results in {store_path(o.out)}; every snapshot and figure: {report}")
     return 0
 
 
@@ -820,20 +463,14 @@ def build_parser(*more: Callable[[argparse._SubParsersAction], None]) -> argpars
     parser = argparse.ArgumentParser(prog="bridgeplan", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True)
     for add in (_add_data_commands, _add_reference_commands, _add_train_commands, _add_eval_commands,
-                _add_hierarchy_commands, _add_graph_command, _add_oracle_command, _add_gcbc_commands,
-                _add_report_command, _add_bench_command, _add_demo_command, *more):
+                _add_gcbc_commands, _add_report_command, _add_bench_command, _add_demo_command, *more):
         add(sub)
     return parser
 
 
-def _one_line_warning(message, category, filename, lineno, line=None) -> str:
-    return f"warning: {message}\n"
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the parsed command: a user mistake is one ``error:`` line and exit 2, an interrupt exit 130."""
-    warnings.filterwarnings("ignore", module="gymnasium_robotics")
-    warnings.formatwarning = _one_line_warning
+    one_line_warnings()
     try:
         from bridgeplan.device import configure_threads
 
@@ -850,8 +487,3 @@ def run(args: argparse.Namespace) -> int:
     except BrokenPipeError:  # the reader closed the pipe (`bridgeplan study list | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``bridgeplan`` restricted to these commands (what a study runs)."""
-    return run(build_parser().parse_args(argv))

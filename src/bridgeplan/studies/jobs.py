@@ -11,7 +11,7 @@ line, run by ``study run``)::
     [[evaluations]]
     command = "hierarchy eval"           # eval | hierarchy eval | graph | oracle | gcbc eval
     runs = ["high-ddpm-k12", "low-flow-k4"]
-    args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's flags
+    args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's options
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
     splits = ["test", "validation"]      # the evaluation seed: the training seed, or 1000 + it
     task_sets = ["single", "multi"]      # multi: Multi2D (--multi-task; where the family has it)
@@ -21,11 +21,13 @@ A named run from the learned prior (``prior = "learned"``) samples it from the t
 same windows, per training seed, for [training]'s ``prior_steps`` (runs/<maze>-prior-learned-<shape>-s<seed>, shared
 by the runs of one plan shape). ``out`` may name ``{seed}`` (training), ``{eval_seed}`` and ``{tasks}`` (``single``
 or ``multi``). ``study run`` writes each under the study's results directory (results/NAME/OUT): a JSON there is
-done; it trains what the missing ones need and runs their commands (``--workers`` training seeds side by side, one
-torch thread each). ``study export`` copies them to docs/results/OUT, where the study's report reads them; ``study
-import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its low level
-(``runs = ["low"]``, given as ``--low``); the runner gives it the study's dataset. A validation split of a family
-with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier draw.
+done; it trains what the missing ones need and calls their commands' functions on the options ``args`` fills (the
+options dataclass the command's flags fill: :data:`bridgeplan.eval_commands.STUDY_COMMANDS`; ``--workers`` training
+seeds side by side, one torch thread each). ``study export`` copies them to docs/results/OUT, where the study's
+report reads them; ``study import`` copies the committed ones back. ``graph`` takes no run (``runs = []``), or its
+low level (``runs = ["low"]``, its ``low`` option); the runner gives it the study's dataset. A validation split of a
+family with validation tasks of its own (OGBench's) evaluates them (``--tasks``), unless the study pins the earlier
+draw.
 """
 
 from __future__ import annotations
@@ -33,23 +35,32 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.spec import READS_THE_DATASET, TAKES_TASKS, NamedRun, command_argv
+from bridgeplan.errors import one_line_warnings
+from bridgeplan.eval_commands import STUDY_COMMANDS
+from bridgeplan.studies.spec import NamedRun, command_options
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
 @dataclass(frozen=True)
 class Job:
-    """One JSON: the command line that writes it."""
+    """One JSON: the command that writes it, its runs' directories and its options (:data:`STUDY_COMMANDS`)."""
 
     path: Path
-    argv: tuple[str, ...]
+    run_dirs: tuple[str, ...]
+    args: tuple[tuple[str, Any], ...]
     """Without the study's dataset file, which :func:`run_seed` adds for a command that reads it."""
     seed: int
     runs: tuple[str, ...]
     command: str
-    reads_dataset: bool = False
+
+    def options(self, dataset: Path | None = None, progress: bool = False):
+        """The command's options (``dataset``: the study's file, for a command that reads it)."""
+        given = dict(self.args) | ({} if progress else {"no_progress": True})
+        if STUDY_COMMANDS[self.command].reads_dataset and dataset is not None:
+            given["dataset"] = str(dataset)
+        return command_options(self.command, list(self.run_dirs), given)
 
 
 def run_dir(results: Path, run: str, seed: int) -> Path:
@@ -110,16 +121,17 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if quick:
                         cap = study.dataset.family.quick_episodes
                         episodes = cap if episodes is None else min(episodes, cap)
-                    dataset = study.dataset.maze if e.command in READS_THE_DATASET else None
+                    command = STUDY_COMMANDS[e.command]
+                    if command.reads_dataset:
+                        args.setdefault("maze", study.dataset.maze)
                     validation_tasks = study.dataset.family.validation_tasks
-                    if (split == "validation" and validation_tasks and e.command in TAKES_TASKS and "tasks" not in args
+                    if (split == "validation" and validation_tasks and command.takes_tasks and "tasks" not in args
                             and study.evaluation.validation == "other-tasks"):
                         args["tasks"] = ",".join(map(str, validation_tasks))  # not the test tasks, reseeded
-                    argv = [*command_argv(e.command, [str(run_dir(results, r, seed)) for r in e.runs],
-                                          tuple(sorted(args.items())), dataset),
-                            *(["--episodes", str(episodes)] if episodes is not None else []), "--seed", str(eval_seed),
-                            *(["--multi-task"] if tasks == "multi" else []), "--threads", "1", "--out", str(path)]
-                    out.append(Job(path, tuple(argv), seed, e.runs, e.command, e.command in READS_THE_DATASET))
+                    args |= {**({"episodes": episodes} if episodes is not None else {}), command.seed: eval_seed,
+                             **({"multi_task": True} if tasks == "multi" else {}), "threads": 1, "out": str(path)}
+                    out.append(Job(path, tuple(str(run_dir(results, r, seed)) for r in e.runs),
+                                   tuple(sorted(args.items())), seed, e.runs, e.command))
     return out
 
 
@@ -144,13 +156,13 @@ def needed_runs(study, results: Path, needed: set[tuple[str, int]] | None = None
 
 def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, progress: bool) -> int:
     """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands; the JSONs written."""
-    from bridgeplan.commands import main
     from bridgeplan.device import configure_threads
     from bridgeplan.experiments.runner import train_to
     from bridgeplan.gcbc import train_gcbc
     from bridgeplan.train import train, train_prior
 
     configure_threads(1)
+    one_line_warnings()  # as the CLI's, in a worker process too
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
         config = train_config(study, runs[name], seed, dataset, results)
@@ -164,11 +176,14 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
-        quiet = [] if progress else ["--no-progress"]
-        if main([*job.argv, *(["--dataset", str(dataset)] if job.reads_dataset else []), *quiet]) != 0:
-            raise BridgeplanError(f"bridgeplan {' '.join(job.argv)} failed (its error above)")
+        run_job(job, dataset, progress)
         written += 1
     return written
+
+
+def run_job(job: Job, dataset: Path, progress: bool) -> None:
+    """Write ``job``'s JSON: its command's function on its options."""
+    STUDY_COMMANDS[job.command].run(job.options(dataset, progress))
 
 
 def work_units(todo: list[Job]) -> list[tuple[int, list[Job]]]:

@@ -80,16 +80,15 @@ reads a method that neither the study nor the studies it uses train: one ``error
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import functools
-import io
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.eval_commands import STUDY_COMMANDS
+from bridgeplan.options import options_from_dict
 
 SPLITS = ("test", "validation")
 EXECUTION_FIELDS = ("controller", "lookahead", "replan_every", "warm", "arrival", "tolerance", "candidates", "select")
@@ -430,20 +429,6 @@ def _experiment(file, key: str, raw, methods: dict[str, Method]) -> ExperimentSp
 
 # --- evaluations of one command each (bridgeplan.studies.jobs runs them) -----------------------------------
 
-COMMANDS = {"eval": ("eval",), "hierarchy eval": ("hierarchy", "eval"), "graph": ("graph",),
-            "oracle": ("oracle",), "gcbc eval": ("gcbc", "eval")}
-LEVELS = {"eval": 1, "hierarchy eval": 2, "graph": 0, "oracle": 0, "gcbc eval": 1}
-"""How many runs each command takes (a hierarchy: the high level, then the low one; the dataset graph none, or its
-low level as a flag; the oracle none)."""
-RUN_FLAGS = {"graph": ("--low",)}
-"""Commands whose runs are optional flags (the dataset graph's low level): none, or one run per flag."""
-POSITIONAL = {"oracle": ("maze",)}
-"""The ``args`` a command takes as positional arguments, after its runs."""
-TAKES_TASKS = {"eval", "hierarchy eval", "graph", "oracle"}
-"""Commands that take ``--tasks`` (so a validation split can give them a family's validation tasks)."""
-READS_THE_DATASET = {"graph"}
-"""Commands that read the study's dataset itself: the runner gives them its name and file (``--maze NAME --dataset
-FILE``)."""
 TRAINERS = ("planner", "gcbc")
 """What trains a named run: ``bridgeplan train`` (a planner), or ``bridgeplan gcbc train`` (GCBC, the calibration
 baseline)."""
@@ -514,11 +499,12 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         e = _table(file, key, e, {"command", "runs", "out", "args", "splits", "task_sets", "seeds", "task_seed"},
                    ("command", "runs", "out"))
         command = _typed(file, f"{key}.command", e["command"], str)
-        if command not in COMMANDS:
+        if command not in STUDY_COMMANDS:
             raise StudyError(file, f"{key}.command", f"unknown command {command!r} (choose from "
-                                                     f"{', '.join(COMMANDS)})")
+                                                     f"{', '.join(STUDY_COMMANDS)})")
         levels = e["runs"]
-        counts = (LEVELS[command], len(RUN_FLAGS[command])) if command in RUN_FLAGS else (LEVELS[command],)
+        runs_of = STUDY_COMMANDS[command].runs
+        counts = (0, len(runs_of)) if STUDY_COMMANDS[command].optional_runs else (len(runs_of),)
         if (not isinstance(levels, list) or len(levels) not in counts
                 or any(not isinstance(r, str) for r in levels)):
             raise StudyError(file, f"{key}.runs", f"{command} takes {' or '.join(map(str, counts))} run name(s), got "
@@ -528,9 +514,9 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
                 raise StudyError(file, f"{key}.runs", f"unknown run {r!r} (declared: "
                                                       f"{', '.join(sorted(names)) or 'none'}; see [runs.NAME])")
         args = _table(file, f"{key}.args", e.get("args", {}), set(e.get("args", {})))
-        for name in sorted(set(args) & SET_BY_THE_RUNNER):
+        for name in sorted(set(args) & (SET_BY_THE_RUNNER | {STUDY_COMMANDS[command].seed, *runs_of})):
             raise StudyError(file, f"{key}.args.{name}", "set by the runner (the seed and split, the task set, the "
-                                                          "output path, one thread)")
+                                                          "output path, one thread, the runs)")
         splits = tuple(e.get("splits", ["test"]))
         if not splits or any(s not in SPLITS for s in splits):
             raise StudyError(file, f"{key}.splits", f"expected a list of {', '.join(SPLITS)}, got {e.get('splits')!r}")
@@ -550,49 +536,20 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
     return tuple(out)
 
 
-def _flags(args: tuple[tuple[str, Any], ...]) -> list[str]:
-    """``name = value`` as ``--name value`` (True: the bare flag; False: nothing)."""
-    argv = []
-    for name, value in args:
-        flag = "--" + name.replace("_", "-")
-        if value is True:
-            argv.append(flag)
-        elif value is not False:
-            argv += [flag, str(value)]
-    return argv
-
-
-def command_argv(command: str, runs: list[str], args: tuple[tuple[str, Any], ...],
-                 dataset: str | None = None) -> list[str]:
-    """``bridgeplan``'s arguments for ``command`` on ``runs`` (positional, or as :data:`RUN_FLAGS` say) with
-    ``args``: its positional ones, then flags (the study's ``dataset`` name first, for a command that reads it)."""
-    positional = POSITIONAL.get(command, ())
-    flags = RUN_FLAGS.get(command)
-    return [*COMMANDS[command], *([] if flags else runs), *(["--maze", dataset] if dataset is not None else []),
-            *(str(v) for k, v in args if k in positional),
-            *_flags(tuple((k, v) for k, v in args if k not in positional)),
-            *(a for flag, run in zip(flags or (), runs) for a in (flag, run))]
-
-
-@functools.cache
-def _command_parser():
-    """The CLI's parser, built once: building it takes tens of milliseconds, and every evaluation is checked."""
-    from bridgeplan.commands import build_parser
-
-    return build_parser()
+def command_options(command: str, runs: list[str], args: tuple[tuple[str, Any], ...] | dict):
+    """The options of ``command`` on ``runs`` (filling the options :data:`STUDY_COMMANDS` names) with ``args``; a
+    bad one: :class:`BridgeplanError` naming it."""
+    spec = STUDY_COMMANDS[command]
+    return options_from_dict(spec.options, {**dict(args), **dict(zip(spec.runs, runs))},
+                             unlisted=SET_BY_THE_RUNNER | {spec.seed, *spec.runs})
 
 
 def _check_flags(file, key: str, evaluation: CommandEvaluation) -> None:
-    """The command's own parser reads ``args`` (an unknown flag or a bad value: one error naming the key)."""
-    argv = command_argv(evaluation.command, ["RUN"] * len(evaluation.runs), evaluation.args,
-                        "NAME" if evaluation.command in READS_THE_DATASET else None)
-    err = io.StringIO()
+    """The command's options read ``args`` (an unknown option or a bad value: one error naming the key)."""
     try:
-        with contextlib.redirect_stderr(err):
-            _command_parser().parse_args(argv)
-    except SystemExit:
-        message = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else "bad flags"
-        raise StudyError(file, f"{key}.args", message.split("error: ", 1)[-1]) from None
+        command_options(evaluation.command, ["RUN"] * len(evaluation.runs), evaluation.args)
+    except BridgeplanError as e:
+        raise StudyError(file, f"{key}.args", str(e)) from None
 
 
 def read_study(path: Path | str, shown: Path | str | None = None, generators: dict | None = None) -> Study:
@@ -679,7 +636,7 @@ def read_study(path: Path | str, shown: Path | str | None = None, generators: di
         raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
                                               f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
-        if ("validation" in e.splits and dataset.family.validation_tasks and e.command not in TAKES_TASKS
+        if ("validation" in e.splits and dataset.family.validation_tasks and not STUDY_COMMANDS[e.command].takes_tasks
                 and evaluation.validation == "other-tasks"):
             raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates {dataset.family.title}'s test "
                                                                f"tasks only: it has no validation split")

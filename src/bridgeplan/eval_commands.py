@@ -1,0 +1,419 @@
+"""The evaluation commands a study runs (``eval``, ``hierarchy eval``, ``graph``, ``oracle``, ``gcbc eval``): each an
+options dataclass (:mod:`bridgeplan.options`) and a function of it. The CLI (:mod:`bridgeplan.commands`) parses its
+flags into the dataclass and calls the function; the study runner (:mod:`bridgeplan.studies.jobs`) fills the same
+dataclass from a study's ``args`` table and calls the function (:data:`STUDY_COMMANDS`). Their options are declared in
+:mod:`bridgeplan.option_groups` where other commands share them. torch is imported only when a command runs."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.option_groups import (
+    Controller,
+    Correction,
+    Dataset,
+    Device,
+    Environment,
+    LowLevel,
+    Output,
+    PlanChoice,
+    Progress,
+    Replanning,
+    Tasks,
+    Threads,
+    task_ids,
+)
+from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared
+
+
+def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None):
+    """The :class:`~bridgeplan.replan.Execution` the options say (``plans``: a planner's, else the defaults)."""
+    from bridgeplan.replan import Execution
+
+    if controller.lookahead is not None and controller.controller != "pursuit":
+        raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    common = {"replan_every": replanning.replan_every, "tolerance": replanning.replan_tolerance,
+              "controller": controller.controller, "lookahead": controller.lookahead}
+    if plans is None:
+        return Execution(**common)
+    if plans.prior is not None and plans.prior != "warm":
+        raise BridgeplanError(f"--prior takes warm (replans start from the previous plan; the first plan uses "
+                              f"the run's own prior), got {plans.prior!r}")
+    return Execution(**common, candidates=plans.candidates, select=plans.select, warm=plans.prior == "warm",
+                     arrival=plans.arrival)
+
+
+def parsed_correction(options: Correction):
+    """The :class:`~bridgeplan.consistency.Correction` the options say, or None."""
+    from bridgeplan.consistency import Correction as Parsed
+
+    if not options.correction:
+        if options.correction_form is not None:
+            raise BridgeplanError("--correction-form needs --correction RESIDUAL=STEP")
+        return None
+    return Parsed.parse(options.correction, options.correction_form or "x0")
+
+
+def _show(result, output: Output, out: Path) -> int:
+    from bridgeplan.evaluate import format_table, write_and_show
+
+    d = result.to_dict()
+    write_and_show(d, out, output.json, format_table(d))
+    return 0
+
+
+# --- eval -----------------------------------------------------------------------------------------------------------
+
+@dataclass(kw_only=True)
+class EvalOptions:
+    run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name (`bridgeplan "
+                        "planners list`)")
+    nfe: int | None = opt(None, "network calls per plan (default: the full count)")
+    batch_size: int | None = opt(None, "plans per batch (default: all episodes at once)")
+    snapshot: int | None = opt(None, "evaluate the EMA snapshot of this training step")
+    sampler: str | None = opt(None, "a process with several samplers: ddpm ancestral (default; strided below N) or "
+                                    "ddim; flow euler (default) or stochastic; bridge posterior (default) or mean (no "
+                                    "noise)")
+    eta: float = opt(0.0, "ddpm with ddim: eta (0: deterministic)")
+    correction: Correction = group(Correction)
+    compile: bool = opt(False, "through the torch.compile'd network: planning compiles first, untimed (see "
+                               "`bridgeplan bench`); training compiles at the first step")
+    no_floor: bool = opt(False, "skip the floors (the same episodes from the straight line alone, no network)")
+    tasks: Tasks = group(Tasks)
+    replanning: Replanning = group(Replanning)
+    plans: PlanChoice = group(PlanChoice)
+    controller: Controller = group(Controller)
+    device: Device = group(Device)
+    output: Output = group(Output)
+    progress: Progress = group(Progress)
+    threads: Threads = group(Threads)
+
+
+EVAL_DESCRIPTION = ("Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: its 5-task "
+                    "protocol, the success rate; your own environment (a spec file): its seeded resets, the success "
+                    "rate. Beside the score: the straight line alone, the cost and the decision latency. Writes "
+                    "RUN/eval/<settings>.json unless --out.")
+
+
+def eval_run(o: EvalOptions) -> int:
+    from bridgeplan.evaluate import check_result_path, evaluate_run
+    from bridgeplan.gcbc import is_gcbc_run
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import run_dir_of
+
+    if is_gcbc_run(o.run):
+        return _eval_gcbc(o)
+    plan = execution(o.replanning, o.controller, o.plans)
+    correction = parsed_correction(o.correction)
+    folder = eval_dir(run_dir_of(Path(o.run)))
+    check_result_path(o.output.out, folder)
+    result = evaluate_run(Path(o.run), episodes=o.tasks.episodes, nfe=o.nfe, seed=o.tasks.seed,
+                          multi_task=o.tasks.multi_task, task_ids=o.tasks.ids, batch_size=o.batch_size,
+                          snapshot=o.snapshot, device=o.device.device, sampler=o.sampler, eta=o.eta,
+                          compile=o.compile, execution=plan, correction=correction, floor=not o.no_floor)
+    d = result.to_dict()
+    name = "-".join(part for part in (
+        f"step{d['step']}-nfe{d['nfe']}", o.sampler and f"{o.sampler}{o.eta:g}",
+        o.compile and "compiled", plan.resolved(result.family, result.tasks.env).tag(),
+        correction and correction.file_tag()) if part)
+    return _show(result, o.output, _out(o.output, o.tasks, folder, name))
+
+
+def _out(output: Output, tasks: Tasks, folder: Path, name: str) -> Path:
+    """``--out``, else ``folder/name-<task settings>.json``."""
+    return Path(output.out) if output.out else folder / f"{name}{tasks.file_tag()}.json"
+
+
+def _eval_gcbc(o: EvalOptions) -> int:
+    """``eval`` of a GCBC run: its policy (``--snapshot``: that step's) on its environment's tasks; the flags about
+    plans do not apply and are refused."""
+    from bridgeplan.files import atomic_write_text, check_writable
+    from bridgeplan.gcbc import evaluate_gcbc
+
+    given = {"nfe": o.nfe, "sampler": o.sampler, "replan_every": o.replanning.replan_every,
+             "replan_tolerance": o.replanning.replan_tolerance}
+    planning = [f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None] + (
+        ["--multi-task"] if o.tasks.multi_task else [])
+    if planning:
+        raise BridgeplanError(f"{o.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
+    if o.output.out:
+        check_writable(o.output.out, "evaluation JSON")
+    row = evaluate_gcbc(o.run, steps=None if o.snapshot is None else [o.snapshot], episodes=o.tasks.episodes or 0,
+                        seed=o.tasks.seed, progress=not o.progress.no_progress, task_ids=o.tasks.ids)[0]
+    text = row.pop("text")
+    if o.output.out:
+        atomic_write_text(Path(o.output.out), json.dumps(row, indent=2) + "\n")
+    print(json.dumps(row, indent=2) if o.output.json else text)
+    return 0
+
+
+# --- hierarchy eval and graph -------------------------------------------------------------------------------------
+
+@dataclass(kw_only=True)
+class HierarchyEvalOptions:
+    high: str = opt(help="the high level's run directory (a long --stride)")
+    low: str = opt(help="the low level's run directory (trained with --subgoal-every J; J x its stride = the high "
+                        "level's stride)")
+    high_snapshot: int | None = opt(None, "the high level's snapshot (training step)")
+    nfe_high: int | None = opt(None, "network calls per coarse plan (default: all)")
+    low_level: LowLevel = group(LowLevel)
+    tasks: Tasks = group(Tasks)
+    replanning: Replanning = group(Replanning)
+    controller: Controller = group(Controller, controller="pursuit")
+    device: Device = group(Device)
+    output: Output = group(Output)
+    progress: Progress = group(Progress)
+    threads: Threads = group(Threads)
+
+
+HIERARCHY_DESCRIPTION = ("The high level plans once per episode; the low level plans from the current state through "
+                         "the coarse plan's next states every --replan-every steps. Writes "
+                         "LOW/eval/hierarchy-<settings>.json unless --out.")
+
+
+def hierarchy_eval(o: HierarchyEvalOptions) -> int:
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, run_tasks
+    from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import run_dir_of
+
+    if o.tasks.episodes is not None:
+        positive("--episodes", o.tasks.episodes)
+    plan = execution(o.replanning, o.controller)
+    check_controller(plan.controller, plan.lookahead)
+    folder = eval_dir(run_dir_of(Path(o.low)))
+    check_result_path(o.output.out, folder)  # before anything is loaded
+    low_level = o.low_level
+    hierarchy, high, low = load_hierarchy(Path(o.high), Path(o.low), o.high_snapshot, low_level.low_snapshot,
+                                          o.device.device)
+    if plan.replan_every is None:
+        plan = dataclasses.replace(plan, replan_every=hierarchy.spacing)
+    tasks = run_tasks(low, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
+    result = evaluate_hierarchy(hierarchy, high, low, tasks, o.nfe_high, low_level.nfe_low, plan,
+                                low_level.replan_high_every, progress=not o.progress.no_progress)
+    d = result.to_dict()
+    name = (f"hierarchy-{high.name}-step{high.step}-nfe{d['high']['nfe']}-step{low.step}-nfe{d['low']['nfe']}-"
+            f"{plan.resolved(result.family, tasks.env).tag()}"
+            + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else ""))
+    return _show(result, o.output, _out(o.output, o.tasks, folder, name))
+
+
+@dataclass(kw_only=True)
+class GraphSettings:
+    title: ClassVar[str] = "the graph (defaults: the environment family's)"
+    keep: int | None = opt(None, "every keep-th state of an episode is a node (10)")
+    radius: float | None = opt(None, "nodes of other episodes (or farther along one stream) within this distance are "
+                                     "joined: below a wall's thickness (Maze2D 0.2, OGBench 0.5)")
+    neighbours: int | None = opt(None, "at most this many such joins per node (8)")
+    reach: float | None = opt(None, "the start and the goal join the nodes within this distance, else the nearest "
+                                    "(Maze2D 0.5, OGBench 2.0)")
+
+
+@dataclass(kw_only=True)
+class GraphOptions:
+    environment: Environment = group(Environment)
+    dataset: Dataset = group(Dataset)
+    low: str | None = opt(None, "a low level (trained with --subgoal-every J) that plans through the graph's path "
+                                "(default: the path alone)", metavar="RUN")
+    low_level: LowLevel = group(LowLevel)
+    graph: GraphSettings = group(GraphSettings)
+    tasks: Tasks = group(Tasks)
+    replanning: Replanning = group(Replanning)
+    controller: Controller = group(Controller, controller="pursuit")
+    device: Device = group(Device)
+    output: Output = group(Output)
+    progress: Progress = group(Progress)
+    threads: Threads = group(Threads)
+
+
+GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short jumps between them "
+                     "(bridgeplan.graph); alone, its shortest paths are executed as plans; with --low, its path, one "
+                     "state every J x stride steps, is the subgoals a low level plans through every --replan-every "
+                     "steps. --maze and --dataset default to the low level's. Writes LOW/eval/graph-<settings>.json, "
+                     "or results/graph/MAZE/graph-<settings>.json, unless --out.")
+
+
+def graph_eval(o: GraphOptions) -> int:
+    from bridgeplan.envs import family_of
+    from bridgeplan.envs.controllers import check_controller
+    from bridgeplan.evaluate import check_result_path, make_tasks
+    from bridgeplan.graph import check_graph_settings
+    from bridgeplan.hierarchy import evaluate_graph
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import load_planner, resolve_run, run_dir_of
+
+    if o.low is not None:  # the run named first, before the flags and files that go with it
+        resolve_run(Path(o.low))
+    if o.tasks.episodes is not None:
+        positive("--episodes", o.tasks.episodes)
+    plan = execution(o.replanning, o.controller)
+    check_controller(plan.controller, plan.lookahead)
+    settings = dataclasses.asdict(o.graph)
+    check_graph_settings(**settings)
+    env, dataset = o.environment.maze, o.dataset.dataset
+    low_level = o.low_level
+    if o.low is not None:
+        _, low = load_planner(Path(o.low), snapshot=low_level.low_snapshot, device="cpu")
+        env = env or low.config.maze
+        dataset = dataset or low.config.dataset
+    if env is None:
+        raise BridgeplanError("give the environment (--maze NAME) or a low level (--low RUN)")
+    if dataset is None:
+        raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
+    if not Path(dataset).exists():
+        raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
+    folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
+              else Path("results") / "graph" / family_of(env).label(env))
+    check_result_path(o.output.out, folder)
+    tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
+    result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
+                            low_level.replan_high_every, low_level.low_snapshot, o.device.device,
+                            progress=not o.progress.no_progress)
+    d = result.to_dict()
+    g = d["graph"]
+    tag = plan.resolved(result.family, env).tag()
+    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if o.low else "") + (
+        f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
+    return _show(result, o.output, _out(o.output, o.tasks, folder, name))
+
+
+# --- oracle and gcbc eval -----------------------------------------------------------------------------------------
+
+@dataclass(kw_only=True)
+class OracleOptions:
+    maze: list[str] = opt(help="environments (Maze2D mazes, OGBench dataset names: the maze's tasks)")
+    seeds: str = opt("0", "comma-separated task seeds")
+    task_sets: str = opt("single", "comma-separated: single (the family's tasks), multi (Maze2D: Multi2D's random "
+                                   "goals)")
+    episodes: int | None = shared(Tasks, "episodes")
+    tasks: str | None = shared(Tasks, "tasks")
+    output: Output = group(Output)
+    progress: Progress = group(Progress)
+    threads: Threads = group(Threads)
+
+
+def oracle(o: OracleOptions) -> int:
+    from bridgeplan.envs import family_of
+    from bridgeplan.evaluate import make_tasks
+    from bridgeplan.files import atomic_write_text, check_writable, code_version
+
+    seeds = int_tuple(o.seeds, "--seeds", minimum=0)
+    out = o.output.out
+    if out:
+        check_writable(out, "JSON file")
+    sets = o.task_sets.split(",")
+    rows = []
+    for env in o.maze:
+        family = family_of(env)
+        for task_set in sets:
+            if task_set not in family.task_sets:
+                raise BridgeplanError(f"--task-sets: {family.title} has {', '.join(family.task_sets)}, not "
+                                      f"{task_set!r}")
+            for seed in seeds:
+                tasks = make_tasks(env, o.episodes, seed, task_set == "multi", task_ids(o.tasks))
+                agent = family.oracle(env)
+                agent_outcome = family.run(tasks, agent, progress=not o.progress.no_progress)
+                rows.append({**tasks.fields(), "policy": "oracle", **family.score(tasks, agent_outcome)})
+                row = rows[-1]
+                rate = row["success_rate"]["mean"] if isinstance(row["success_rate"], dict) else row["success_rate"]
+                score = f"{row['score']['minari']['mean']:.1f} (Minari), " if "score" in row else ""
+                if not o.output.json:
+                    print(f"{env} {task_set} seed {seed}: {score}success {rate:.3f}")
+    text = json.dumps({"code_version": code_version(), "rows": rows}, indent=2)
+    if o.output.json:
+        print(text)
+    if out:
+        atomic_write_text(Path(out), text + "\n")
+        print(f"wrote {out}")
+    return 0
+
+
+
+@dataclass(kw_only=True)
+class GCBCEvalOptions:
+    run: str = opt(help="a `gcbc train` run directory")
+    environment: Environment = group(Environment)
+    steps: str | None = opt(None, "comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
+    episodes: int | None = shared(Tasks, "episodes")
+    seed: int = shared(Tasks, "seed")
+    output: Output = group(Output)
+    progress: Progress = group(Progress)
+    threads: Threads = group(Threads)
+
+
+GCBC_EVAL_DESCRIPTION = ("--maze defaults to the environment the run was trained with; --out takes one snapshot's "
+                         "evaluation (--steps N).")
+
+
+def gcbc_eval(o: GCBCEvalOptions) -> int:
+    from bridgeplan.gcbc import evaluate_gcbc, policy_snapshots
+
+    steps = None
+    if o.steps == "all":
+        steps = [s for s, _ in policy_snapshots(o.run)]
+    elif o.steps:
+        try:
+            steps = [int(v) for v in o.steps.split(",")]
+        except ValueError:
+            raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {o.steps!r}") from None
+    out = o.output.out
+    if out and (steps is None or len(steps) != 1):
+        raise BridgeplanError("--out takes one evaluation: give one snapshot with --steps N")
+    if out:
+        from bridgeplan.files import check_writable
+
+        check_writable(out, "JSON file")
+    if o.threads.threads is not None:
+        from bridgeplan.device import configure_threads
+
+        configure_threads(o.threads.threads)
+    rows = evaluate_gcbc(o.run, o.environment.maze or "", steps, o.episodes or 0, o.seed,
+                         progress=not o.progress.no_progress)
+    for row in rows:
+        text = row.pop("text")
+        print(json.dumps(row, indent=2) if o.output.json else f"step {row['step']}: {text}")
+    if out:
+        from bridgeplan.files import atomic_write_text
+
+        atomic_write_text(Path(out), json.dumps(rows[0], indent=2) + "\n")
+        print(f"wrote {out}")
+    return 0
+
+
+# --- what a study runs ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StudyCommand:
+    """An evaluation command as a study declares it: its options, its function, and the options its runs fill."""
+
+    options: type
+    run: Callable[..., int]
+    runs: tuple[str, ...]
+    """The options a study's runs fill, in order (a hierarchy: the high level, then the low one)."""
+    optional_runs: bool = False
+    """The runs may be left out (the dataset graph alone, without a low level)."""
+    reads_dataset: bool = False
+    """The runner gives it the study's dataset (``maze``, ``dataset``)."""
+    seed: str = "seed"
+    """The option the runner's evaluation seed fills."""
+
+    @property
+    def takes_tasks(self) -> bool:
+        """It takes ``tasks`` (so a validation split can give it a family's validation tasks)."""
+        return any(leaf.name == "tasks" for leaf in leaves(self.options))
+
+
+STUDY_COMMANDS = {
+    "eval": StudyCommand(EvalOptions, eval_run, ("run",)),
+    "hierarchy eval": StudyCommand(HierarchyEvalOptions, hierarchy_eval, ("high", "low")),
+    "graph": StudyCommand(GraphOptions, graph_eval, ("low",), optional_runs=True, reads_dataset=True),
+    "oracle": StudyCommand(OracleOptions, oracle, (), seed="seeds"),
+    "gcbc eval": StudyCommand(GCBCEvalOptions, gcbc_eval, ("run",)),
+}
