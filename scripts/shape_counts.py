@@ -19,7 +19,7 @@ LAYERS = [
     ("data", ("data.stream", "data.windows", "data.npz", "data")),
     ("envs", ("envs", "maze", "ogbench_pointmaze")),
     ("planning", ("priors", "consistency", "planner")),
-    ("training", ("config", "runs", "train", "gcbc", "shipped")),
+    ("training", ("config", "runs", "train", "gcbc", "gciql", "shipped")),
     ("decisions", ("replan", "graph", "hierarchy", "decisions", "evaluate", "render", "policy")),
     ("results", ("experiments", "analysis", "report", "bench", "studies", "eval_commands")),
     ("commands", ("commands", "gcbc_commands", "cli")),
