@@ -156,12 +156,10 @@ def _eval_gcbc(o: EvalOptions) -> int:
 # --- hierarchy eval and graph -------------------------------------------------------------------------------------
 
 @dataclass(kw_only=True)
-class HierarchyEvalOptions:
-    high: str = opt(help="the high level's run directory (a long --stride)")
-    low: str = opt(help="the low level's run directory (trained with --subgoal-every J; J x its stride = the high "
-                        "level's stride)")
-    high_snapshot: int | None = opt(None, "the high level's snapshot (training step)")
-    nfe_high: int | None = opt(None, "network calls per coarse plan (default: all)")
+class LevelledEvaluation:
+    """What a hierarchy's and a graph's evaluations share: a low level's settings, the tasks, replanning and the
+    controller (pursuit by default: both follow a coarse path), and where and how they run."""
+
     low_level: LowLevel = group(LowLevel)
     tasks: Tasks = group(Tasks)
     replanning: Replanning = group(Replanning)
@@ -170,6 +168,15 @@ class HierarchyEvalOptions:
     output: Output = group(Output)
     progress: Progress = group(Progress)
     threads: Threads = group(Threads)
+
+
+@dataclass(kw_only=True)
+class HierarchyEvalOptions(LevelledEvaluation):
+    high: str = opt(help="the high level's run directory (a long --stride)")
+    low: str = opt(help="the low level's run directory (trained with --subgoal-every J; J x its stride = the high "
+                        "level's stride)")
+    high_snapshot: int | None = opt(None, "the high level's snapshot (training step)")
+    nfe_high: int | None = opt(None, "network calls per coarse plan (default: all)")
 
 
 HIERARCHY_DESCRIPTION = ("The high level plans once per episode; the low level plans from the current state through "
@@ -217,20 +224,12 @@ class GraphSettings:
 
 
 @dataclass(kw_only=True)
-class GraphOptions:
+class GraphOptions(LevelledEvaluation):
     environment: Environment = group(Environment)
     dataset: Dataset = group(Dataset)
     low: str | None = opt(None, "a low level (trained with --subgoal-every J) that plans through the graph's path "
                                 "(default: the path alone)", metavar="RUN")
-    low_level: LowLevel = group(LowLevel)
     graph: GraphSettings = group(GraphSettings)
-    tasks: Tasks = group(Tasks)
-    replanning: Replanning = group(Replanning)
-    controller: Controller = group(Controller, controller="pursuit")
-    device: Device = group(Device)
-    output: Output = group(Output)
-    progress: Progress = group(Progress)
-    threads: Threads = group(Threads)
 
 
 GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short jumps between them "
