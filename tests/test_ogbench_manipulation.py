@@ -130,6 +130,57 @@ def test_protocol_success_comes_from_the_environment(monkeypatch):
     assert FAMILY.score(tasks, out)["success_rate"] == 0.5
 
 
+class _Recorder:
+    """A deterministic agent that moves as its states say and keeps every episode's states (episodes in order)."""
+
+    def __init__(self):
+        self.batches, self.episodes = [], []
+
+    def begin(self, n):
+        self.batches.append(n)
+        self.rows = list(range(len(self.episodes), len(self.episodes) + n))
+        self.episodes += [[] for _ in range(n)]
+        self.active = np.ones(n, dtype=bool)
+
+    def act(self, states, goals):
+        for row, state, active in zip(self.rows, states, self.active):
+            if active:
+                self.episodes[row].append(state.copy())
+        return np.tanh(3 * (states[:, 19:24] - states[:, 12:17]))
+
+    def end(self, rows):
+        self.active[rows] = False
+
+
+def test_an_episode_does_not_depend_on_its_batch(monkeypatch):
+    """The same episodes in batches of 3 and 1 (an environment reused by the next batch) and all 4 side by side: the
+    same states, steps and successes episode by episode; at most BATCH environments are made."""
+    env = make_env("cube-single-v0")
+    trivial = dict(task_name="trivial", init_xyzs=np.array([[0.425, 0.1, 0.02]]),
+                   goal_xyzs=np.array([[0.425, 0.1, 0.02]]))
+    real = env.unwrapped.task_infos[0]
+    monkeypatch.setattr(protocol, "validation_tasks", lambda spec, env: [trivial, real, real, real, real])
+    made = []
+    monkeypatch.setattr(protocol, "make_env", lambda env_id: made.append(env_id) or make_env(env_id))
+    tasks = FAMILY.tasks("cube-single-play-v0", episodes=2, task_ids=(6, 1))
+    runs = {}
+    for batch in (3, 4):
+        monkeypatch.setattr(protocol, "BATCH", batch)
+        made.clear()
+        agent = _Recorder()
+        runs[batch] = FAMILY.run(tasks, agent), agent
+        assert agent.batches == {3: [3, 1], 4: [4]}[batch] and len(made) == batch
+    (chunked, small), (whole, large) = runs[3], runs[4]
+    for t in (6, 1):
+        assert chunked.tasks[t].successes == whole.tasks[t].successes
+        assert chunked.tasks[t].steps == whole.tasks[t].steps
+    assert whole.tasks[6].successes == 2 and whole.tasks[1].steps == [200] * 2
+    for a, b in zip(small.episodes, large.episodes):
+        np.testing.assert_array_equal(np.array(a), np.array(b))
+    starts = np.array([e[0] for e in large.episodes[2:]])  # task 1's episodes: each reset by its own seed
+    assert len({s.tobytes() for s in starts}) == 2
+
+
 def test_validation_tasks_are_fixed_and_not_the_test_tasks():
     for name in ("cube-double-play-v0", "puzzle-3x3-play-v0", "scene-play-v0"):
         spec = parse_dataset_name(name)

@@ -8,8 +8,9 @@ episode ends when the environment terminates at the goal or truncates it at its 
 500, scene 750, puzzle 500 steps). An episode succeeds when its last step's ``info["success"]`` is true; a task's
 success rate is the mean over its episodes, the overall rate the mean over the tasks.
 
-Episodes run batched: one environment per episode of a batch, stepped in lockstep, the agent called once per step on
-the whole batch. Each episode's environment is reset with its own seed (from ``seed``, its task and its index), which
+Episodes run in batches of at most :data:`BATCH`: one environment per episode of a batch, stepped in lockstep, the agent
+called once per step on the whole batch; the next batch's episodes reuse the environments. Each episode's environment
+is reset with its own seed (from ``seed``, its task and its index, whatever its batch), which
 seeds what the environment draws from its ``np_random`` (the objects' jitter and yaw, the arm's start). One draw is
 outside any seed: ogbench's reset takes two random actions (its ``action_space`` property builds a fresh, unseeded
 space each time) before it records the goal observation, so the robot's part of ``info["goal"]`` varies slightly
@@ -41,8 +42,12 @@ MIN_MOVE = 0.1
 """A validation task moves each cube at least this far (m), as every cube-moving test task does."""
 MIN_APART = 0.08
 """Cubes of a validation task start and end at least this far apart (m): never on top of one another."""
-BATCH = 100
-"""Episodes stepped side by side (one environment each)."""
+BATCH = 25
+"""Episodes stepped side by side, one environment each: the most environments an evaluation holds at once. One
+cube-single environment holds about 150 MB once reset (its MuJoCo model with the arm's meshes and the textures, the IK
+controller's own model, their arenas): 100 side by side took 15-16.5 GB, so two evaluations on a 23 GB machine were
+killed for memory; 25 hold about 4 GB. An episode's reset and steps do not depend on its batch; a stochastic
+planner's draws do (it samples one batch's plans at a time, from one generator across the batches)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -135,8 +140,8 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
 
 
 def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) -> ProtocolResult:
-    """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), at most
-    :data:`BATCH` side by side."""
+    """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), in batches
+    of at most :data:`BATCH` side by side, each batch's environments reused by the next."""
     from tqdm import tqdm
 
     spec = tasks.spec
