@@ -248,6 +248,68 @@ def test_a_study_of_your_own_environment(reach, tmp_path, monkeypatch):
     assert planner["success_rate"] >= 0.8 and graph["success_rate"] >= 0.9 and graph["method"] == "dataset graph"
 
 
+DYING_STUDY = """
+[dataset]
+maze = "{spec}"
+path = "{dataset}"
+
+[training]
+seeds = [0, 1]
+
+[evaluation]
+episodes = 2
+
+[[evaluations]]
+command = "graph"
+runs = []
+out = "dying/graph-seed{{eval_seed}}.json"
+"""
+
+
+def test_a_study_worker_killed_ends_the_study_with_one_error(reach, tmp_path):
+    """Two workers, each a training seed's graph evaluation; the environment SIGKILLs the first process that resets
+    it (as the out-of-memory killer would): ``study run`` ends (in seconds, not never) with one error line naming the
+    worker that died and the JSON it was writing, exit 2, the other worker's JSON kept."""
+    import os
+    import subprocess
+    import sys
+
+    claimed = tmp_path / "claimed"
+    (tmp_path / "dying_env.py").write_text(ENV_SOURCE + f"""
+import os, signal
+
+
+class Dying(Reach):
+    def reset(self, seed=None, options=None):
+        try:
+            os.close(os.open({str(claimed)!r}, os.O_CREAT | os.O_EXCL))
+        except FileExistsError:
+            return super().reset(seed=seed, options=options)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def make_dying():
+    return Dying()
+""")
+    spec = tmp_path / "dying.toml"
+    spec.write_text(reach.read_text().replace('"reach_env.py:make_env"', '"dying_env.py:make_dying"').replace(
+        '"reach.npz"', f'"{reach.parent / "reach.npz"}"'))
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "dying.toml").write_text(DYING_STUDY.format(spec=spec, dataset=reach.parent / "reach.npz"))
+    r = subprocess.run([sys.executable, "-m", "bridgeplan.cli", "study", "run", "dying", "--workers", "2",
+                        "--no-progress", "--root", str(tmp_path)], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    written = sorted(p.name for p in (tmp_path / "results" / "dying" / "dying").iterdir())
+    assert len(written) == 1 and claimed.exists()
+    dead = 1 if written == ["graph-seed0.json"] else 0
+    assert lines[0].startswith(f"error: the worker of training seed {dead} (runs: none) was killed by SIGKILL (likely "
+                               f"out of memory) while running `graph` for ")
+    assert lines[0].endswith(f"graph-seed{dead}.json; the JSONs written are kept: `study run` again runs what is "
+                             f"missing")
+
+
 def test_coarse_plans_without_a_wall_map():
     """A hierarchy's diagnostics of its coarse plans in a family without a wall map: no wall shares, the arrival."""
     from bridgeplan.hierarchy import COARSE_ARRIVAL, coarse_diagnostics

@@ -1,4 +1,5 @@
-"""Worker processes of the local pools (a study's seeds, a sweep's jobs, a dataset's streams) end with their parent.
+"""Worker processes of the local pools (a study's seeds, a sweep's jobs, a dataset's streams) end with their parent;
+:func:`run_spawned` runs calls in worker processes and names one that was killed instead of waiting for it.
 
 A pool's workers are spawned processes of their own: when the command that started them is killed without the time
 to stop its pool (SIGTERM from a scheduler, SIGKILL), they would train on as orphans, holding their runs' locks and
@@ -6,9 +7,16 @@ both cores, beside the command run next. Each worker watches its parent instead,
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
+import signal
 import threading
 import time
+from collections.abc import Callable
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
+
+from bridgeplan.errors import BridgeplanError
 
 PARENT_POLL_SECONDS = 1.0
 
@@ -24,3 +32,91 @@ def exit_with_parent(poll_seconds: float = PARENT_POLL_SECONDS) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+class WorkerDied(BridgeplanError):
+    """A worker process ended without answering: killed (the kernel's out-of-memory killer sends SIGKILL)."""
+
+
+_PARENT: Connection | None = None
+"""In a worker of :func:`run_spawned`: where it tells its parent what it is doing (:func:`doing`)."""
+
+
+def doing(what: str) -> None:
+    """Tell the parent, where this process is a worker of :func:`run_spawned`, what it does now: named if it dies."""
+    if _PARENT is not None:
+        _PARENT.send(("doing", what))
+
+
+def _worker(parent: Connection, call: Callable, args: tuple) -> None:
+    global _PARENT
+    from tqdm import tqdm
+
+    exit_with_parent()
+    _PARENT = parent
+    # this process's bars need a lock of its own only: tqdm's default, a named semaphore, would outlive a killed worker
+    # (the resource tracker's warning at exit)
+    tqdm.set_lock(threading.RLock())
+    try:
+        answer = ("done", call(*args))
+    except BaseException as e:  # raised again in the parent, as a pool's map does
+        answer = ("raised", e)
+    try:
+        parent.send(answer)
+    except Exception as e:  # an answer that does not pickle
+        parent.send(("raised", RuntimeError(f"{type(answer[1]).__name__}: {answer[1]} (unpicklable: {e})")))
+
+
+def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: list[str]) -> list:
+    """``call(*args)`` for each ``args`` of ``arguments``, each in a spawned process of its own, at most ``workers``
+    at once; their results in order. A process per call rather than a pool: a pool whose worker is killed loses its
+    task and waits for it forever. A call that raises: its exception raised here once the others have ended. A process
+    that ends without answering (killed): :class:`WorkerDied` naming it (``names[i]``) and what it last said it was
+    doing (:func:`doing`), once the others have ended (what they finished is kept)."""
+    ctx = mp.get_context("spawn")
+    waiting = list(range(len(arguments)))
+    running: dict[Connection, tuple[int, BaseProcess]] = {}
+    results: list = [None] * len(arguments)
+    raised: list[BaseException] = []
+    died: list[str] = []
+    last: dict[int, str] = {}
+    while waiting or running:
+        while waiting and len(running) < workers:
+            i = waiting.pop(0)
+            receive, send = ctx.Pipe(duplex=False)
+            process = ctx.Process(target=_worker, args=(send, call, arguments[i]), daemon=True)
+            process.start()
+            send.close()  # the child's end: the parent's copy closed, EOF comes when the child ends
+            running[receive] = (i, process)
+        for conn in wait(list(running)):
+            i, process = running[conn]
+            try:
+                kind, value = conn.recv()
+            except EOFError:
+                kind, value = "died", None
+            if kind == "doing":
+                last[i] = value
+                continue
+            del running[conn]
+            conn.close()
+            process.join()
+            if kind == "done":
+                results[i] = value
+            elif kind == "raised":
+                raised.append(value)
+            else:
+                died.append(f"{names[i]} {_death(process.exitcode)}"
+                            + (f" while {last[i]}" if i in last else ""))
+    if died:
+        raise WorkerDied("; ".join(died))
+    if raised:
+        raise raised[0]
+    return results
+
+
+def _death(exitcode: int | None) -> str:
+    """How a process that never answered ended."""
+    if exitcode is not None and exitcode < 0:
+        name = signal.Signals(-exitcode).name
+        return f"was killed by {name}" + (" (likely out of memory)" if -exitcode == signal.SIGKILL else "")
+    return f"exited with code {exitcode} without an answer"

@@ -37,9 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridgeplan.errors import one_line_warnings
+from bridgeplan.errors import BridgeplanError, one_line_warnings
 from bridgeplan.eval_commands import STUDY_COMMANDS
 from bridgeplan.studies.spec import NamedRun, command_options
+from bridgeplan.workers import doing
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
@@ -165,6 +166,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     one_line_warnings()  # as the CLI's, in a worker process too
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
+        doing(f"training {run_dir(results, name, seed)}")
         config = train_config(study, runs[name], seed, dataset, results)
         if runs[name].trainer == "gcbc":
             train_to(train_gcbc, config, run_dir(results, name, seed), progress)
@@ -176,6 +178,7 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     for job in todo:
         if job.path.exists():  # another worker or sweep wrote it meanwhile
             continue
+        doing(f"running `{job.command}` for {job.path}")
         run_job(job, dataset, progress)
         written += 1
     return written
@@ -201,14 +204,14 @@ def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int,
     units = work_units([job for job in jobs(study, results, results, quick) if not job.path.exists()])
     if workers <= 1 or len(units) <= 1:
         return sum(run_seed(study, results, dataset, unit, seed, progress) for seed, unit in units)
-    import multiprocessing as mp
-
-    from bridgeplan.workers import exit_with_parent
+    from bridgeplan.workers import WorkerDied, run_spawned
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with mp.get_context("spawn").Pool(min(workers, len(units)), initializer=exit_with_parent) as pool:
-        written = pool.starmap(run_seed, [(study, results, dataset, unit, seed, False) for seed, unit in units],
-                               chunksize=1)  # one unit at a time: a worker never holds two while the other idles
-        pool.close()
-        pool.join()
+    try:  # one unit per process: a worker never holds two while the other idles
+        written = run_spawned(run_seed, [(study, results, dataset, unit, seed, False) for seed, unit in units],
+                              min(workers, len(units)),
+                              [f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})"
+                               for seed, unit in units])
+    except WorkerDied as e:
+        raise BridgeplanError(f"{e}; the JSONs written are kept: `study run` again runs what is missing") from None
     return sum(written)
