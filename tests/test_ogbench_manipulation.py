@@ -462,13 +462,18 @@ def test_the_dataset_graph_over_an_arms_states(tiny_data):
 
 
 def test_the_dataset_graph_plans_alone_and_as_a_high_level(tiny_data, tmp_path, capsys):
-    """``bridgeplan graph`` on cube-single: its paths executed by the arm's inverse dynamics; then as the high level
-    of a bridge low level trained with ``--subgoal-every`` from the coarse prior (the path's subgoals, joined by lines
-    in state space), which plans through them every 20 steps."""
+    """``bridgeplan graph`` on cube-single: its paths executed by the arm's inverse dynamics (the family's path
+    controller, track, where none is given; pursuit refused); then as the high level of a bridge low level trained with
+    ``--subgoal-every`` from the coarse prior (the path's subgoals, joined by lines in state space), which plans
+    through them every 20 steps."""
     graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
-             "--controller", "track", "--keep", "2", "--no-progress", "--json"]
+             "--keep", "2", "--no-progress", "--json"]
+    assert _error(capsys, [*graph, "--controller", "pursuit", "--out", str(tmp_path / "pursued.json")]).startswith(
+        "error: --controller pursuit steers a point toward a waypoint in the plane")
+    assert not (tmp_path / "pursued.json").exists()
     assert main([*graph, "--out", str(tmp_path / "alone.json")]) == 0
     row = json.loads(capsys.readouterr().out)
+    assert row["execution"]["controller"] == "track"
     assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 1
     assert row["graph"]["nodes"] == 3 * 101 and row["graph"]["paths_found"] == 1.0
     assert row["graph"]["path_steps"]["mean"] > 20  # the data's own states, not a straight line to the goal
@@ -481,6 +486,7 @@ def test_the_dataset_graph_plans_alone_and_as_a_high_level(tiny_data, tmp_path, 
     assert main([*graph, "--low", str(low), "--nfe-low", "2", "--out", str(tmp_path / "low.json")]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["low"]["prior"] == "coarse" and row["execution"]["replan_every"] == 20
+    assert row["execution"]["controller"] == "track"
     assert row["tasks"]["1"]["steps"] == [200] and row["plans_per_episode"]["mean"] == 10
     assert row["coarse_plans"]["arrival_step"] < 200  # the path reaches the goal's cube position
 

@@ -32,14 +32,19 @@ from bridgeplan.option_groups import (
 from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared
 
 
-def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None):
-    """The :class:`~bridgeplan.replan.Execution` the options say (``plans``: a planner's, else the defaults)."""
+def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None, env: str | None = None):
+    """The :class:`~bridgeplan.replan.Execution` the options say (``plans``: a planner's, else the defaults); where
+    they give no controller, ``env``'s family's path controller (``Family.path_controller``)."""
+    from bridgeplan.envs import family_of
+    from bridgeplan.envs.controllers import check_controller
     from bridgeplan.replan import Execution
 
-    if controller.lookahead is not None and controller.controller != "pursuit":
+    kind = family_of(env).path_controller if controller.controller is None else controller.controller
+    if controller.lookahead is not None and kind != "pursuit":
         raise BridgeplanError("--lookahead is the pursuit controller's: give --controller pursuit")
+    check_controller(kind, controller.lookahead)
     common = {"replan_every": replanning.replan_every, "tolerance": replanning.replan_tolerance,
-              "controller": controller.controller, "lookahead": controller.lookahead}
+              "controller": kind, "lookahead": controller.lookahead}
     if plans is None:
         return Execution(**common)
     if plans.prior is not None and plans.prior != "warm":
@@ -158,12 +163,12 @@ def _eval_gcbc(o: EvalOptions) -> int:
 @dataclass(kw_only=True)
 class LevelledEvaluation:
     """What a hierarchy's and a graph's evaluations share: a low level's settings, the tasks, replanning and the
-    controller (pursuit by default: both follow a coarse path), and where and how they run."""
+    controller (the family's path controller by default: both follow a coarse path), and where and how they run."""
 
     low_level: LowLevel = group(LowLevel)
     tasks: Tasks = group(Tasks)
     replanning: Replanning = group(Replanning)
-    controller: Controller = group(Controller, controller="pursuit")
+    controller: Controller = group(Controller, controller=None)
     device: Device = group(Device)
     output: Output = group(Output)
     progress: Progress = group(Progress)
@@ -185,7 +190,6 @@ HIERARCHY_DESCRIPTION = ("The high level plans once per episode; the low level p
 
 
 def hierarchy_eval(o: HierarchyEvalOptions) -> int:
-    from bridgeplan.envs.controllers import check_controller
     from bridgeplan.evaluate import check_result_path, run_tasks
     from bridgeplan.hierarchy import evaluate_hierarchy, load_hierarchy
     from bridgeplan.paths import eval_dir
@@ -193,16 +197,17 @@ def hierarchy_eval(o: HierarchyEvalOptions) -> int:
 
     if o.tasks.episodes is not None:
         positive("--episodes", o.tasks.episodes)
-    plan = execution(o.replanning, o.controller)
-    check_controller(plan.controller, plan.lookahead)
+    if o.controller.controller is not None:
+        execution(o.replanning, o.controller)  # a controller given is refused before anything is read
     folder = eval_dir(run_dir_of(Path(o.low)))
     check_result_path(o.output.out, folder)  # before anything is loaded
     low_level = o.low_level
     hierarchy, high, low = load_hierarchy(Path(o.high), Path(o.low), o.high_snapshot, low_level.low_snapshot,
                                           o.device.device)
+    tasks = run_tasks(low, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
+    plan = execution(o.replanning, o.controller, env=tasks.env)
     if plan.replan_every is None:
         plan = dataclasses.replace(plan, replan_every=hierarchy.spacing)
-    tasks = run_tasks(low, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
     result = evaluate_hierarchy(hierarchy, high, low, tasks, o.nfe_high, low_level.nfe_low, plan,
                                 low_level.replan_high_every, progress=not o.progress.no_progress)
     d = result.to_dict()
@@ -241,7 +246,6 @@ GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short
 
 def graph_eval(o: GraphOptions) -> int:
     from bridgeplan.envs import family_of
-    from bridgeplan.envs.controllers import check_controller
     from bridgeplan.evaluate import check_result_path, make_tasks
     from bridgeplan.graph import check_graph_settings
     from bridgeplan.hierarchy import evaluate_graph
@@ -252,8 +256,8 @@ def graph_eval(o: GraphOptions) -> int:
         resolve_run(Path(o.low))
     if o.tasks.episodes is not None:
         positive("--episodes", o.tasks.episodes)
-    plan = execution(o.replanning, o.controller)
-    check_controller(plan.controller, plan.lookahead)
+    if o.controller.controller is not None:
+        execution(o.replanning, o.controller)  # a controller given is refused before anything is read
     settings = dataclasses.asdict(o.graph)
     check_graph_settings(**settings)
     env, dataset = o.environment.maze, o.dataset.dataset
@@ -268,6 +272,7 @@ def graph_eval(o: GraphOptions) -> int:
         raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
+    plan = execution(o.replanning, o.controller, env=env)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))
     check_result_path(o.output.out, folder)

@@ -397,7 +397,7 @@ def evaluate_hierarchy(hierarchy: Hierarchy | GraphHierarchy, high_info: RunInfo
     of ``bridgeplan graph --low``). ``hierarchy``: two planners, or the dataset graph over a low level
     (:class:`GraphHierarchy`, whose ``high_info`` is the graph's settings).
 
-    ``execution``: the low level's replanning and controller (default: every coarse step, pursued);
+    ``execution``: the low level's replanning and controller (default: every coarse step, the family's path controller);
     ``replan_high_every``: the high level plans again every that many steps (None: once per episode). Beside the
     hierarchy's score: ``high_alone``, the first coarse plans densified and executed open loop by the same
     controller (what the low level adds), ``coarse_plans`` (how they lie against the walls) and, for a planner as
@@ -405,8 +405,8 @@ def evaluate_hierarchy(hierarchy: Hierarchy | GraphHierarchy, high_info: RunInfo
     """
     family = family_of(tasks.env)
     low = hierarchy.low
-    execution = (execution or Execution(replan_every=hierarchy.spacing, controller="pursuit")).resolved(family,
-                                                                                                         tasks.env)
+    execution = (execution or Execution(replan_every=hierarchy.spacing, controller=family.path_controller)).resolved(
+        family, tasks.env)
     check_execution(execution, tasks.episode_steps)
     check_high_replanning(replan_high_every, tasks.episode_steps)
     decisions = HierarchyDecisions(hierarchy, nfe_high, nfe_low, replan_high_every)

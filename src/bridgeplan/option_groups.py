@@ -102,9 +102,11 @@ class PlanChoice:
 @dataclass(kw_only=True)
 class Controller:
     title: ClassVar[str] = "controller (how a plan is executed)"
-    controller: str = opt("track", "track (Diffuser's: the planned states in time), pursuit (the plan's path at the "
-                                   "expert's pace: toward the first planned position --lookahead away) or actions (a "
-                                   "planner's own planned actions, Diffuser's joint state-action plans)")
+    controller: str | None = opt("track", "track (Diffuser's: the planned states in time), pursuit (the plan's path at "
+                                          "the expert's pace: toward the first planned position --lookahead away) or "
+                                          "actions (a planner's own planned actions, Diffuser's joint state-action "
+                                          "plans); where no default is shown, the environment family's (pursuit; "
+                                          "OGBench manipulation: track)")
     lookahead: float | None = opt(None, "pursuit: distance to the planned position driven toward (default: the "
                                         "family's, Maze2D 1.0, OGBench 2.0)", metavar="R")
 

@@ -99,6 +99,9 @@ class Family:
     the environment itself ends an episode at the goal (nothing needs to hold it), ``truncate`` where an episode goes
     on past it."""
     floor_replans: bool = False
+    path_controller: str = "pursuit"
+    """The controller that follows a coarse path (the dataset graph's, a hierarchy's high plan) unless one is given
+    (``bridgeplan graph``, ``hierarchy eval``): pursuit, the path at the data's pace, where it steers the body."""
     """Whether a planner's floor (the straight line alone) is executed as the planner is, replans included (else
     open loop, one line per episode)."""
 

@@ -41,6 +41,7 @@ class OGBenchManipulation(Family):
     episodes = 50  # per task, as every manipulation line of OGBench's hyperparameters.sh (--eval_episodes=50)
     quick_episodes = 4
     default_arrival = "end"
+    path_controller = "track"  # pursuit steers a point in the plane, not an arm (controllers.py)
 
     @property
     def validation_tasks(self) -> tuple[int, ...]:
