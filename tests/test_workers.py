@@ -7,8 +7,12 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
+
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.workers import run_spawned
 
 PARENT = """
 import multiprocessing as mp, sys, time
@@ -51,3 +55,17 @@ def _orphan_after_parent_killed(mode: str, wait_seconds: float) -> bool:
 def test_a_worker_exits_when_its_parent_is_killed():
     assert not _orphan_after_parent_killed("watched", wait_seconds=10)
     assert _orphan_after_parent_killed("unwatched", wait_seconds=3)  # what happened before: an orphan trains on
+
+
+def _square_or_refuse(x: int, folder: str) -> int:
+    if x < 0:
+        raise BridgeplanError(f"refused {x}")
+    (Path(folder) / f"{x}.done").touch()
+    return x * x
+
+
+def test_run_spawned_answers_in_order_and_raises_a_workers_error_after_the_others(tmp_path):
+    assert run_spawned(_square_or_refuse, [(3, str(tmp_path)), (2, str(tmp_path))], 2, ["a", "b"]) == [9, 4]
+    with pytest.raises(BridgeplanError, match="^refused -1$"):
+        run_spawned(_square_or_refuse, [(-1, str(tmp_path)), (5, str(tmp_path))], 1, ["a", "b"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["2.done", "3.done", "5.done"]  # the other call ran

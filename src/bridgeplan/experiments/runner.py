@@ -108,6 +108,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
     from bridgeplan.runs import load_planner
     from bridgeplan.train import train
+    from bridgeplan.workers import doing
 
     config = _train_config(settings, spec, seed, prior_run)
     if settings.only_runs is not None and config.run_name() not in settings.only_runs:
@@ -117,6 +118,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     if config.process.distills:  # the teacher first (another job may be training it: train_to waits for it)
         teacher = _teacher_config(settings, spec, seed)
         train_to(train, teacher, Path(config.process.teacher), progress)
+    doing(f"training {run_dir}")
     train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []
@@ -143,6 +145,7 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
                 todo.append((name, series, key))
         if not todo:
             continue
+        doing(f"evaluating {run_dir} at step {step}")
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
         for name, series, key in todo:
             if store.has(key):  # another experiment of this job named the same evaluation
@@ -230,18 +233,15 @@ def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: 
     if workers == 1:
         return sum(len(run_job(settings, experiments, spec, seed, prior_runs.get(seed, ""), 0, progress))
                    for spec, seed in jobs)
-    import multiprocessing as mp
-
-    from bridgeplan.workers import exit_with_parent
+    from bridgeplan.workers import WorkerDied, run_spawned
 
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with mp.get_context("spawn").Pool(workers, initializer=exit_with_parent) as pool:
-        results = pool.starmap(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads,
-                                          False) for spec, seed in jobs])
-        # let the workers exit on their own: the block's terminate() would kill them before they release their
-        # semaphores (tqdm's lock), and the resource tracker then warns of leaked semaphores at shutdown
-        pool.close()
-        pool.join()
+    try:
+        results = run_spawned(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads, False)
+                                        for spec, seed in jobs], workers,
+                              [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs])
+    except WorkerDied as e:
+        raise BridgeplanError(f"{e}; the rows stored are kept: the sweep again runs what is missing") from None
     return sum(len(r) for r in results)
 
 
