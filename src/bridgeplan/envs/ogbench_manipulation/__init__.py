@@ -41,6 +41,7 @@ class OGBenchManipulation(Family):
     episodes = 50  # per task, as every manipulation line of OGBench's hyperparameters.sh (--eval_episodes=50)
     quick_episodes = 4
     default_arrival = "end"
+    picture = "frames"
 
     @property
     def validation_tasks(self) -> tuple[int, ...]:
@@ -167,6 +168,12 @@ class OGBenchManipulation(Family):
         from bridgeplan.envs.ogbench_manipulation.protocol import run_tasks
 
         return run_tasks(tasks, agent, progress)
+
+    def film(self, tasks, agent, size: int):
+        """The protocol's run, the first episode's physics states kept and replayed in ogbench's own renderer."""
+        from bridgeplan.envs.ogbench_manipulation.protocol import film
+
+        return film(tasks, agent, size)
 
     def score(self, tasks, outcome) -> dict:
         """The success rate (the mean of the tasks'), the counts, and each task's."""
