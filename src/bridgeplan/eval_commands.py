@@ -252,10 +252,12 @@ def graph_eval(o: GraphOptions) -> int:
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import load_planner, resolve_run, run_dir_of
 
-    if o.low is not None:  # the run named first, before the flags and files that go with it
-        resolve_run(Path(o.low))
     if o.picture.video and not o.render:
         raise BridgeplanError("--video goes with --render")
+    if o.render and o.low is not None:
+        raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
+    if o.low is not None:  # the run named first, before the flags and files that go with it
+        resolve_run(Path(o.low))
     if o.tasks.episodes is not None:
         positive("--episodes", o.tasks.episodes)
     plan = execution(o.replanning, o.controller)
@@ -304,8 +306,6 @@ def _graph_drawing(o: GraphOptions, env: str):
     from bridgeplan.envs import family_of
     from bridgeplan.render import check_offscreen, render_episodes
 
-    if o.low is not None:
-        raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
     positive("--size", o.picture.size)
     family = family_of(env)
     if family.picture is None:

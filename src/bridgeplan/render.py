@@ -117,15 +117,16 @@ def strip_steps(length: int) -> list[int]:
 
 def frame_strip(frames: list[np.ndarray], captions: list[str], title: str) -> bytes:
     """``frames`` side by side under a band of ``title`` and each frame's caption, as PNG bytes."""
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
 
     h, w = frames[0].shape[:2]
     image = Image.new("RGB", (w * len(frames), h + 2 * CAPTION), "white")
     draw = ImageDraw.Draw(image)
-    draw.text((2, 1), title, fill="black")
+    font = ImageFont.load_default(size=CAPTION - 3)
+    draw.text((2, 1), title, fill="black", font=font)
     for k, (frame, caption) in enumerate(zip(frames, captions)):
         image.paste(Image.fromarray(frame), (k * w, 2 * CAPTION))
-        draw.text((k * w + 2, CAPTION + 1), caption, fill="black")
+        draw.text((k * w + 2, CAPTION + 1), caption, fill="black", font=font)
     buf = io.BytesIO()
     image.save(buf, format="PNG")
     return buf.getvalue()
@@ -184,7 +185,7 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
     else:
         steps = strip_steps(film.length)
         captions = ["start", f"step {steps[1]}", f"end, step {steps[2]}: {film.outcome}"]
-        png = frame_strip(film.frames(steps), captions, title)
+        png = frame_strip(film.frames(steps), captions, f"{title}, seed {tasks.seed}")
         atomic_write_bytes(base, lambda f: f.write(png))
     written = [base]
     if movie is not None:
