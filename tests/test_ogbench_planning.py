@@ -123,7 +123,7 @@ def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
     (["graph", "--low", "{maze2d}", "--maze", NAME, "--replan-every", "12"], "the low level was trained on umaze"),
     (["graph", "--maze", NAME, "--dataset", "{maze2d_data}"], "is a folder, not an npz file"),
     (["graph", "--maze", "umaze", "--dataset", "{navigate}"], "is an npz file (OGBench's format), not a Maze2D"),
-    (["render", "{point}", "--episodes", "1"], "render draws Maze2D's episodes"),
+    (["render", "{point}", "--episodes", "1"], "render draws Maze2D's and OGBench manipulation's episodes"),
     (["oracle", "mars", "--episodes", "1"], "unknown environment 'mars'"),
     (["data", "info", "{navigate}", "--maze", "maze9"], "unknown environment 'maze9'"),
     (["graph", "--maze", "antmaze-medium-navigate-v0", "--dataset", "{navigate}"], "unknown environment"),

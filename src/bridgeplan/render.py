@@ -205,7 +205,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
-    from bridgeplan.envs import family_of
+    from bridgeplan.envs import FAMILIES, family_of
     from bridgeplan.evaluate import PlannerDecisions, generator, run_tasks
     from bridgeplan.paths import render_dir
     from bridgeplan.replan import Execution
@@ -217,8 +217,9 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     config = info.config
     family = family_of(config.maze)
     if family.picture is None:
-        raise BridgeplanError(f"{run} is a {family.title} planner: render draws Maze2D's and OGBench manipulation's "
-                              f"episodes (evaluate it with `bridgeplan eval`)")
+        drawn = " and ".join(f"{f.title}'s" for f in FAMILIES if f.picture)
+        raise BridgeplanError(f"{run} is a {family.title} planner: render draws {drawn} episodes (evaluate it with "
+                              f"`bridgeplan eval`)")
     if pairs and family.picture != "map":
         raise BridgeplanError(f"--pairs draws prior/target pairs over a map: {family.title} has none")
     nfe = planner.process.max_nfe if nfe is None else nfe
