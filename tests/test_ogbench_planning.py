@@ -124,6 +124,7 @@ def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
     (["graph", "--maze", NAME, "--dataset", "{maze2d_data}"], "is a folder, not an npz file"),
     (["graph", "--maze", "umaze", "--dataset", "{navigate}"], "is an npz file (OGBench's format), not a Maze2D"),
     (["render", "{point}", "--episodes", "1"], "render draws Maze2D's and OGBench manipulation's episodes"),
+    (["graph", "--maze", NAME, "--dataset", "{navigate}", "--render"], "--render: OGBench pointmaze episodes cannot"),
     (["oracle", "mars", "--episodes", "1"], "unknown environment 'mars'"),
     (["data", "info", "{navigate}", "--maze", "maze9"], "unknown environment 'maze9'"),
     (["graph", "--maze", "antmaze-medium-navigate-v0", "--dataset", "{navigate}"], "unknown environment"),
