@@ -321,6 +321,17 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
                  "--controller", "actions", "--no-floor", "--no-progress", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
+    # its first episode of validation task 7 drawn (the 5 test tasks' episodes are not run)
+    picture = tmp_path / "episode.png"
+    assert main(["render", str(run), "--tasks", "7,1", "--nfe", "1", "--replan-every", "8", "--size", "16",
+                 "--device", "cpu", "--out", str(picture)]) == 0
+    assert capsys.readouterr().out.split() == ["wrote", str(picture)]
+    from PIL import Image
+
+    from bridgeplan.render import CAPTION
+
+    with Image.open(picture) as png:
+        assert png.size == (3 * 16, 16 + 2 * CAPTION)
 
 
 @pytest.mark.parametrize("process,prior", [pytest.param("bridge", "gaussian", marks=pytest.mark.slow),

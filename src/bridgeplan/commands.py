@@ -287,6 +287,7 @@ class RenderOptions:
     nfe: int | None = shared(_ec.EvalOptions, "nfe")
     seed: int = shared(og.Tasks, "seed")
     multi_task: bool = shared(og.Tasks, "multi_task")
+    tasks: str | None = shared(og.Tasks, "tasks")
     out: str | None = shared(og.Output, "out")
     pairs: bool = opt(False, "also draw prior/target pairs from the training data")
     picture: og.Picture = group(og.Picture)
@@ -307,8 +308,8 @@ def _cmd_render(o: RenderOptions) -> int:
         check_writable(o.out, "picture")
     positive("--size", o.picture.size)
     for path in render_run(Path(o.run), episodes=o.episodes, nfe=o.nfe, seed=o.seed, multi_task=o.multi_task,
-                           out=o.out, pairs=o.pairs, video=o.picture.video, size=o.picture.size,
-                           device=o.device.device, execution=plan):
+                           task_ids=og.task_ids(o.tasks), out=o.out, pairs=o.pairs, video=o.picture.video,
+                           size=o.picture.size, device=o.device.device, execution=plan):
         print(f"wrote {path}")
     return 0
 

@@ -150,12 +150,15 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
     unless every picture was drawn.
 
     ``map``: one panel per episode, its first plan (as executed: chosen, truncated) and its executed states over the
-    maze. ``frames``: the first episode's start, middle and end, as the simulator's camera saw them."""
+    maze. ``frames``: the first episode alone is run, and drawn at its start, middle and end as the simulator's camera
+    saw it."""
     from bridgeplan.evaluate import run_episodes
 
     if family.picture is None:
         raise BridgeplanError(f"{family.title} episodes cannot be drawn (evaluate them with `bridgeplan eval`)")
     check_offscreen()
+    if family.picture == "frames":
+        tasks = tasks.first()
     first: list[np.ndarray] = []
 
     class FirstPlans:  # the decisions, keeping each batch's first plan
@@ -196,8 +199,8 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
 
 
 def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int = 0, multi_task: bool = False,
-               out: str | None = None, pairs: bool = False, video: bool = False, size: int = 240,
-               device: str = "auto", execution=None) -> list[Path]:
+               task_ids: tuple[int, ...] | None = None, out: str | None = None, pairs: bool = False,
+               video: bool = False, size: int = 240, device: str = "auto", execution=None) -> list[Path]:
     """Plan and execute ``episodes`` episodes of a run and draw them (:func:`render_episodes`); returns the files
     written.
 
@@ -224,7 +227,7 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
         raise BridgeplanError(f"--pairs draws prior/target pairs over a map: {family.title} has none")
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
-    tasks = run_tasks(info, episodes, seed, multi_task)
+    tasks = run_tasks(info, episodes, seed, multi_task, task_ids)
     execution = (execution or Execution()).resolved(family, config.maze)
     execution.validate(planner.process, tasks.episode_steps)
     decisions = PlannerDecisions(planner, nfe, execution, family, config.maze)
