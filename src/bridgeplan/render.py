@@ -72,6 +72,7 @@ def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: 
     """
     plt = _pyplot()
     n = len(layers[0][0])
+    columns = min(columns, n)
     rows = (n + columns - 1) // columns
     aspect = len(maze.grid) / len(maze.grid[0])
     fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 3.2 * rows * aspect), squeeze=False)
