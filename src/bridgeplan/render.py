@@ -161,25 +161,34 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
     if family.picture == "frames":
         tasks = tasks.first()
     first: list[np.ndarray] = []
+    made: list[tuple[int, np.ndarray]] = []  # (step, plan) of the first episode's plans
 
-    class FirstPlans:  # the decisions, keeping each batch's first plan
+    class FirstPlans:  # the decisions, keeping each batch's first plans and every plan of the first episode
         device = decisions.device
 
         def source(self, n, gen):
             source = decisions.source(n, gen)
+            batch = len(first)
 
             def decide(states, goals, idx, t):
                 planned = source(states, goals, idx, t)
                 if t == 0:
                     first.append(planned)
+                if batch == 0 and 0 in idx:
+                    made.append((t, planned[list(idx).index(0)]))
                 return planned
 
             return decide
 
+    def in_force(steps: list[int]) -> list[np.ndarray | None]:
+        """The first episode's plan at each of ``steps``: the last made at or before it."""
+        return [next((plan for t, plan in reversed(made) if t <= k), None) for k in steps]
+
     episodes = run_episodes(FirstPlans(), family, tasks, execution,
                             run=lambda t, agent, progress: family.film(t, agent, size))
     outcome, film = episodes.outcome
-    movie = gif(film.frames(video_steps(film.length))) if video else None
+    steps = video_steps(film.length)
+    movie = gif(film.frames(steps, in_force(steps))) if video else None
     if family.picture == "map":
         positions = family.layout(tasks.env).state_positions
         plot_trajectory_grid(tasks.maze, [(positions(first[0]), "winter",
@@ -189,7 +198,8 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
     else:
         steps = strip_steps(film.length)
         captions = ["start", f"step {steps[1]}", f"end, step {steps[2]}: {film.outcome}"]
-        png = frame_strip(film.frames(steps), captions, f"{title}, seed {tasks.seed}")
+        png = frame_strip(film.frames(steps, in_force(steps)), captions,
+                          f"{title}, seed {tasks.seed}; blue: the plan in force")
         atomic_write_bytes(base, lambda f: f.write(png))
     written = [base]
     if movie is not None:

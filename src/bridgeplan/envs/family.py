@@ -47,8 +47,10 @@ class Film(Protocol):
     outcome: str
     """How the episode ended, as a caption says it (``success``, ``timed out``)."""
 
-    def frames(self, steps: Sequence[int]) -> list[np.ndarray]:
-        """RGB images ``[height, width, 3]`` (uint8) of the states ``steps`` (indices below :attr:`length`)."""
+    def frames(self, steps: Sequence[int], plans: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
+        """RGB images ``[height, width, 3]`` (uint8) of the states ``steps`` (indices below :attr:`length`);
+        ``plans``: the plan in force at each of them (planned states ``[S, obs_dim]``, or None), drawn where the
+        family's film can (Maze2D's cannot: its map draws them)."""
 
 
 @dataclass(frozen=True)

@@ -138,7 +138,8 @@ class MazeFilm:
         self.length = len(self.states)
         self.outcome = "reached the goal" if success else "never reached the goal"
 
-    def frames(self, steps) -> list[np.ndarray]:
+    def frames(self, steps, plans=None) -> list[np.ndarray]:
+        """The states ``steps`` (``plans`` are drawn by the map, not here)."""
         from bridgeplan.trajectory import MAZE2D
 
         env = make_gym_env(self.maze, render_mode="rgb_array", width=self.size, height=self.size)

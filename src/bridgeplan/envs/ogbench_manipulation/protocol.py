@@ -224,16 +224,43 @@ SHADOW_SIZE = 1024
 2 loaded cores, this 0.36 s (10 frames each, alternated)."""
 
 
+EFFECTOR_CENTRE, EFFECTOR_SCALE = np.array([0.425, 0.0, 0.0]), 10.0
+"""The observation's effector position is its world position less this centre, times this scale
+(``compute_observation``)."""
+PLAN_MARKS = 25
+"""Most marks a plan is drawn with (its states evenly apart)."""
+MARK = {"radius": 0.006, "rgba": np.array([0.15, 0.55, 1.0, 0.9], np.float32)}
+
+
+def planned_effector(plan: np.ndarray) -> np.ndarray:
+    """World positions ``[k, 3]`` of the effector along ``plan`` (``[S, obs_dim]``), at most :data:`PLAN_MARKS`."""
+    from bridgeplan.envs.ogbench_manipulation import EFFECTOR_XY
+
+    rows = np.unique(np.linspace(0, len(plan) - 1, min(PLAN_MARKS, len(plan))).round().astype(int))
+    return plan[rows, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + EFFECTOR_CENTRE
+
+
+def _draw_marks(scene, positions: np.ndarray) -> None:
+    """Spheres at ``positions`` added to a scene about to be rendered."""
+    import mujoco
+
+    for pos in positions[:max(0, scene.maxgeom - scene.ngeom)]:
+        mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([MARK["radius"], 0, 0]),
+                            pos, np.eye(3).ravel(), MARK["rgba"])
+        scene.ngeom += 1
+
+
 class ManipulationFilm:
     """One episode's physics states, replayed in an environment of the scene reset as the episode was (its cubes'
-    colours; the goal's translucent cubes where the task puts them), seen by ogbench's ``front`` camera."""
+    colours; the goal's translucent cubes where the task puts them), seen by ogbench's ``front`` camera; a plan is
+    drawn as blue marks along its effector's path."""
 
     def __init__(self, tasks: ManipulationTasks, states: list[np.ndarray], success: bool, size: int):
         self.tasks, self.states, self.size = tasks, states, size
         self.length = len(states)
         self.outcome = "success" if success else "no success"
 
-    def frames(self, steps: Sequence[int]) -> list[np.ndarray]:
+    def frames(self, steps: Sequence[int], plans: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
         import mujoco
 
         full = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -242,11 +269,13 @@ class ManipulationFilm:
         reset(env, self.tasks.task_ids[0], 0, self.tasks.seed, task_infos(self.tasks, env))
         u.model.vis.quality.shadowsize = SHADOW_SIZE
         frames = []
-        for k in steps:
+        for i, k in enumerate(steps):
             mujoco.mj_setState(u.model, u.data, self.states[k], full)
             mujoco.mj_forward(u.model, u.data)
             u.post_step()  # the cubes' colours: a cube on its target turns
-            frames.append(env.render())
+            plan = None if plans is None else plans[i]
+            marks = None if plan is None else planned_effector(plan)
+            frames.append(u.render(scene_callback=None if marks is None else lambda scene: _draw_marks(scene, marks)))
         env.close()
         return frames
 
