@@ -578,7 +578,7 @@ def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
 
 def test_a_plans_marks_are_where_its_effector_would_be():
     """The picture's marks of a plan: the effector's world position read back from the observation's scaled columns,
-    as the environment reports it (``proprio/effector_pos``), after random steps."""
+    as the environment reports it (``proprio/effector_pos``), after random steps; a plan's repeated end once."""
     env = make_env("cube-single-v0")
     env.reset(seed=3, options=dict(task_id=2))
     obs, where = [], []
@@ -586,7 +586,7 @@ def test_a_plans_marks_are_where_its_effector_would_be():
         ob, *_, info = env.step(env.action_space.sample())
         obs.append(ob)
         where.append(info["proprio/effector_pos"])
-    marks = protocol.planned_effector(np.asarray(obs))
+    marks = protocol.planned_effector(np.asarray(obs + [obs[-1]] * 20))  # a path held at its end: not drawn again
     assert len(marks) == protocol.PLAN_MARKS and np.abs(np.ptp(np.asarray(where), axis=0)).max() > 0.01
     rows = np.linspace(0, 29, protocol.PLAN_MARKS).round().astype(int)
     assert np.allclose(marks, np.asarray(where)[rows], atol=1e-6)

@@ -228,16 +228,18 @@ EFFECTOR_CENTRE, EFFECTOR_SCALE = np.array([0.425, 0.0, 0.0]), 10.0
 """The observation's effector position is its world position less this centre, times this scale
 (``compute_observation``)."""
 PLAN_MARKS = 25
-"""Most marks a plan is drawn with (its states evenly apart)."""
-MARK = {"radius": 0.006, "rgba": np.array([0.15, 0.55, 1.0, 0.9], np.float32)}
+"""Most marks a plan is drawn with (its moving states evenly apart)."""
+MARK = {"radius": 0.009, "rgba": np.array([0.1, 0.6, 1.0, 1.0], np.float32)}
 
 
 def planned_effector(plan: np.ndarray) -> np.ndarray:
-    """World positions ``[k, 3]`` of the effector along ``plan`` (``[S, obs_dim]``), at most :data:`PLAN_MARKS`."""
+    """World positions ``[k, 3]`` of the effector along ``plan`` (``[S, obs_dim]``), at most :data:`PLAN_MARKS`; a
+    state as the one before it (a path held at its end to the plan's length) is not drawn again."""
     from bridgeplan.envs.ogbench_manipulation import EFFECTOR_XY
 
-    rows = np.unique(np.linspace(0, len(plan) - 1, min(PLAN_MARKS, len(plan))).round().astype(int))
-    return plan[rows, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + EFFECTOR_CENTRE
+    xyz = plan[:, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + EFFECTOR_CENTRE
+    xyz = xyz[np.r_[True, np.any(np.diff(plan, axis=0) != 0, axis=1)]]
+    return xyz[np.unique(np.linspace(0, len(xyz) - 1, min(PLAN_MARKS, len(xyz))).round().astype(int))]
 
 
 def _draw_marks(scene, positions: np.ndarray) -> None:
