@@ -30,7 +30,14 @@ import numpy as np
 from bridgeplan.envs.family import Agent, Tasks
 from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
 from bridgeplan.envs.ogbench_manipulation.generate import make_env
-from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, DatasetName, parse_dataset_name
+from bridgeplan.envs.ogbench_manipulation.names import (
+    ACT_DIM,
+    EFFECTOR_CENTRE,
+    EFFECTOR_SCALE,
+    EFFECTOR_XY,
+    DatasetName,
+    parse_dataset_name,
+)
 from bridgeplan.errors import BridgeplanError
 
 TASK_IDS = (1, 2, 3, 4, 5)
@@ -224,9 +231,6 @@ SHADOW_SIZE = 1024
 2 loaded cores, this 0.36 s (10 frames each, alternated)."""
 
 
-EFFECTOR_CENTRE, EFFECTOR_SCALE = np.array([0.425, 0.0, 0.0]), 10.0
-"""The observation's effector position is its world position less this centre, times this scale
-(``compute_observation``)."""
 PLAN_MARKS = 25
 """Most marks a plan is drawn with (its moving states evenly apart)."""
 MARK = {"radius": 0.009, "rgba": np.array([0.1, 0.6, 1.0, 1.0], np.float32)}
@@ -235,9 +239,7 @@ MARK = {"radius": 0.009, "rgba": np.array([0.1, 0.6, 1.0, 1.0], np.float32)}
 def planned_effector(plan: np.ndarray) -> np.ndarray:
     """World positions ``[k, 3]`` of the effector along ``plan`` (``[S, obs_dim]``), at most :data:`PLAN_MARKS`; a
     state as the one before it (a path held at its end to the plan's length) is not drawn again."""
-    from bridgeplan.envs.ogbench_manipulation import EFFECTOR_XY
-
-    xyz = plan[:, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + EFFECTOR_CENTRE
+    xyz = plan[:, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + np.asarray(EFFECTOR_CENTRE)
     xyz = xyz[np.r_[True, np.any(np.diff(plan, axis=0) != 0, axis=1)]]
     return xyz[np.unique(np.linspace(0, len(xyz) - 1, min(PLAN_MARKS, len(xyz))).round().astype(int))]
 
