@@ -229,11 +229,10 @@ def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int
 SHADOW_SIZE = 1024
 """Pixels of the shadow map's side: ogbench's 4096 costs 0.53-0.64 s a 240-pixel frame in Mesa's software OpenGL on
 2 loaded cores, this 0.36 s (10 frames each, alternated)."""
-
-
 PLAN_MARKS = 25
 """Most marks a plan is drawn with (its moving states evenly apart)."""
 MARK = {"radius": 0.009, "rgba": np.array([0.1, 0.6, 1.0, 1.0], np.float32)}
+"""A plan's mark: a blue sphere of 9 mm radius, visible at 240 pixels."""
 
 
 def planned_effector(plan: np.ndarray) -> np.ndarray:
