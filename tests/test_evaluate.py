@@ -65,11 +65,26 @@ def test_eval_missing_run(tmp_path, capsys):
 
 
 def test_render_writes_pngs(tiny_runs, tmp_path):
+    """Plans and executed states over the maze, prior/target pairs, and the first episode's video: each of its
+    states replayed in gymnasium-robotics' renderer, every 4th and the last, 40 ms each; the point moves."""
+    from PIL import Image
+
+    from bridgeplan.evaluate import make_tasks
+
     out = tmp_path / "plan.png"
     assert main(["render", str(tiny_runs["bridge"]), "--episodes", "2", "--device", "cpu", "--out", str(out),
-                 "--pairs"]) == 0
+                 "--pairs", "--video", "--size", "24"]) == 0
     for path in (out, tmp_path / "plan-pairs.png"):
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    states = make_tasks("umaze", 2).episode_steps + 1
+    with Image.open(out.with_suffix(".gif")) as gif:  # a frame as the one before it lengthens that one
+        durations, frames = [], []
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            durations.append(gif.info["duration"])
+            frames.append(np.asarray(gif.convert("RGB"), dtype=int))
+        assert gif.size == (24, 24) and sum(durations) == 40 * (len(range(0, states, 4)) + ((states - 1) % 4 > 0))
+    assert np.abs(frames[0] - frames[-1]).mean() > 0.1
 
 
 def test_learned_prior_for_another_horizon_is_refused(tiny_dataset, tiny_runs, tmp_path, capsys):

@@ -372,6 +372,17 @@ def test_a_planner_trains_and_plans_on_cube_single(tiny_data, tmp_path, capsys):
                  "--controller", "actions", "--no-floor", "--no-progress", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["execution"]["controller"] == "actions" and row["plans_per_episode"]["mean"] == 50
+    # its first episode of validation task 7 drawn (the 5 test tasks' episodes are not run)
+    picture = tmp_path / "episode.png"
+    assert main(["render", str(run), "--tasks", "7,1", "--nfe", "1", "--replan-every", "8", "--size", "16",
+                 "--device", "cpu", "--out", str(picture)]) == 0
+    assert capsys.readouterr().out.split() == ["wrote", str(picture)]
+    from PIL import Image
+
+    from bridgeplan.render import CAPTION
+
+    with Image.open(picture) as png:
+        assert png.size == (3 * 16, 16 + 2 * CAPTION)
 
 
 @pytest.mark.parametrize("process,prior", [pytest.param("bridge", "gaussian", marks=pytest.mark.slow),
@@ -572,3 +583,67 @@ def test_the_actions_controller_executes_planned_actions():
     assert done[1, 0] != 0.5 + 0.2
     with pytest.raises(BridgeplanError, match="plan states alone"):
         follower.actions(states, layout.states(plans), np.array([0, 0]))
+
+
+def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
+    """``bridgeplan graph --render --video`` on cube-single: the first episode executed again and drawn by ogbench's
+    camera: a PNG of its start, middle and end side by side, and a GIF of every 4th of its 201 states (and the last),
+    frames of the size asked (the GIF 40 ms a state); the arm moves, so the first and last frames differ. Refused
+    before anything is written: a video without --render, --render with --low, a MuJoCo that cannot render
+    offscreen."""
+    from PIL import Image
+
+    from bridgeplan import render
+
+    size = 24
+    graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
+             "--controller", "track", "--keep", "2", "--no-progress", "--json", "--size", str(size)]
+    out = tmp_path / "graph.json"
+    assert main([*graph, "--render", "--video", "--out", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["tasks"]["1"]["steps"] == [200]  # stdout: the JSON alone
+    with Image.open(out.with_suffix(".png")) as png:
+        assert png.size == (3 * size, size + 2 * render.CAPTION)
+        strip = np.asarray(png.convert("RGB"))[2 * render.CAPTION:]
+    first, last = strip[:, :size], strip[:, 2 * size:]
+    assert np.abs(first.astype(int) - last).mean() > 1
+    with Image.open(out.with_suffix(".gif")) as gif:  # a frame as the one before it lengthens that one
+        durations, frames = [], []
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            durations.append(gif.info["duration"])
+            frames.append(np.asarray(gif.convert("RGB")))
+        start, end = frames[0], frames[-1]
+        assert gif.size == (size, size) and sum(durations) == 40 * len(range(0, 201, 4)) == 40 * 51
+    assert np.abs(start.astype(int) - end).mean() > 1
+
+    def refused(argv, message):
+        assert message in _error(capsys, [*graph, *argv, "--out", str(tmp_path / "bad.json")])
+        assert not list(tmp_path.glob("bad*"))
+
+    refused(["--video"], "error: --video goes with --render")
+    refused(["--render", "--low", str(tmp_path / "graph.json")], "--render draws the graph's own paths")
+
+    class NoGL:
+        def __init__(self, *args):
+            raise AttributeError("'NoneType' object has no attribute 'glGetError'")
+
+    import mujoco
+
+    monkeypatch.setattr(mujoco, "Renderer", NoGL)
+    refused(["--render"], "error: MuJoCo cannot render offscreen with MUJOCO_GL='egl' (AttributeError")
+
+
+def test_a_plans_marks_are_where_its_effector_would_be():
+    """The picture's marks of a plan: the effector's world position read back from the observation's scaled columns,
+    as the environment reports it (``proprio/effector_pos``), after random steps; a plan's repeated end once."""
+    env = make_env("cube-single-v0")
+    env.reset(seed=3, options=dict(task_id=2))
+    obs, where = [], []
+    for _ in range(30):
+        ob, *_, info = env.step(env.action_space.sample())
+        obs.append(ob)
+        where.append(info["proprio/effector_pos"])
+    marks = protocol.planned_effector(np.asarray(obs + [obs[-1]] * 20))  # a path held at its end: not drawn again
+    assert len(marks) == protocol.PLAN_MARKS and np.abs(np.ptp(np.asarray(where), axis=0)).max() > 0.01
+    rows = np.linspace(0, 29, protocol.PLAN_MARKS).round().astype(int)
+    assert np.allclose(marks, np.asarray(where)[rows], atol=1e-6)

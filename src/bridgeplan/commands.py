@@ -261,7 +261,10 @@ def _cmd_train_prior(o: TrainCommon) -> int:
 def _add_eval_commands(sub) -> None:
     add_command(sub, "eval", _ec.EvalOptions, _ec.eval_run, description=_ec.EVAL_DESCRIPTION,
                 help="evaluate a trained run (any environment family) on its environment's tasks")
-    add_command(sub, "render", RenderOptions, _cmd_render, description="Writes PNGs under RUN/render/ unless --out.",
+    add_command(sub, "render", RenderOptions, _cmd_render,
+                description="Maze2D: plans and executed states over the maze, one panel per episode; OGBench "
+                            "manipulation: the first episode's start, middle and end in the simulator's camera. "
+                            "Writes PNGs under RUN/render/ unless --out.",
                 help="draw planned and executed trajectories (PNG), optionally a video")
     p = sub.add_parser("hierarchy", help="hierarchical planning: a coarse plan over the episode, refined by a low "
                                          "level (bridgeplan.hierarchy)")
@@ -284,9 +287,10 @@ class RenderOptions:
     nfe: int | None = shared(_ec.EvalOptions, "nfe")
     seed: int = shared(og.Tasks, "seed")
     multi_task: bool = shared(og.Tasks, "multi_task")
+    tasks: str | None = shared(og.Tasks, "tasks")
     out: str | None = shared(og.Output, "out")
     pairs: bool = opt(False, "also draw prior/target pairs from the training data")
-    video: bool = opt(False, "also write an animated GIF of the first episode (MuJoCo)")
+    picture: og.Picture = group(og.Picture)
     device: og.Device = group(og.Device)
     replanning: og.Replanning = group(og.Replanning)
     plans: og.PlanChoice = group(og.PlanChoice)
@@ -302,8 +306,10 @@ def _cmd_render(o: RenderOptions) -> int:
     plan = execution(o.replanning, o.controller, o.plans)
     if o.out:
         check_writable(o.out, "picture")
+    positive("--size", o.picture.size)
     for path in render_run(Path(o.run), episodes=o.episodes, nfe=o.nfe, seed=o.seed, multi_task=o.multi_task,
-                           out=o.out, pairs=o.pairs, video=o.video, device=o.device.device, execution=plan):
+                           task_ids=og.task_ids(o.tasks), out=o.out, pairs=o.pairs, video=o.picture.video,
+                           size=o.picture.size, device=o.device.device, execution=plan):
         print(f"wrote {path}")
     return 0
 

@@ -22,6 +22,7 @@ from bridgeplan.option_groups import (
     Environment,
     LowLevel,
     Output,
+    Picture,
     PlanChoice,
     Progress,
     Replanning,
@@ -235,6 +236,9 @@ class GraphOptions(LevelledEvaluation):
     low: str | None = opt(None, "a low level (trained with --subgoal-every J) that plans through the graph's path "
                                 "(default: the path alone)", metavar="RUN")
     graph: GraphSettings = group(GraphSettings)
+    render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone): a PNG beside "
+                              "the JSON, as `bridgeplan render` draws the environment's episodes")
+    picture: Picture = group(Picture)
 
 
 GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short jumps between them "
@@ -252,6 +256,10 @@ def graph_eval(o: GraphOptions) -> int:
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import load_planner, resolve_run, run_dir_of
 
+    if o.picture.video and not o.render:
+        raise BridgeplanError("--video goes with --render")
+    if o.render and o.low is not None:
+        raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
     if o.low is not None:  # the run named first, before the flags and files that go with it
         resolve_run(Path(o.low))
     if o.tasks.episodes is not None:
@@ -276,16 +284,44 @@ def graph_eval(o: GraphOptions) -> int:
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))
     check_result_path(o.output.out, folder)
+    draw = _graph_drawing(o, env) if o.render else None
     tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
+    heard = []  # the graph's decisions, tasks and execution, drawn once the result's name is known
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
-                            progress=not o.progress.no_progress)
+                            progress=not o.progress.no_progress,
+                            picture=draw and (lambda *args: heard.append(args)))
     d = result.to_dict()
     g = d["graph"]
     tag = plan.resolved(result.family, env).tag()
     name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if o.low else "") + (
         f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
-    return _show(result, o.output, _out(o.output, o.tasks, folder, name))
+    out = _out(o.output, o.tasks, folder, name)
+    drawn = [path for args in heard for path in draw(*args, out.with_suffix(".png"),
+                                                     f"{env}: dataset graph, {tag or 'open loop'}")]
+    _show(result, o.output, out)
+    if not o.output.json:  # the JSON alone on stdout; the pictures lie beside it
+        print("\n".join(f"wrote {path}" for path in drawn))
+    return 0
+
+
+def _graph_drawing(o: GraphOptions, env: str):
+    """``--render``'s drawing of the graph's first episode (checked before anything runs): a function of the graph's
+    decisions, its tasks and execution, the picture's path and title."""
+    from bridgeplan.envs import family_of
+    from bridgeplan.render import check_offscreen, render_episodes
+
+    positive("--size", o.picture.size)
+    family = family_of(env)
+    if family.picture is None:
+        raise BridgeplanError(f"--render: {family.title} episodes cannot be drawn")
+    check_offscreen()
+
+    def draw(decisions, tasks, execution, path, title):
+        return render_episodes(decisions, family, tasks.first(), execution, path, title, o.picture.video,
+                               o.picture.size)
+
+    return draw
 
 
 # --- oracle and gcbc eval -----------------------------------------------------------------------------------------

@@ -136,14 +136,15 @@ class Episodes:
 
 
 def run_episodes(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution, seed: int | None = None,
-                 warm_up: Callable | None = None, progress: bool = False) -> Episodes:
+                 warm_up: Callable | None = None, progress: bool = False, run: Callable | None = None) -> Episodes:
     """Every episode of ``tasks``, decided by ``decisions`` (one generator seeded ``seed``, default the tasks',
-    across the batches) and executed as ``execution`` says by ``family``'s controllers."""
+    across the batches) and executed as ``execution`` says by ``family``'s controllers, in ``run(tasks, agent,
+    progress)`` (default ``family.run``; ``render``: its film)."""
     gen = generator(decisions.device, tasks.seed if seed is None else seed)
     executor = PlanExecutor(lambda n: decisions.source(n, gen),
                             lambda n: family.follower(tasks.env, n, execution.controller, execution.lookahead),
                             execution.replan_every, execution.tolerance, warm_up)
-    return Episodes(family.run(tasks, executor, progress), executor)
+    return Episodes((run or family.run)(tasks, executor, progress), executor)
 
 
 def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution) -> dict:

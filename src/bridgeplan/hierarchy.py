@@ -23,7 +23,7 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import numpy as np
 import torch
@@ -463,7 +463,8 @@ def graph_hierarchy(low_run: Path, dataset: str | None = None, settings: dict | 
 
 def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
                    low_run: Path | None = None, nfe_low: int | None = None, replan_high_every: int | None = None,
-                   low_snapshot: int | None = None, device: str = "auto", progress: bool = False) -> EvalResult:
+                   low_snapshot: int | None = None, device: str = "auto", progress: bool = False,
+                   picture: Callable | None = None) -> EvalResult:
     """The dataset graph over ``dataset`` (of ``tasks``' environment; ``bridgeplan.graph``, built with ``settings``
     over its family's) on ``tasks``: the JSON of ``bridgeplan graph``, with the graph's settings, size and what its
     queries found (``graph``) and the data's identity (``config``).
@@ -472,7 +473,8 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     if given). With ``low_run`` (a planner of that environment trained with ``--subgoal-every``), the graph is a
     hierarchy's high level (:class:`GraphHierarchy`, :func:`evaluate_hierarchy`): the low level plans through its
     path's next states every ``execution.replan_every`` steps (default: its subgoal spacing), the path searched
-    again every ``replan_high_every`` steps if given."""
+    again every ``replan_high_every`` steps if given. ``picture(decisions, tasks, execution)`` (the graph alone) hears
+    the graph's decisions after the evaluation (``bridgeplan graph --render``)."""
 
     env, family = tasks.env, family_of(tasks.env)
     if low_run is None:
@@ -493,6 +495,8 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
                              after_run=lambda _: seen.update(graph=graph.summary()), progress=progress)
         result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": build_seconds}
         result.config = {"dataset": env, "dataset_identity": stream.identity(), "graph": settings}
+        if picture is not None:
+            picture(GraphDecisions(graph, length), tasks, execution)
         return result
     hierarchy, high, low_info = graph_hierarchy(low_run, dataset, settings, low_snapshot, device, tasks.episode_steps,
                                                 env)

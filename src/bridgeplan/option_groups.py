@@ -62,6 +62,13 @@ class Output:
 
 
 @dataclass(kw_only=True)
+class Picture:
+    title: ClassVar[str] = "pictures (MuJoCo offscreen: MUJOCO_GL, default egl)"
+    video: bool = opt(False, "also write an animated GIF of the first episode")
+    size: int = opt(240, "pixels of a rendered frame's side (the video's; OGBench manipulation's picture)")
+
+
+@dataclass(kw_only=True)
 class Progress:
     no_progress: bool = opt(False, "no progress bars")
 

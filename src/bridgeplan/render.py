@@ -1,14 +1,24 @@
-"""Pictures: planned and executed trajectories over the maze, prior/target pairs, rollout videos."""
+"""Pictures of planned and executed episodes, one path for every family that draws them (``Family.picture``):
+plans and executed states over the maze (Maze2D's map), or the simulator's own frames of an episode (OGBench's
+manipulation); prior/target pairs; a video of an episode (``Family.film``) in MuJoCo's offscreen renderer."""
 
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # headless unless told otherwise: mujoco reads it when first imported
+
+VIDEO_EVERY = 4
+"""A video shows every 4th state of the episode (and its last)."""
+CAPTION = 14
+"""Pixels of the caption band above a strip of frames."""
 
 
 def _pyplot():
@@ -62,6 +72,7 @@ def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: 
     """
     plt = _pyplot()
     n = len(layers[0][0])
+    columns = min(columns, n)
     rows = (n + columns - 1) // columns
     aspect = len(maze.grid) / len(maze.grid[0])
     fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 3.2 * rows * aspect), squeeze=False)
@@ -79,17 +90,137 @@ def plot_trajectory_grid(maze, layers: list[tuple[np.ndarray, str, str]], path: 
     save_figure(fig, path)
 
 
-def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int = 0, multi_task: bool = False,
-               out: str | None = None, pairs: bool = False, video: bool = False, device: str = "auto",
-               execution=None) -> list[Path]:
-    """Plan and execute ``episodes`` episodes of a run and draw them; returns the files written.
+def check_offscreen() -> None:
+    """That MuJoCo renders offscreen here (the backend ``MUJOCO_GL`` names), else one BridgeplanError: checked before
+    any episode runs, so that nothing is written."""
+    try:
+        import mujoco
 
-    ``execution`` (:class:`~bridgeplan.replan.Execution`): closed loop, candidates, arrival rule; the picture
-    then shows each episode's first plan (as executed: chosen, truncated) and the executed states."""
+        renderer = mujoco.Renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 8, 8)
+        renderer.render()
+        renderer.close()
+    except Exception as e:  # each backend fails its own way (ImportError, AttributeError, mujoco.FatalError, ...)
+        raise BridgeplanError(f"MuJoCo cannot render offscreen with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} "
+                              f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}): set MUJOCO_GL to "
+                              f"egl, or osmesa where OSMesa is installed") from None
+
+
+def video_steps(length: int, every: int = VIDEO_EVERY) -> list[int]:
+    """The states a video of an episode of ``length`` states shows: every ``every``-th, and the last."""
+    steps = list(range(0, length, every))
+    return steps if steps[-1] == length - 1 else steps + [length - 1]
+
+
+def strip_steps(length: int) -> list[int]:
+    """The states a strip of frames shows: the start, the middle and the end."""
+    return [0, (length - 1) // 2, length - 1]
+
+
+def frame_strip(frames: list[np.ndarray], captions: list[str], title: str) -> bytes:
+    """``frames`` side by side under a band of ``title`` and each frame's caption, as PNG bytes."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    h, w = frames[0].shape[:2]
+    image = Image.new("RGB", (w * len(frames), h + 2 * CAPTION), "white")
+    draw = ImageDraw.Draw(image)
+    font = ImageFont.load_default(size=CAPTION - 3)
+    draw.text((2, 1), title, fill="black", font=font)
+    for k, (frame, caption) in enumerate(zip(frames, captions)):
+        image.paste(Image.fromarray(frame), (k * w, 2 * CAPTION))
+        draw.text((k * w + 2, CAPTION + 1), caption, fill="black", font=font)
+    buf = io.BytesIO()
+    image.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def gif(frames: list[np.ndarray], duration_ms: int = 40) -> bytes:
+    """``frames`` as an animated GIF, looping."""
+    from PIL import Image
+
+    images = [Image.fromarray(f) for f in frames]
+    buf = io.BytesIO()
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0)
+    return buf.getvalue()
+
+
+def render_episodes(decisions, family, tasks, execution, base: Path, title: str, video: bool = False,
+                    size: int = 240) -> list[Path]:
+    """Plan and execute ``tasks``' episodes by ``decisions`` (:class:`~bridgeplan.evaluate.Decisions`) as
+    ``execution`` says, and draw them as their family does (``Family.picture``): ``base`` (PNG), and with ``video``
+    ``base`` as a GIF of the first episode, frames ``size`` pixels square. Returns the files written; none is written
+    unless every picture was drawn.
+
+    ``map``: one panel per episode, its first plan (as executed: chosen, truncated) and its executed states over the
+    maze. ``frames``: the first episode alone is run, and drawn at its start, middle and end as the simulator's camera
+    saw it."""
+    from bridgeplan.evaluate import run_episodes
+
+    if family.picture is None:
+        raise BridgeplanError(f"{family.title} episodes cannot be drawn (evaluate them with `bridgeplan eval`)")
+    check_offscreen()
+    if family.picture == "frames":
+        tasks = tasks.first()
+    first: list[np.ndarray] = []
+    made: list[tuple[int, np.ndarray]] = []  # (step, plan) of the first episode's plans
+
+    class FirstPlans:  # the decisions, keeping each batch's first plans and every plan of the first episode
+        device = decisions.device
+
+        def source(self, n, gen):
+            source = decisions.source(n, gen)
+            batch = len(first)
+
+            def decide(states, goals, idx, t):
+                planned = source(states, goals, idx, t)
+                if t == 0:
+                    first.append(planned)
+                if batch == 0 and 0 in idx:
+                    made.append((t, planned[list(idx).index(0)]))
+                return planned
+
+            return decide
+
+    def in_force(steps: list[int]) -> list[np.ndarray | None]:
+        """The first episode's plan at each of ``steps``: the last made at or before it."""
+        return [next((plan for t, plan in reversed(made) if t <= k), None) for k in steps]
+
+    episodes = run_episodes(FirstPlans(), family, tasks, execution,
+                            run=lambda t, agent, progress: family.film(t, agent, size))
+    outcome, film = episodes.outcome
+    steps = video_steps(film.length)
+    movie = gif(film.frames(steps, in_force(steps))) if video else None
+    if family.picture == "map":
+        positions = family.layout(tasks.env).state_positions
+        plot_trajectory_grid(tasks.maze, [(positions(first[0]), "winter",
+                                           "plan" if execution.plans_once else "first plan"),
+                                          (positions(outcome.states), "autumn", "executed")],
+                             base, title, goals=tasks.goals_xy)
+    else:
+        steps = strip_steps(film.length)
+        captions = ["start", f"step {steps[1]}", f"end, step {steps[2]}: {film.outcome}"]
+        png = frame_strip(film.frames(steps, in_force(steps)), captions,
+                          f"{title}, seed {tasks.seed}; blue: the plan in force")
+        atomic_write_bytes(base, lambda f: f.write(png))
+    written = [base]
+    if movie is not None:
+        path = base.with_suffix(".gif")
+        atomic_write_bytes(path, lambda f: f.write(movie))
+        written.append(path)
+    return written
+
+
+def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int = 0, multi_task: bool = False,
+               task_ids: tuple[int, ...] | None = None, out: str | None = None, pairs: bool = False,
+               video: bool = False, size: int = 240, device: str = "auto", execution=None) -> list[Path]:
+    """Plan and execute ``episodes`` episodes of a run and draw them (:func:`render_episodes`); returns the files
+    written.
+
+    ``execution`` (:class:`~bridgeplan.replan.Execution`): closed loop, candidates, arrival rule; a map then shows each
+    episode's first plan (as executed: chosen, truncated) and the executed states."""
     import torch
 
-    from bridgeplan.envs import family_of
-    from bridgeplan.evaluate import PlannerDecisions, generator, run_episodes, run_tasks
+    from bridgeplan.envs import FAMILIES, family_of
+    from bridgeplan.evaluate import PlannerDecisions, generator, run_tasks
     from bridgeplan.paths import render_dir
     from bridgeplan.replan import Execution
     from bridgeplan.runs import load_planner, load_windows
@@ -99,45 +230,25 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
     planner, info = load_planner(run, device=device)
     config = info.config
     family = family_of(config.maze)
-    if not family.renders:
-        raise BridgeplanError(f"{run} is a {family.title} planner: render draws Maze2D's episodes (evaluate it with "
+    if family.picture is None:
+        drawn = " and ".join(f"{f.title}'s" for f in FAMILIES if f.picture)
+        raise BridgeplanError(f"{run} is a {family.title} planner: render draws {drawn} episodes (evaluate it with "
                               f"`bridgeplan eval`)")
+    if pairs and family.picture != "map":
+        raise BridgeplanError(f"--pairs draws prior/target pairs over a map: {family.title} has none")
     nfe = planner.process.max_nfe if nfe is None else nfe
     planner.process.validate_nfe(nfe)
-    tasks = run_tasks(info, episodes, seed, multi_task)
-    maze = tasks.maze
+    tasks = run_tasks(info, episodes, seed, multi_task, task_ids)
     execution = (execution or Execution()).resolved(family, config.maze)
     execution.validate(planner.process, tasks.episode_steps)
     decisions = PlannerDecisions(planner, nfe, execution, family, config.maze)
-    first: list[np.ndarray] = []
-
-    class FirstPlans:  # the decisions, keeping each episode's first plan
-        device = planner.device
-
-        def source(self, n, gen):
-            source = decisions.source(n, gen)
-
-            def decide(states, goals, idx, t):
-                planned = source(states, goals, idx, t)
-                if t == 0:
-                    first.append(planned)
-                return planned
-
-            return decide
-
-    result = run_episodes(FirstPlans(), family, tasks, execution).outcome
-    plan_states = first[0]
-    gen = generator(planner.device, seed)
     tag = f"-{execution.tag()}" if execution.tag() else ""
     base = Path(out) if out else render_dir(info.path) / f"step{info.step}-nfe{nfe}-seed{seed}{tag}.png"
-    title = (f"{maze.name}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} step={info.step}, "
-             f"{execution.tag() or 'open loop'}")
-    positions = planner.layout.state_positions
-    plot_trajectory_grid(maze, [(positions(plan_states), "winter", "plan" if execution.plans_once else "first plan"),
-                                (positions(result.states), "autumn", "executed")],
-                         base, title, goals=tasks.goals_xy)
-    written = [base]
+    title = (f"{family.label(config.maze)}{' Multi2D' if multi_task else ''} {config.label()} NFE={nfe} "
+             f"step={info.step}, {execution.tag() or 'open loop'}")
+    written = render_episodes(decisions, family, tasks, execution, base, title, video, size)
     if pairs:
+        gen = generator(planner.device, seed)
         windows, _ = load_windows(config.dataset, config.maze, config.horizon, config.stride)
         idx = torch.randint(len(windows), (episodes,), generator=torch.Generator().manual_seed(seed))
         x0 = windows.batch(idx).to(planner.device)
@@ -146,35 +257,9 @@ def render_run(run: Path, episodes: int = 8, nfe: int | None = None, seed: int =
         prior_states, _ = planner.unnormalize(x1)
         target_states, _ = planner.unnormalize(x0)
         path = base.with_name(base.stem + "-pairs.png")
-        plot_trajectory_grid(maze, [(positions(prior_states), "cool", f"prior ({planner.prior.name})"),
-                                    (positions(target_states), "viridis", "target")],
-                             path, f"{maze.name}: prior/target pairs")
-        written.append(path)
-    if video:
-        path = base.with_suffix(".gif")
-        write_rollout_gif(maze, result.states[0], tasks.goals_xy[0], path)
+        positions = planner.layout.state_positions
+        plot_trajectory_grid(tasks.maze, [(positions(prior_states), "cool", f"prior ({planner.prior.name})"),
+                                          (positions(target_states), "viridis", "target")],
+                             path, f"{tasks.maze.name}: prior/target pairs")
         written.append(path)
     return written
-
-
-def write_rollout_gif(maze, states: np.ndarray, goal: np.ndarray, path: Path, every: int = 4) -> None:
-    """Replay executed states in MuJoCo's renderer (headless: MUJOCO_GL=egl) and save an animated GIF."""
-    from PIL import Image
-
-    from bridgeplan.envs.maze2d.sim import make_gym_env
-    from bridgeplan.trajectory import MAZE2D
-
-    env = make_gym_env(maze, render_mode="rgb_array", width=320, height=320)
-    env.reset(seed=0)
-    point = env.unwrapped.point_env
-    env.unwrapped.goal = np.asarray(goal, dtype=np.float64)
-    env.unwrapped.update_target_site_pos()
-    frames = []
-    for s in states[::every]:
-        point.set_state(np.asarray(MAZE2D.state_positions(s), dtype=np.float64),
-                        np.asarray(MAZE2D.state_velocities(s), dtype=np.float64))
-        frames.append(Image.fromarray(env.render()))
-    env.close()
-    buf = io.BytesIO()
-    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=40, loop=0)
-    atomic_write_bytes(path, lambda f: f.write(buf.getvalue()))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -37,6 +37,20 @@ class Agent(Protocol):
 
     def end(self, rows: np.ndarray) -> None:
         """Rows ``rows`` of the batch have ended (the environment ended them at their goal)."""
+
+
+class Film(Protocol):
+    """An executed episode's states, kept to be drawn by the simulator's renderer (:meth:`Family.film`)."""
+
+    length: int
+    """States kept: the first and one after every step."""
+    outcome: str
+    """How the episode ended, as a caption says it (``success``, ``timed out``)."""
+
+    def frames(self, steps: Sequence[int], plans: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
+        """RGB images ``[height, width, 3]`` (uint8) of the states ``steps`` (indices below :attr:`length`);
+        ``plans``: the plan in force at each of them (planned states ``[S, obs_dim]``, or None), drawn where the
+        family's film can (Maze2D's cannot: its map draws them)."""
 
 
 @dataclass(frozen=True)
@@ -81,8 +95,10 @@ class Family:
     sweeps: bool = False
     """Whether the experiments runner's grids and declared series (rows of normalized scores in a results store)
     run in it; else a study of it declares runs and evaluations of one command each."""
-    renders: bool = False
-    """Whether ``bridgeplan render`` draws its episodes."""
+    picture: str | None = None
+    """What ``bridgeplan render`` draws of an episode: ``map`` (plans and executed states over the family's map, which
+    its tasks carry), ``frames`` (the simulator's own camera: the episode's start, middle and end), None (nothing: the
+    family cannot render). Either has a video (:meth:`film`)."""
     episodes: int
     """Episodes per task an evaluation runs unless told (Maze2D: its single task set; OGBench: each of its tasks)."""
     quick_episodes: int
@@ -202,6 +218,11 @@ class Family:
     def run(self, tasks: Tasks, agent: Agent, progress: bool = False):
         """Run every episode of ``tasks`` with ``agent``; returns what :meth:`score` reads."""
         raise NotImplementedError
+
+    def film(self, tasks: Tasks, agent: Agent, size: int) -> tuple[object, Film]:
+        """:meth:`run`, also keeping the first episode's states to be drawn in frames of ``size`` x ``size`` pixels;
+        returns what :meth:`run` returns and the film. Only where :attr:`picture` is set."""
+        raise BridgeplanError(f"{self.title} episodes cannot be drawn")
 
     def score(self, tasks: Tasks, outcome) -> dict:
         """The JSON fields of an evaluation's score (success, and the family's normalized score where it has one)."""

@@ -39,7 +39,7 @@ class Maze2D(Family):
     data_seed = 123
     sized_data = True
     sweeps = True
-    renders = True
+    picture = "map"
     episodes = 200
     quick_episodes = 20
     task_sets = ("single", "multi")
@@ -154,6 +154,13 @@ class Maze2D(Family):
         agent.begin(tasks.episodes)
         return rollout(tasks.maze, lambda t, obs: agent.act(obs, tasks.goals_xy), tasks.starts_xy, tasks.goals_xy,
                        tasks.episode_steps)
+
+    def film(self, tasks: MazeTasks, agent, size: int):
+        """The batched simulator's run; its first episode replayed in gymnasium-robotics' renderer."""
+        from bridgeplan.envs.maze2d.sim import MazeFilm
+
+        outcome = self.run(tasks, agent)
+        return outcome, MazeFilm(tasks.maze, outcome.states[0], tasks.goals_xy[0], bool(outcome.success[0]), size)
 
     def score(self, tasks: MazeTasks, outcome) -> dict:
         """The normalized score in both conventions, the return and the success rate (mean and standard error),

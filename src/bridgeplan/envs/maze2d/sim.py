@@ -127,3 +127,29 @@ class BatchedPointMaze:
     def rewards(self, obs: np.ndarray) -> np.ndarray:
         """Sparse reward ``[n]``: 1.0 where the position is within 0.45 of the goal."""
         return (np.linalg.norm(obs[:, :2] - self.goals, axis=1) <= GOAL_RADIUS).astype(np.float64)
+
+
+class MazeFilm:
+    """An episode's observed states ``[T, 4]`` replayed in gymnasium-robotics' PointMaze renderer, the goal's site
+    where the episode's goal was (:meth:`bridgeplan.envs.family.Family.film`)."""
+
+    def __init__(self, maze: Maze, states: np.ndarray, goal: np.ndarray, success: bool, size: int):
+        self.maze, self.states, self.goal, self.size = maze, np.asarray(states, np.float64), goal, size
+        self.length = len(self.states)
+        self.outcome = "reached the goal" if success else "never reached the goal"
+
+    def frames(self, steps, plans=None) -> list[np.ndarray]:
+        """The states ``steps`` (``plans`` are drawn by the map, not here)."""
+        from bridgeplan.trajectory import MAZE2D
+
+        env = make_gym_env(self.maze, render_mode="rgb_array", width=self.size, height=self.size)
+        env.reset(seed=0)
+        point = env.unwrapped.point_env
+        env.unwrapped.goal = np.asarray(self.goal, dtype=np.float64)
+        env.unwrapped.update_target_site_pos()
+        frames = []
+        for s in self.states[list(steps)]:
+            point.set_state(MAZE2D.state_positions(s), MAZE2D.state_velocities(s))
+            frames.append(env.render())
+        env.close()
+        return frames

@@ -14,13 +14,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from bridgeplan.envs.family import Family
-from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, ROBOT_COLUMNS, names, parse_dataset_name
+from bridgeplan.envs.ogbench_manipulation.names import (
+    ACT_DIM,
+    EFFECTOR_XY,
+    ROBOT_COLUMNS,
+    names,
+    parse_dataset_name,
+)
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import Layout
 
 SUFFIX = "-play-v0"
-EFFECTOR_XY = 12
-"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y and z follow)."""
 GRAPH_GOAL_WEIGHT = 30.0
 """How much more a distance counts in the objects' columns than in the effector's, both standardized
 (:meth:`OGBenchManipulation.graph_space`): a jump of the graph's radius 1 moves the effector by up to one standard
@@ -42,6 +46,7 @@ class OGBenchManipulation(Family):
     quick_episodes = 4
     default_arrival = "end"
     path_controller = "track"  # pursuit steers a point in the plane, not an arm (controllers.py)
+    picture = "frames"
 
     @property
     def validation_tasks(self) -> tuple[int, ...]:
@@ -168,6 +173,12 @@ class OGBenchManipulation(Family):
         from bridgeplan.envs.ogbench_manipulation.protocol import run_tasks
 
         return run_tasks(tasks, agent, progress)
+
+    def film(self, tasks, agent, size: int):
+        """The protocol's run, the first episode's physics states kept and replayed in ogbench's own renderer."""
+        from bridgeplan.envs.ogbench_manipulation.protocol import film
+
+        return film(tasks, agent, size)
 
     def score(self, tasks, outcome) -> dict:
         """The success rate (the mean of the tasks'), the counts, and each task's."""

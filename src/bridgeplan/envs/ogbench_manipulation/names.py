@@ -19,6 +19,11 @@ from dataclasses import dataclass
 from bridgeplan.errors import BridgeplanError
 
 ROBOT_COLUMNS = 19
+EFFECTOR_XY = 12
+"""The effector's x in the observation (after 6 joint positions and 6 joint velocities; y and z follow)."""
+EFFECTOR_CENTRE, EFFECTOR_SCALE = (0.425, 0.0, 0.0), 10.0
+"""The observation's effector position is its world position less this centre, times this scale
+(``compute_observation``)."""
 CUBE_COLUMNS = 9
 BUTTON_COLUMNS = 4
 ACT_DIM = 5

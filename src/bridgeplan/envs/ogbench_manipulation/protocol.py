@@ -24,14 +24,21 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from bridgeplan.envs.family import Agent, Tasks
 from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
 from bridgeplan.envs.ogbench_manipulation.generate import make_env
-from bridgeplan.envs.ogbench_manipulation.names import ACT_DIM, DatasetName, parse_dataset_name
+from bridgeplan.envs.ogbench_manipulation.names import (
+    ACT_DIM,
+    EFFECTOR_CENTRE,
+    EFFECTOR_SCALE,
+    EFFECTOR_XY,
+    DatasetName,
+    parse_dataset_name,
+)
 from bridgeplan.errors import BridgeplanError
 
 TASK_IDS = (1, 2, 3, 4, 5)
@@ -139,17 +146,17 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
     return out
 
 
-def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) -> ProtocolResult:
+def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False,
+              watch: Callable[[int, object, dict], None] | None = None) -> ProtocolResult:
     """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), in batches
-    of at most :data:`BATCH` side by side, each batch's environments reused by the next."""
+    of at most :data:`BATCH` side by side, each batch's environments reused by the next; ``watch(episode, env,
+    info)`` hears each episode's environment and info after its reset and after each of its steps (:func:`film`)."""
     from tqdm import tqdm
 
     spec = tasks.spec
     episodes = [(t, k) for t in tasks.task_ids for k in range(tasks.episodes_per_task)]
     envs = [make_env(spec.scene.env_id) for _ in range(min(BATCH, len(episodes)))]
-    infos = list(envs[0].unwrapped.task_infos)
-    if any(t in VALIDATION_TASK_IDS for t in tasks.task_ids):
-        infos += validation_tasks(spec, envs[0])
+    infos = task_infos(tasks, envs[0])
     success = np.zeros(len(episodes), dtype=bool)
     steps = np.zeros(len(episodes), dtype=np.int64)
     t0 = time.perf_counter()
@@ -157,7 +164,8 @@ def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) ->
         for lo in range(0, len(episodes), len(envs)):
             batch = episodes[lo:lo + len(envs)]
             agent.begin(len(batch))
-            s, n = _run_batch(envs[:len(batch)], agent, batch, tasks.seed, infos, spec.obs_dim, bar.update)
+            seen = None if watch is None else (lambda i, env, info, lo=lo: watch(lo + i, env, info))
+            s, n = _run_batch(envs[:len(batch)], agent, batch, tasks.seed, infos, spec.obs_dim, bar.update, seen)
             success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
     for env in envs:
         env.close()
@@ -170,16 +178,32 @@ def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False) ->
                           time.perf_counter() - t0)
 
 
+def task_infos(tasks: ManipulationTasks, env) -> list[dict]:
+    """The scene's tasks in ogbench's ``task_info`` form, task id ``i`` at ``i - 1``: its test tasks, then the
+    validation tasks where ``tasks`` has some."""
+    infos = list(env.unwrapped.task_infos)
+    if any(t in VALIDATION_TASK_IDS for t in tasks.task_ids):
+        infos += validation_tasks(tasks.spec, env)
+    return infos
+
+
+def reset(env, task: int, index: int, seed: int, infos: Sequence[dict]) -> tuple[np.ndarray, dict]:
+    """Episode ``index`` of task ``task``: ``env`` reset by the episode's own seed to the task's start."""
+    options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the fresh action space's float64 bounds, cast at each reset
+        return env.reset(seed=episode_seed(seed, task, index), options=options)
+
+
 def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int, infos: Sequence[dict],
-               obs_dim: int, finished) -> tuple[np.ndarray, np.ndarray]:
+               obs_dim: int, finished, watch) -> tuple[np.ndarray, np.ndarray]:
     n = len(batch)
     obs, goals = np.empty((n, obs_dim)), np.empty((n, obs_dim))
     for i, (env, (task, k)) in enumerate(zip(envs, batch)):
-        options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the fresh action space's float64 bounds, cast at each reset
-            ob, info = env.reset(seed=episode_seed(seed, task, k), options=options)
+        ob, info = reset(env, task, k, seed, infos)
         obs[i], goals[i] = ob, info["goal"]
+        if watch is not None:
+            watch(i, env, info)
     active = np.ones(n, dtype=bool)
     success = np.zeros(n, dtype=bool)
     steps = np.zeros(n, dtype=np.int64)
@@ -195,6 +219,8 @@ def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int
             ob, _, terminated, truncated, info = envs[i].step(actions[i])
             obs[i] = ob
             steps[i] += 1
+            if watch is not None:
+                watch(i, envs[i], info)
             if terminated or truncated:
                 active[i] = False
                 success[i] = bool(info["success"])
@@ -203,6 +229,83 @@ def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int
         if ended:
             agent.end(np.asarray(ended))
     return success, steps
+
+
+SHADOW_SIZE = 1024
+"""Pixels of the shadow map's side: ogbench's 4096 costs 0.53-0.64 s a 240-pixel frame in Mesa's software OpenGL on
+2 loaded cores, this 0.36 s (10 frames each, alternated)."""
+PLAN_MARKS = 25
+"""Most marks a plan is drawn with (its moving states evenly apart)."""
+MARK = {"radius": 0.009, "rgba": np.array([0.1, 0.6, 1.0, 1.0], np.float32)}
+"""A plan's mark: a blue sphere of 9 mm radius, visible at 240 pixels."""
+
+
+def planned_effector(plan: np.ndarray) -> np.ndarray:
+    """World positions ``[k, 3]`` of the effector along ``plan`` (``[S, obs_dim]``), at most :data:`PLAN_MARKS`; a
+    state as the one before it (a path held at its end to the plan's length) is not drawn again."""
+    xyz = plan[:, EFFECTOR_XY:EFFECTOR_XY + 3] / EFFECTOR_SCALE + np.asarray(EFFECTOR_CENTRE)
+    xyz = xyz[np.r_[True, np.any(np.diff(plan, axis=0) != 0, axis=1)]]
+    return xyz[np.unique(np.linspace(0, len(xyz) - 1, min(PLAN_MARKS, len(xyz))).round().astype(int))]
+
+
+def _draw_marks(scene, positions: np.ndarray) -> None:
+    """Spheres at ``positions`` added to a scene about to be rendered."""
+    import mujoco
+
+    for pos in positions[:max(0, scene.maxgeom - scene.ngeom)]:
+        mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([MARK["radius"], 0, 0]),
+                            pos, np.eye(3).ravel(), MARK["rgba"])
+        scene.ngeom += 1
+
+
+class ManipulationFilm:
+    """One episode's physics states, replayed in an environment of the scene reset as the episode was (its cubes'
+    colours; the goal's translucent cubes where the task puts them), seen by ogbench's ``front`` camera; a plan is
+    drawn as blue marks along its effector's path."""
+
+    def __init__(self, tasks: ManipulationTasks, states: list[np.ndarray], success: bool, size: int):
+        self.tasks, self.states, self.size = tasks, states, size
+        self.length = len(states)
+        self.outcome = "success" if success else "no success"
+
+    def frames(self, steps: Sequence[int], plans: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
+        import mujoco
+
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        env = make_env(self.tasks.spec.scene.env_id, width=self.size, height=self.size)
+        u = env.unwrapped
+        reset(env, self.tasks.task_ids[0], 0, self.tasks.seed, task_infos(self.tasks, env))
+        u.model.vis.quality.shadowsize = SHADOW_SIZE
+        frames = []
+        for i, k in enumerate(steps):
+            mujoco.mj_setState(u.model, u.data, self.states[k], full)
+            mujoco.mj_forward(u.model, u.data)
+            u.post_step()  # the cubes' colours: a cube on its target turns
+            plan = None if plans is None else plans[i]
+            marks = None if plan is None else planned_effector(plan)
+            frames.append(u.render(scene_callback=None if marks is None else lambda scene: _draw_marks(scene, marks)))
+        env.close()
+        return frames
+
+
+def film(tasks: ManipulationTasks, agent: Agent, size: int) -> tuple[ProtocolResult, ManipulationFilm]:
+    """:func:`run_tasks`, the first episode's physics states (time, positions, velocities, actuators, the targets'
+    mocap bodies) kept after its reset and each step."""
+    import mujoco
+
+    full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    states, success = [], [False]
+
+    def keep(episode: int, env, info: dict) -> None:
+        if episode == 0:
+            u = env.unwrapped
+            state = np.empty(mujoco.mj_stateSize(u.model, full))
+            mujoco.mj_getState(u.model, u.data, state, full)
+            states.append(state)
+            success[0] = bool(info.get("success", False))
+
+    outcome = run_tasks(tasks, agent, watch=keep)
+    return outcome, ManipulationFilm(tasks, states, success[0], size)
 
 
 class _Timed:
