@@ -31,6 +31,9 @@ NOT_RESULTS = ("seconds", "_ms", "ms_", "environment")
 THREADS = re.compile(r"(^|\.)config\.threads$")
 """A run's saved ``threads``: ``study run`` passed 1 before, it leaves the default 0 now, which means one thread on a
 CPU (``device.configure_threads``): the same computation."""
+RELABELLED = {"kind": ("hierarchy", "graph")}
+"""Labels renamed since (committed, now): a hierarchy evaluation over the dataset graph was ``hierarchy`` before
+96df7a4 (one graph command), ``graph`` since."""
 
 
 def leaves(value, path: str = "") -> dict:
@@ -52,6 +55,8 @@ def differences(now: dict, committed: dict) -> list[tuple[str, object, object]]:
             continue
         if key.split(".")[-1] == "dataset" and isinstance(a.get(key), str) and a[key].startswith(f"{value}"):
             continue
+        if RELABELLED.get(key) == (value, a.get(key)):
+            continue
         if a.get(key, "<missing>") != value:
             out.append((key, a.get(key, "<missing>"), value))
     return out
@@ -61,12 +66,9 @@ def summary(now: dict, committed: dict) -> list[str]:
     """What the evaluation's outcome is, now against then: overall, and per task (successes, episodes whose steps
     differ) where the JSON has tasks."""
     lines = []
-    for key in ("success_rate", "successes"):
+    for key in ("score", "success_rate", "successes"):
         if key in committed:
             lines.append(f"  {key}: now {now.get(key)}, committed {committed[key]}")
-    for key in ("score", "success_rate"):
-        if isinstance(committed.get(key), dict):
-            lines.append(f"  {key}: now {now[key]}, committed {committed[key]}")
     for task, c in committed.get("tasks", {}).items():
         n = now["tasks"].get(task, {})
         steps = sum(x != y for x, y in zip(n.get("steps", []), c.get("steps", [])))
