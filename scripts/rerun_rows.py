@@ -22,6 +22,10 @@ import sys
 import time
 from pathlib import Path
 
+import torch
+
+from bridgeplan.bench.harness import cpu_model
+from bridgeplan.files import code_version
 from bridgeplan.studies import find_root, load_studies
 from bridgeplan.studies.jobs import jobs, run_seed
 from bridgeplan.studies.plan import ensure_dataset
@@ -101,9 +105,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: not committed: {missing[0].path.relative_to(out)}", file=sys.stderr)
         return 2
     dataset = Path(args.dataset).resolve() if args.dataset else ensure_dataset(study, root, False)
+    reused = sum(j.path.exists() for j in todo)
     start = time.perf_counter()
     run_seed(study, results, dataset, todo, args.seed, False)
-    print(f"trained and evaluated in {time.perf_counter() - start:.0f} s (runs and JSONs under {results})")
+    shown = results.relative_to(root) if results.is_relative_to(root) else results.name
+    print(f"{study.name}, training seed {args.seed}, --only {args.only}: code {code_version()}, "
+          f"torch {torch.__version__}, CPU {cpu_model() or 'unknown'}")
+    print(f"{len(todo) - reused} JSONs made (and the runs they read trained) in {time.perf_counter() - start:.0f} s, "
+          f"{reused} reused from an earlier run of this script, under {shown}")
     failed = 0
     for job in todo:
         rel = job.path.relative_to(out)
