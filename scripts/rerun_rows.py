@@ -30,7 +30,7 @@ from bridgeplan.studies import find_root, load_studies
 from bridgeplan.studies.jobs import jobs, run_seed
 from bridgeplan.studies.plan import ensure_dataset
 
-NOT_RESULTS = ("seconds", "_ms", "ms_", "environment")
+NOT_RESULTS = ("seconds", "_ms", "ms_", "environment", "cpu")
 """Leaves whose path contains one of these are not compared: wall-clock timings and the machine's description."""
 THREADS = re.compile(r"(^|\.)config\.threads$")
 """A run's saved ``threads``: ``study run`` passed 1 before, it leaves the default 0 now, which means one thread on a

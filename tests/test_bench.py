@@ -266,7 +266,7 @@ def suites_bf16() -> bool:
 
 
 def test_the_machine_names_its_cpu_and_the_extensions_that_decide_its_speed():
-    from bridgeplan.bench.harness import cpu_model
+    from bridgeplan.device import cpu_model
 
     amx = "processor\t: 0\nmodel name\t: Intel Xeon\nflags\t\t: fpu avx2 avx512f amx_bf16 sse\n"
     assert cpu_model(amx) == "Intel Xeon (avx2, avx512f, amx_bf16)"

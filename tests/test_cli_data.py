@@ -57,6 +57,20 @@ def test_default_location(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "elsewhere" / "open-300").is_dir()
 
 
+@pytest.mark.parametrize("maze, under", [("umaze", "umaze-1000-v2"),
+                                         ("pointmaze-medium-navigate-v0", "ogbench/pointmaze-medium-navigate-v0.npz"),
+                                         ("cube-single-play-v0", "ogbench/cube-single-play-v0.npz")])
+def test_a_studys_dataset_lies_where_datasets_are_put(tmp_path, monkeypatch, maze, under):
+    """A study's default dataset is where ``data generate`` puts one: ``datasets/`` under the repository root, or
+    under ``$BRIDGEPLAN_DATASETS`` where set (a dataset made once, found by every checkout)."""
+    from bridgeplan.studies.spec import Dataset
+
+    monkeypatch.delenv("BRIDGEPLAN_DATASETS", raising=False)
+    assert Dataset(maze=maze, steps=1000).directory() == f"datasets/{under}"
+    monkeypatch.setenv("BRIDGEPLAN_DATASETS", str(tmp_path / "shared"))
+    assert Dataset(maze=maze, steps=1000).directory() == str(tmp_path / "shared" / under)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--maze", "maze9"], "unknown environment 'maze9': Maze2D: open, umaze, medium, large; OGBench pointmaze: "
                           "pointmaze-{medium,large,giant,teleport}-{navigate,stitch}-v0; OGBench manipulation: "

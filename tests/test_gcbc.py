@@ -199,6 +199,7 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
     import json
 
     from bridgeplan.cli import main
+    from bridgeplan.device import cpu_model
 
     assert main(["data", "generate", "--maze", "pointmaze-medium-navigate-v0", "--episodes", "4",
                  "--episode-steps", "40", "--out", str(tmp_path), "--no-progress"]) == 0
@@ -214,6 +215,7 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
     assert out.count('"env_id": "pointmaze-medium-v0"') == 1
     saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0.json").read_text())
     assert saved["step"] == 4 and saved["episodes"] == 5 and set(saved["tasks"]) == {"1", "2", "3", "4", "5"}
+    assert saved["cpu"] == cpu_model() and json.loads((run / "config.json").read_text())["cpu"] == cpu_model()
     # mistakes: one error line, exit 2
     assert main(train) == 2
     assert "pass --resume" in capsys.readouterr().err

@@ -13,6 +13,7 @@ import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.cli import main
+from bridgeplan.device import cpu_model
 from bridgeplan.envs.controllers import Follower, tracking_targets
 from bridgeplan.envs.ogbench_pointmaze import FAMILY
 from bridgeplan.envs.ogbench_pointmaze.controllers import BODY, GAIN, pursuit_action, step_action
@@ -109,6 +110,7 @@ def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
     assert r["dataset"].startswith(f"{NAME}.npz ({NAME}, 240 transitions")  # the data's identity
     assert r["prior"] == r["config"]["prior"] and "/" not in r["config"]["prior_run"]
     assert r["config"]["dataset"] == f"{NAME}.npz" and r["environment"]["code_version"]
+    assert r["environment"]["cpu"] == cpu_model()  # the same seeds give other episodes on another CPU
     steps = [s for t in r["tasks"].values() for s in t["steps"]]
     k = r["execution"]["replan_every"]
     assert r["plans_per_episode"]["max"] == max(expected_plans(s, k) for s in steps)

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from bridgeplan.cli import main
+from bridgeplan.device import cpu_model
 
 TINY = ["--preset", "cpu-small", "--horizon", "32", "--dim", "8", "--dim-mults", "1,2",
         "--diffusion-steps", "6", "--batch-size", "4", "--ema-start", "2", "--ema-every", "1",
@@ -48,7 +49,7 @@ def test_run_directory_holds_config_and_snapshots(tiny_dataset, tmp_path):
     run = tmp_path / "run"
     assert main(train_args(tiny_dataset, run, 4, "--checkpoint-every", "2")) == 0
     saved = json.loads((run / "config.json").read_text())
-    assert saved["kind"] == "planner"
+    assert saved["kind"] == "planner" and saved["cpu"] == cpu_model()
     assert saved["config"]["maze"] == "umaze" and saved["config"]["horizon"] == 32
     assert saved["config"]["model"]["dim_mults"] == [1, 2]
     assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["step_00000002.pt", "step_00000004.pt"]

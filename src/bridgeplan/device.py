@@ -1,6 +1,8 @@
-"""Device choice: CUDA when present, overridable with ``--device``."""
+"""Device choice: CUDA when present, overridable with ``--device``; and the CPU a result was made on."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import torch
 
@@ -46,3 +48,23 @@ def configure_threads(requested: int = 0, device: torch.device | None = None) ->
     threads = requested or (1 if device is None or device.type == "cpu" else min(4, cores))
     torch.set_num_threads(threads)
     return threads
+
+
+CPU_EXTENSIONS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16")
+"""The CPU's vector extensions that decide training speed here: fp32 GEMMs (AVX2, AVX-512) and bf16 ones."""
+
+
+def cpu_model(cpuinfo: str | None = None) -> str:
+    """The CPU's model name and which of :data:`CPU_EXTENSIONS` it has (``AMD EPYC (avx2)``), from /proc/cpuinfo;
+    '' where there is none (not Linux). The same code runs at very different speeds on two x86 CPUs: a figure needs its
+    CPU."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            return ""
+    fields = dict(line.split(":", 1) for line in cpuinfo.splitlines() if ":" in line)
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    name, flags = fields.get("model name", ""), set(fields.get("flags", "").split())
+    extensions = [f for f in CPU_EXTENSIONS if f in flags]
+    return f"{name} ({', '.join(extensions)})" if name and extensions else name

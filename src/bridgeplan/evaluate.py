@@ -29,6 +29,7 @@ import torch
 
 from bridgeplan import config as cfg
 from bridgeplan.consistency import Correction, sampling_tag
+from bridgeplan.device import cpu_model
 from bridgeplan.envs import Family, family_of
 from bridgeplan.envs.family import Tasks
 from bridgeplan.errors import BridgeplanError
@@ -194,8 +195,10 @@ class EvalResult:
 
 
 def environment_of(device: torch.device) -> dict:
+    """The machine a result was made on: its CPU too, since the same code and seeds give other floating-point
+    results, and so other episodes, on another CPU (docs/results/rerun)."""
     return {"device": str(device), "torch": torch.__version__, "machine": platform.machine(),
-            "processor": platform.processor() or platform.machine(),
+            "processor": platform.processor() or platform.machine(), "cpu": cpu_model(),
             "cpu_threads": torch.get_num_threads(), "code_version": code_version()}
 
 

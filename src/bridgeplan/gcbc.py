@@ -44,7 +44,7 @@ from tqdm import tqdm
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
-from bridgeplan.device import configure_threads, resolve_device
+from bridgeplan.device import configure_threads, cpu_model, resolve_device
 from bridgeplan.envs import family_of
 from bridgeplan.envs.ogbench_pointmaze.names import dataset_env as environment
 from bridgeplan.errors import BridgeplanError
@@ -390,7 +390,7 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
         step, elapsed = state["step"], state["elapsed_seconds"]
         sums.copy_(state["log_sums"])
         log_from = state["log_from"]
-    write_config(run_dir, {"kind": KIND, "config": config_dict, "code_version": code_version()})
+    write_config(run_dir, {"kind": KIND, "config": config_dict, "code_version": code_version(), "cpu": cpu_model()})
     metrics = _Metrics(run_dir / METRICS_NAME, keep_until=step)
 
     obs = torch.as_tensor(data.observations, device=device)
@@ -536,7 +536,7 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
         # the run and its dataset named by what they are (no path of this machine); the training seed beside
         # the protocol's evaluation seed, so that rows over several training seeds can be averaged as OGBench does
         row = {"run": run_dir.name, "dataset": Path(policy.config.dataset).stem, "train_seed": policy.config.seed,
-               "step": policy.step, "code_version": code_version(), **tasks.fields(),
+               "step": policy.step, "code_version": code_version(), "cpu": cpu_model(), **tasks.fields(),
                **family.score(tasks, outcome)}
         row = json.loads(json.dumps(row))  # as written: task ids as strings
         which = "" if task_ids is None else "-tasks" + "_".join(map(str, task_ids))

@@ -24,7 +24,7 @@ from tqdm import tqdm
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import check_checkpoint_file, load_checkpoint, save_checkpoint, write_config
 from bridgeplan.data.windows import hold_tails
-from bridgeplan.device import configure_threads, resolve_device
+from bridgeplan.device import configure_threads, cpu_model, resolve_device
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import LOCK_NAME, run_lock
@@ -278,7 +278,8 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
         torch.set_rng_state(state["torch_rng"])
         step, elapsed = state["step"], state["elapsed_seconds"]
     dataset = windows.dataset  # what the data is (Stream.identity), saved beside the config
-    write_config(run_dir, {"kind": job.kind, "config": config_dict, "dataset": dataset, "code_version": code_version()})
+    write_config(run_dir, {"kind": job.kind, "config": config_dict, "dataset": dataset, "code_version": code_version(),
+                           "cpu": cpu_model()})
 
     def snapshot_state() -> dict:
         return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict, "dataset": dataset,

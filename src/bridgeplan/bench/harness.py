@@ -8,10 +8,10 @@ import platform
 import statistics
 import tempfile
 import time
-from pathlib import Path
 
 import torch
 
+from bridgeplan.device import cpu_model
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import code_version
 
@@ -49,26 +49,6 @@ def interleaved_ratios(fns: dict[str, object], base: str, rounds: int, device: t
     base_s = statistics.median(times[base])
     return {name: statistics.median(t) / base_s for name, t in times.items() if name != base} | {
         f"{base}_ms": 1000 * base_s}
-
-
-CPU_EXTENSIONS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16")
-"""The CPU's vector extensions that decide training speed here: fp32 GEMMs (AVX2, AVX-512) and bf16 ones."""
-
-
-def cpu_model(cpuinfo: str | None = None) -> str:
-    """The CPU's model name and which of :data:`CPU_EXTENSIONS` it has (``AMD EPYC (avx2)``), from /proc/cpuinfo;
-    '' where there is none (not Linux). The same code runs at very different speeds on two x86 CPUs: a figure needs its
-    CPU."""
-    if cpuinfo is None:
-        try:
-            cpuinfo = Path("/proc/cpuinfo").read_text()
-        except OSError:
-            return ""
-    fields = dict(line.split(":", 1) for line in cpuinfo.splitlines() if ":" in line)
-    fields = {k.strip(): v.strip() for k, v in fields.items()}
-    name, flags = fields.get("model name", ""), set(fields.get("flags", "").split())
-    extensions = [f for f in CPU_EXTENSIONS if f in flags]
-    return f"{name} ({', '.join(extensions)})" if name and extensions else name
 
 
 def machine(device: torch.device) -> dict:

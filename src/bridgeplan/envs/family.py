@@ -167,7 +167,8 @@ class Family:
         raise NotImplementedError
 
     def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
-        """Where a study's dataset of ``env`` lies by default, relative to the repository root."""
+        """Where a study's dataset of ``env`` lies by default: under ``$BRIDGEPLAN_DATASETS`` where set, else under
+        ``datasets`` relative to the repository root (``paths.datasets_root``)."""
         raise NotImplementedError
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,

@@ -275,13 +275,13 @@ class Missing:
 def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tuple[float, str]:
     """Steps per second of one run of ``config`` (its preset, batch and precision) in ``maze`` as a sweep runs it,
     one torch thread beside a second job (two jobs of ``--workers 2``), from a committed throughput bench: the one
-    made on this machine's ``cpu`` (``bench.harness.cpu_model``; the same code trains 2-3x slower on one x86 CPU
+    made on this machine's ``cpu`` (``device.cpu_model``; the same code trains 2-3x slower on one x86 CPU
     than on another) where one has the figure, else :data:`THROUGHPUT_BENCH`; ``TRAIN_STEPS_PER_SECOND`` where
     neither has it. A bench's two-jobs figure (the other core training) is preferred to its throughput table's
     (the other core spinning). Returns the rate and where it came from."""
     import json
 
-    from bridgeplan.bench.harness import cpu_model
+    from bridgeplan.device import cpu_model
 
     cpu = cpu_model() if cpu is None else cpu
     benches = []  # (made on this CPU, path, its CPU, its figures): this CPU's first

@@ -118,8 +118,8 @@ class Dataset:
     """The expert's data as independent pieces of this many steps (`data generate --piece-steps`; 0: one stream)."""
     path: str = ""
     """Dataset directory (or file), relative to the repository root; default the family's
-    (``Family.default_dataset``: ``datasets/<maze>-<steps>-v<version>``, ``datasets/ogbench/<name>.npz``), generated
-    there when absent, as the campaigns did."""
+    (``Family.default_dataset``: ``datasets/<maze>-<steps>-v<version>``, ``datasets/ogbench/<name>.npz``; ``datasets``
+    being ``$BRIDGEPLAN_DATASETS`` where set), generated there when absent, as the campaigns did."""
 
     @property
     def family(self):

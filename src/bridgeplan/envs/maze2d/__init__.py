@@ -16,6 +16,7 @@ from bridgeplan.envs.family import Family
 from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, MAZE_NAMES, get_maze
 from bridgeplan.envs.maze2d.tasks import MazeTasks
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import MAZE2D, Layout
 
 DIFFUSER = {"umaze": (128, 64), "medium": (256, 256), "large": (384, 256), "open": (128, 64)}
@@ -98,7 +99,7 @@ class Maze2D(Family):
 
     def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
         pieces = f"-pieces{piece_steps}" if piece_steps else ""
-        return f"datasets/{env}-{steps}{pieces}-v{version}"
+        return str(datasets_root() / f"{env}-{steps}{pieces}-v{version}")
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,

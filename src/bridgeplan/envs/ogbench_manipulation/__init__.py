@@ -22,6 +22,7 @@ from bridgeplan.envs.ogbench_manipulation.names import (
     parse_dataset_name,
 )
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import Layout
 
 SUFFIX = "-play-v0"
@@ -104,7 +105,7 @@ class OGBenchManipulation(Family):
                       episodes=len(ends), source=str(dataset), layout=self.layout(env))
 
     def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
-        return f"datasets/ogbench/{parse_dataset_name(env).name}.npz"
+        return str(datasets_root() / "ogbench" / f"{parse_dataset_name(env).name}.npz")
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
@@ -113,8 +114,6 @@ class OGBenchManipulation(Family):
         NAME-val.npz and NAME.json (identity and sha256) in ``out``'s folder (default ``datasets/ogbench``, or under
         ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused."""
         from bridgeplan.envs.ogbench_manipulation.generate import generate_dataset
-        from bridgeplan.paths import datasets_root
-
         if steps is not None or piece_steps is not None or workers != 1:
             raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
                                   "not --steps, --piece-steps or --workers")

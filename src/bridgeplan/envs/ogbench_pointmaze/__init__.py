@@ -19,6 +19,7 @@ from bridgeplan.envs.ogbench_pointmaze import plans
 from bridgeplan.envs.ogbench_pointmaze.names import KINDS, MAZES, parse_dataset_name
 from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import KINEMATIC_POINT, Layout
 
 PREFIX = "pointmaze-"
@@ -66,7 +67,7 @@ class OGBenchPointmaze(Family):
         return load_stream(dataset, env)
 
     def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
-        return f"datasets/ogbench/{env}.npz"
+        return str(datasets_root() / "ogbench" / f"{env}.npz")
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
@@ -75,8 +76,6 @@ class OGBenchPointmaze(Family):
         NAME-val.npz in ``out``'s folder (default ``datasets/ogbench``, or under ``$BRIDGEPLAN_DATASETS``);
         returns NAME.npz."""
         from bridgeplan.envs.ogbench_pointmaze.generate import generate_dataset
-        from bridgeplan.paths import datasets_root
-
         if steps is not None or piece_steps is not None or workers != 1:
             raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
                                   "not --steps, --piece-steps or --workers")
