@@ -9,6 +9,7 @@ import os
 import random
 import re
 import shutil
+import signal
 import sqlite3
 import struct
 import subprocess
@@ -475,3 +476,42 @@ def test_code_version_is_dirty_for_code_not_for_reports(tmp_path):
     assert version() == f"{bridgeplan.__version__}+{sha}"
     (repo / "src" / "bridgeplan" / "new_module.py").write_text("X = 1\n")  # code not yet added: code
     assert version() == f"{bridgeplan.__version__}+{sha}.dirty"
+
+
+def _spawned_children(pid: int) -> list[int]:
+    """The processes ``pid`` spawned to work (multiprocessing's spawn), not its resource tracker."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            cmdline = Path(f"/proc/{entry}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid and b"spawn_main" in cmdline:
+            found.append(int(entry))
+    return found
+
+
+def test_data_generation_whose_worker_is_killed_ends_with_one_error(tmp_path):
+    """A Maze2D generation worker killed (as the out-of-memory killer would): the command ends with one error line,
+    exit 2, and writes nothing (a process pool's broken-pool traceback before)."""
+    out = tmp_path / "u"
+    proc = subprocess.Popen(_argv(["data", "generate", "--maze", "umaze", "--steps", "50000000", "--workers", "2",
+                                   "--out", out, "--no-progress"]),
+                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: len(_spawned_children(proc.pid)) == 2 or proc.poll() is not None)
+        workers = _spawned_children(proc.pid)
+        assert workers, "the command ended before its workers started"
+        os.kill(workers[0], signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    lines = stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, stderr
+    assert lines[0].startswith("error: a worker generating umaze's streams ended without answering"), stderr
+    assert not out.exists() and os.listdir(tmp_path) == []

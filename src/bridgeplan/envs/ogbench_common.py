@@ -6,8 +6,11 @@ each episode's seed."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
+
+from bridgeplan.errors import BridgeplanError
 
 
 def episode_seed(seed: int, task_id: int, index: int) -> int:
@@ -70,3 +73,56 @@ class ProtocolResult:
         lines.append(f"  overall: {self.success_rate:.1%} ({self.successes}/{self.episodes}) "
                      f"in {self.seconds:.1f} s")
         return "\n".join(lines)
+
+
+class Episodes(Protocol):
+    """How a family starts and steps its episodes in :func:`run_episodes` (episode ``e`` of the evaluation's list)."""
+
+    def reset(self, e: int, env, task: int, index: int) -> tuple[np.ndarray, dict]:
+        """``env`` reset to episode ``e`` (the ``index``-th of task ``task``): its first state and ``info``."""
+
+    def step(self, e: int, env, action: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, bool, dict]:
+        """``env`` (episode ``e``, at ``state``) stepped by ``action``: the next state, whether the episode ended,
+        ``info``."""
+
+
+def run_episodes(episodes: Sequence[tuple[int, int]], envs: list, episode: Episodes, act: Callable,
+                 begin: Callable[[int], None], end: Callable[[np.ndarray], None], act_dim: int, desc: str,
+                 progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Every (task, index) episode of ``episodes``, ``len(envs)`` side by side, each batch's environments reused by
+    the next: ``begin(n)`` as a batch of ``n`` starts, ``act(states, goals)`` once per step for the whole batch (an
+    ended row's action is ignored), ``end(rows)`` after the step that ended those rows. Each episode's success (its
+    last ``info["success"]``) and steps."""
+    from tqdm import tqdm
+
+    success = np.zeros(len(episodes), dtype=bool)
+    steps = np.zeros(len(episodes), dtype=np.int64)
+    with tqdm(total=len(episodes), disable=not progress, desc=desc, unit="episode") as bar:
+        for lo in range(0, len(episodes), len(envs)):
+            batch = episodes[lo:lo + len(envs)]
+            n = len(batch)
+            begin(n)
+            first = [episode.reset(lo + i, env, task, k) for i, (env, (task, k)) in enumerate(zip(envs, batch))]
+            states = np.stack([ob for ob, _ in first]).astype(np.float64)
+            goals = np.stack([info["goal"] for _, info in first]).astype(np.float64)
+            active = np.ones(n, dtype=bool)
+            while active.any():
+                actions = np.asarray(act(states.copy(), goals.copy()), dtype=np.float64)
+                if actions.shape != (n, act_dim):
+                    raise BridgeplanError(f"the agent returned actions of shape {list(actions.shape)}, expected "
+                                          f"{[n, act_dim]}")
+                if not np.isfinite(actions[active]).all():
+                    raise BridgeplanError("the agent returned non-finite actions")
+                actions = np.clip(actions, -1, 1)
+                ended = []
+                for i in np.flatnonzero(active):
+                    states[i], done, info = episode.step(lo + i, envs[i], actions[i], states[i])
+                    steps[lo + i] += 1
+                    if done:
+                        active[i] = False
+                        success[lo + i] = bool(info["success"])
+                        ended.append(i)
+                        bar.update(1)
+                if ended:
+                    end(np.asarray(ended))
+    return success, steps

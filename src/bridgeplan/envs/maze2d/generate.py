@@ -18,6 +18,7 @@ import math
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -36,7 +37,7 @@ from bridgeplan.envs.maze2d.expert import (
 from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
 from bridgeplan.envs.maze2d.sim import MAX_SPEED, point_maze_model
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.workers import exit_with_parent
+from bridgeplan.workers import WorkerDied, exit_with_parent
 
 CHUNK = 4096
 """Action noise is drawn (and progress reported) in chunks of this many steps."""
@@ -214,13 +215,17 @@ def generate_streams(maze: Maze, steps: int, seed: int, workers: int = 1, progre
             return [generate_stream(maze, n, s, progress=bar.update) for n, s in zip(sizes, seeds)]
         ctx = multiprocessing.get_context("spawn")  # no fork of a process that may hold torch/MuJoCo state
         counter = ctx.Value("q", 0)
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(counter,)) as pool:
-            futures = [pool.submit(_worker, maze.name, n, s) for n, s in zip(sizes, seeds)]
-            while not all(f.done() for f in futures):
-                time.sleep(0.25)
-                bar.update(counter.value - bar.n)
-            streams = [f.result() for f in futures]
+        try:
+            with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                                     initargs=(counter,)) as pool:
+                futures = [pool.submit(_worker, maze.name, n, s) for n, s in zip(sizes, seeds)]
+                while not all(f.done() for f in futures):
+                    time.sleep(0.25)
+                    bar.update(counter.value - bar.n)
+                streams = [f.result() for f in futures]
+        except BrokenProcessPool as e:  # the pool ends its other workers; nothing has been written yet
+            raise WorkerDied(f"a worker generating {maze.name}'s streams ended without answering (killed; out of "
+                             f"memory?): nothing written") from e
         bar.update(steps - bar.n)
         return streams
     finally:

@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from bridgeplan.envs.family import Agent, Tasks
-from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
+from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed, run_episodes
 from bridgeplan.envs.ogbench_manipulation.generate import make_env
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
@@ -151,22 +151,13 @@ def run_tasks(tasks: ManipulationTasks, agent: Agent, progress: bool = False,
     """Every episode of ``tasks`` with ``agent`` (told when each batch begins and which rows have ended), in batches
     of at most :data:`BATCH` side by side, each batch's environments reused by the next; ``watch(episode, env,
     info)`` hears each episode's environment and info after its reset and after each of its steps (:func:`film`)."""
-    from tqdm import tqdm
-
     spec = tasks.spec
     episodes = [(t, k) for t in tasks.task_ids for k in range(tasks.episodes_per_task)]
     envs = [make_env(spec.scene.env_id) for _ in range(min(BATCH, len(episodes)))]
     infos = task_infos(tasks, envs[0])
-    success = np.zeros(len(episodes), dtype=bool)
-    steps = np.zeros(len(episodes), dtype=np.int64)
     t0 = time.perf_counter()
-    with tqdm(total=len(episodes), disable=not progress, desc=f"evaluate {spec.name}", unit="episode") as bar:
-        for lo in range(0, len(episodes), len(envs)):
-            batch = episodes[lo:lo + len(envs)]
-            agent.begin(len(batch))
-            seen = None if watch is None else (lambda i, env, info, lo=lo: watch(lo + i, env, info))
-            s, n = _run_batch(envs[:len(batch)], agent, batch, tasks.seed, infos, spec.obs_dim, bar.update, seen)
-            success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
+    success, steps = run_episodes(episodes, envs, _Episodes(tasks.seed, infos, watch), agent.act, agent.begin,
+                                  agent.end, ACT_DIM, f"evaluate {spec.name}", progress)
     for env in envs:
         env.close()
     results = {}
@@ -195,40 +186,25 @@ def reset(env, task: int, index: int, seed: int, infos: Sequence[dict]) -> tuple
         return env.reset(seed=episode_seed(seed, task, index), options=options)
 
 
-def _run_batch(envs: list, agent: Agent, batch: list[tuple[int, int]], seed: int, infos: Sequence[dict],
-               obs_dim: int, finished, watch) -> tuple[np.ndarray, np.ndarray]:
-    n = len(batch)
-    obs, goals = np.empty((n, obs_dim)), np.empty((n, obs_dim))
-    for i, (env, (task, k)) in enumerate(zip(envs, batch)):
-        ob, info = reset(env, task, k, seed, infos)
-        obs[i], goals[i] = ob, info["goal"]
-        if watch is not None:
-            watch(i, env, info)
-    active = np.ones(n, dtype=bool)
-    success = np.zeros(n, dtype=bool)
-    steps = np.zeros(n, dtype=np.int64)
-    while active.any():
-        actions = np.asarray(agent.act(obs.copy(), goals.copy()), dtype=np.float64)
-        if actions.shape != (n, ACT_DIM):
-            raise BridgeplanError(f"the agent returned actions of shape {list(actions.shape)}, expected {[n, ACT_DIM]}")
-        if not np.isfinite(actions[active]).all():
-            raise BridgeplanError("the agent returned non-finite actions")
-        actions = np.clip(actions, -1, 1)
-        ended = []
-        for i in np.flatnonzero(active):
-            ob, _, terminated, truncated, info = envs[i].step(actions[i])
-            obs[i] = ob
-            steps[i] += 1
-            if watch is not None:
-                watch(i, envs[i], info)
-            if terminated or truncated:
-                active[i] = False
-                success[i] = bool(info["success"])
-                ended.append(i)
-                finished(1)
-        if ended:
-            agent.end(np.asarray(ended))
-    return success, steps
+@dataclass
+class _Episodes:
+    """The scene's episodes for :func:`run_episodes`, each heard by ``watch`` after its reset and each step."""
+
+    seed: int
+    infos: Sequence[dict]
+    watch: Callable[[int, object, dict], None] | None
+
+    def reset(self, e: int, env, task: int, index: int) -> tuple[np.ndarray, dict]:
+        ob, info = reset(env, task, index, self.seed, self.infos)
+        if self.watch is not None:
+            self.watch(e, env, info)
+        return ob, info
+
+    def step(self, e: int, env, action: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, bool, dict]:
+        ob, _, terminated, truncated, info = env.step(action)
+        if self.watch is not None:
+            self.watch(e, env, info)
+        return ob, terminated or truncated, info
 
 
 SHADOW_SIZE = 1024

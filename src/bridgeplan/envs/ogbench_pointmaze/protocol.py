@@ -24,7 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from bridgeplan.envs.family import Tasks
-from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed
+from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed, run_episodes
 from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, check_maze, env_id
 from bridgeplan.errors import BridgeplanError
@@ -134,7 +134,6 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
     ``n`` new episodes starts (``on_batch_start(n)``, before its first call on them) and which rows of the
     batch have just ended (``on_episodes_end(rows)``, after the step that ended them): their later rows are
     ignored, so it need not work for them."""
-    from tqdm import tqdm
 
     check_maze(maze)
     if episodes_per_task <= 0 or batch_size <= 0:
@@ -151,16 +150,10 @@ def evaluate_policy(maze: str, act: Policy, episodes_per_task: int = EVAL_EPISOD
         infos += validation_tasks(probe.maze_map, infos)
     episodes = [(int(t), k) for t in task_ids for k in range(episodes_per_task)]
     envs = [make_env(maze) for _ in range(min(batch_size, len(episodes)))]
-    success = np.zeros(len(episodes), dtype=bool)
-    steps = np.zeros(len(episodes), dtype=np.int64)
     t0 = time.perf_counter()
-    with tqdm(total=len(episodes), disable=not progress, desc=f"evaluate {env_id(maze)}", unit="episode") as bar:
-        for lo in range(0, len(episodes), len(envs)):
-            batch = episodes[lo:lo + len(envs)]
-            if on_batch_start is not None:
-                on_batch_start(len(batch))
-            s, n = _run_batch(envs[:len(batch)], act, batch, seed, bar.update, on_episodes_end, infos)
-            success[lo:lo + len(batch)], steps[lo:lo + len(batch)] = s, n
+    success, steps = run_episodes(episodes, envs, _Episodes(seed, infos, _may_teleport(envs[0])), act,
+                                  on_batch_start or (lambda n: None), on_episodes_end or (lambda rows: None), 2,
+                                  f"evaluate {env_id(maze)}", progress)
     for env in envs:
         env.close()
     tasks = {}
@@ -189,45 +182,28 @@ def _may_teleport(env) -> Callable[[np.ndarray], bool]:
     return lambda xy: bool(np.min(np.linalg.norm(ins - xy, axis=1)) <= reach)
 
 
-def _run_batch(envs: list, act: Policy, batch: list[tuple[int, int]], seed: int,
-               finished: Callable[[int], None], on_episodes_end: Callable[[np.ndarray], None] | None = None,
-               infos: Sequence[dict] = ()) -> tuple[np.ndarray, np.ndarray]:
-    """Run one batch of (task id, index) episodes; a task past OGBench's own (``TASK_IDS``) resets to its entry of
-    ``infos``."""
-    n = len(batch)
-    may_teleport = _may_teleport(envs[0])
-    seeds = [episode_seed(seed, t, k) for t, k in batch]
-    rngs = [np.random.RandomState(s) for s in seeds]
-    obs = np.empty((n, 2))
-    goals = np.empty((n, 2))
-    for i, (env, (task, _)) in enumerate(zip(envs, batch)):
-        with legacy_rng(rngs[i]):
-            options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
-            ob, info = env.reset(seed=seeds[i], options=options)
-        obs[i], goals[i] = ob, info["goal"]
-    active = np.ones(n, dtype=bool)
-    success = np.zeros(n, dtype=bool)
-    steps = np.zeros(n, dtype=np.int64)
-    while active.any():
-        actions = np.asarray(act(obs.copy(), goals.copy()), dtype=np.float64)
-        if actions.shape != (n, 2):
-            raise BridgeplanError(f"the policy returned actions of shape {actions.shape}, expected {(n, 2)}")
-        if not np.isfinite(actions[active]).all():
-            raise BridgeplanError("the policy returned non-finite actions")
-        actions = np.clip(actions, -1, 1)
-        was_active = active.copy()
-        for i in np.flatnonzero(active):
-            if may_teleport(obs[i]):
-                with legacy_rng(rngs[i]):
-                    ob, _, terminated, truncated, info = envs[i].step(actions[i])
-            else:
-                ob, _, terminated, truncated, info = envs[i].step(actions[i])
-            obs[i] = ob
-            steps[i] += 1
-            if terminated or truncated:
-                active[i] = False
-                success[i] = info["success"] == 1.0
-                finished(1)
-        if on_episodes_end is not None and (ended := np.flatnonzero(was_active & ~active)).size:
-            on_episodes_end(ended)
-    return success, steps
+class _Episodes:
+    """The maze's episodes for :func:`run_episodes`: each reset, and each step that may end near a teleport, draws
+    from the episode's own legacy RNG (ogbench draws from numpy's global one), so an episode does not depend on its
+    batch; a task past OGBench's own (``TASK_IDS``) resets to its entry of ``infos``."""
+
+    def __init__(self, seed: int, infos: Sequence[dict], may_teleport: Callable[[np.ndarray], bool]):
+        self.seed, self.infos, self.may_teleport = seed, infos, may_teleport
+        self.rngs: dict[int, np.random.RandomState] = {}
+
+    def reset(self, e: int, env, task: int, index: int) -> tuple[np.ndarray, dict]:
+        seed = episode_seed(self.seed, task, index)
+        self.rngs[e] = np.random.RandomState(seed)
+        options = dict(task_id=task) if task in TASK_IDS else dict(task_info=self.infos[task - 1])
+        with legacy_rng(self.rngs[e]):
+            return env.reset(seed=seed, options=options)
+
+    def step(self, e: int, env, action: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, bool, dict]:
+        if self.may_teleport(state):
+            with legacy_rng(self.rngs[e]):
+                ob, _, terminated, truncated, info = env.step(action)
+        else:
+            ob, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            del self.rngs[e]
+        return ob, terminated or truncated, info
