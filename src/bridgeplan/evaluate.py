@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from bridgeplan import config as cfg
-from bridgeplan.consistency import Correction, sampling_tag
+from bridgeplan.consistency import Correction
 from bridgeplan.device import cpu_model
 from bridgeplan.envs import Family, family_of
 from bridgeplan.envs.family import Tasks
@@ -307,11 +307,6 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
         "plan_residuals": _residuals(episodes.executor.sources) if residuals else None})
     result.config, result.planner = (run.portable_config if run else None), planner
     return result
-
-
-def sampling_tag_of(result: EvalResult) -> str:
-    """The process's :meth:`~bridgeplan.processes.Process.sampling_tag` and the correction's, if any."""
-    return sampling_tag(result.planner.process.sampling_tag(), result.planner.correction)
 
 
 def _residuals(sources: list[PlanSource]) -> dict:

@@ -64,10 +64,6 @@ class GCIQL(nn.Module):
         self.critic = GoalValue(2 * obs_dim + action_dim, hidden_dims, 2, layer_norm)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
 
-    def trained_parameters(self) -> list[nn.Parameter]:
-        """What the optimizer moves (the slow critics follow by :meth:`update_target`)."""
-        return [*self.actor.parameters(), *self.value.parameters(), *self.critic.parameters()]
-
     @staticmethod
     def _frozen(module: nn.Module, *inputs: torch.Tensor) -> torch.Tensor:
         """``module(*inputs)`` with its parameters as constants (gradients reach the inputs only)."""

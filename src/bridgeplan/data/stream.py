@@ -74,10 +74,6 @@ class Stream:
         ends = [*self.segment_starts[1:].tolist(), len(self)]
         return list(zip(self.segment_starts.tolist(), ends))
 
-    def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """``[(states [T_k, obs_dim], actions [T_k, act_dim]), ...]`` (views) of the continuous segments."""
-        return [(self.states[lo:hi], self.actions[lo:hi]) for lo, hi in self.segment_bounds()]
-
     def pace(self) -> float:
         """The median distance the data's position moves in one step, within its segments."""
         xy = self.layout.state_positions(self.states)

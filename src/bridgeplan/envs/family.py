@@ -233,11 +233,6 @@ class Family:
         """The score of a floor (a prior alone), as results show it beside the planner's."""
         return self.score(tasks, outcome)
 
-    def plans_per_episode(self, outcome, made: np.ndarray) -> np.ndarray:
-        """The plans each episode made, ``made`` as counted over the whole run (a family whose episodes end early
-        may count them otherwise)."""
-        return made
-
     def free(self, env: str) -> Callable[[np.ndarray], np.ndarray] | None:
         """Whether positions ``[..., 2]`` lie in free space (the wall map; no planner reads it), or None."""
         return None

@@ -11,8 +11,8 @@ with its defaults), re-written for PyTorch:
   near zero;
 - a diagonal Gaussian with *constant* standard deviation 1 (``const_std=True``, ``state_dependent_std=False``);
   no tanh squashing. With a fixed std the negative log-likelihood is ``0.5 ||a - mean||^2`` plus a
-  constant, so training is regression of the mean; :meth:`GoalPolicy.nll` still returns the full NLL so the
-  loss reads as OGBench's ``actor_loss``.
+  constant, so training is regression of the mean; the loss (:func:`unit_gaussian_nll`) is still the full NLL, so
+  it reads as OGBench's ``actor_loss``.
 
 Not carried over: OGBench's learnable, state-independent log-std (``const_std=False``, not GCBC's setting)
 and its visual encoders (pointmaze observations are positions).
@@ -60,10 +60,6 @@ class GoalPolicy(nn.Module):
     def forward(self, observations: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """The mean action, ``[B, action_dim]``, for observations ``[B, obs_dim]`` and goals ``[B, goal_dim]``."""
         return self.mean(self.trunk(torch.cat([observations, goals], dim=-1)))
-
-    def nll(self, observations: torch.Tensor, goals: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """Per-sample negative log-likelihood of ``actions`` under ``N(mean, I)``, ``[B]``."""
-        return unit_gaussian_nll(self(observations, goals), actions)
 
     @torch.no_grad()
     def act(self, observations: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:

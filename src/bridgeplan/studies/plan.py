@@ -65,7 +65,6 @@ class Scale:
                                    evaluations=evaluations, dataset=dataset)
 
 
-SCALES = ("committed", "quick")
 QUICK_NOTE = "QUICK SCALE (`--quick`): fewer seeds, steps and episodes; NOT the committed scale, not comparable"
 
 
