@@ -136,12 +136,13 @@ def test_nan_loss_stops_and_keeps_last_checkpoint(tiny_dataset, tmp_path, capsys
 @pytest.mark.parametrize("flag, patch, message", [
     ("--precision=bf16", ("bridgeplan.train.bf16_supported", lambda device: False), "has no bfloat16 kernels"),
     ("--compile", ("shutil.which", lambda name: None), "needs a C++ compiler"),
+    ("--compile --process meanflow", ("shutil.which", lambda name: "/usr/bin/c++"), "Jacobian-vector product"),
 ])
 def test_device_features_missing_are_refused_before_anything_is_written(tiny_dataset, tmp_path, capsys,
                                                                         monkeypatch, flag, patch, message):
     monkeypatch.setattr(*patch)
     run = tmp_path / "run"
-    assert main(train_args(tiny_dataset, run, 2, flag)) == 2
+    assert main(train_args(tiny_dataset, run, 2, *flag.split())) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and message in err[0], err
     assert not run.exists()

@@ -124,6 +124,10 @@ class TrainConfig:
             raise BridgeplanError(f"ema_every must be >= 1 and ema_start >= 0, got {self.ema_every}, {self.ema_start}")
         if self.precision not in PRECISIONS:
             raise BridgeplanError(f"unknown precision {self.precision!r}: choose from {', '.join(PRECISIONS)}")
+        if self.compile and self.process.forward_mode:
+            raise BridgeplanError(f"--compile: the {self.process.display_name} trains through a Jacobian-vector "
+                                  "product (forward-mode AD), which a torch.compile'd network does not support: "
+                                  "train without --compile")
 
     @property
     def layout(self) -> Layout:

@@ -35,6 +35,9 @@ class Process:
     distills: ClassVar[bool] = False
     """True: trained against a teacher's network (its run in the ``teacher`` field): ``training_loss`` takes it as
     ``teacher`` and the student starts from its weights (``runs.load_teacher``)."""
+    forward_mode: ClassVar[bool] = False
+    """True: training differentiates the network in forward mode (the mean flow's Jacobian-vector product), which a
+    ``torch.compile``'d network does not support (its kernels have no forward-mode derivative)."""
     predicts_x0: ClassVar[bool] = True
     """True: every sampler step goes through :meth:`predict_x0`, so a correction of x0 (``sample``'s ``correct``)
     applies; a process whose sampler does not (none so far) sets False and corrections refuse it."""

@@ -47,6 +47,7 @@ class MeanFlow(JumpProcess):
     """Power of the adaptive loss weight (0: plain L2)."""
     name = "meanflow"
     display_name = "mean flow"
+    forward_mode = True
 
     def __post_init__(self):
         if self.steps < 1:
