@@ -446,18 +446,25 @@ def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(t
     assert "No rows yet" in mc.render(tmp_path)
     folder = tmp_path / mc.FOLDER
 
-    def write(path, rate, tasks=(1, 2, 3, 4, 5)):
+    def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000):
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"success_rate": rate, "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
+        path.write_text(json.dumps({"success_rate": rate, "train_seed": seed, "step": step,
+                                    "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
 
     write(folder / "gcbc-s0-step20000-seed0.json", 0.04)
-    write(folder / "gcbc-s1-step20000-seed0.json", 0.08)
+    write(folder / "gcbc-s1-step20000-seed0.json", 0.08, seed=1)
     write(folder / "ddpm-s0" / "nfe16-replan8-seed0.json", 0.5)
     write(folder / "ddpm-s0" / "nfe16-replan8-seed1000-tasks678910.json", 0.3, tasks=(6, 7, 8, 9, 10))
+    # earlier snapshots: not in the main table; seed 0 has its last three (OGBench's average), seed 1 not
+    write(folder / "gcbc-s0-step10000-seed0.json", 0.10, step=10000)
+    write(folder / "gcbc-s0-step15000-seed0.json", 0.16, step=15000)
+    write(folder / "gcbc-s1-step15000-seed0.json", 0.20, seed=1, step=15000)
     lines = mc.render(tmp_path).splitlines()
     assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) |" in lines
     assert "| ddpm | test | 1 | 50.0 | - |" in lines
     assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines
+    assert "| method | 10 k steps | 15 k steps | 20 k steps | OGBench's average (last 3) |" in lines
+    assert "| gcbc | 10.0 (1) | 18.0 ± 2.0 (2) | 6.0 ± 2.0 (2) | 10.0 (1) |" in lines
     # the README's lines: the test tasks only, readable names, the published number where there is one
     assert mc.block(tmp_path).splitlines() == [
         "- cube-single-play-v0, DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps): 50.0% (one run)",

@@ -2,9 +2,11 @@
 the published numbers with their budget.
 
 Rows: the evaluation JSONs in docs/results/manip-cube-single/ (``gcbc eval`` for GCBC and GCIQL, one per training
-seed; ``eval`` for the planner and ``graph`` for the graph (no training: one row), each its test split and its
-validation split on tasks 6-10). Success is OGBench's
-``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds.
+seed and snapshot; ``eval`` for the planner and ``graph`` for the graph (no training: one row), each its test split
+and its validation split on tasks 6-10). Success is OGBench's
+``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds. The main
+table is at the runs' last snapshot (:data:`FINAL` steps); GCBC and GCIQL also as OGBench averages them (per training
+seed, the mean of its last :data:`LAST` evaluations) and against training steps.
 
 Made by `bridgeplan study report manip-cube-single` (studies/manip-cube-single.toml) into
 docs/results/manip-cube-single.md.
@@ -28,6 +30,13 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
 """The README's names of the study's methods (the files' names are the report's)."""
 
 
+FINAL = 20000
+"""The steps the study's runs train for: the main table's rows are their last snapshots."""
+LAST = 3
+"""Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
+20 k)."""
+
+
 def rows(root: Path) -> list[dict]:
     """Every evaluation JSON under the study's folder, with the method it is of (the file's or its folder's stem
     before ``-s<seed>``) and whether it is on the validation tasks."""
@@ -40,13 +49,37 @@ def rows(root: Path) -> list[dict]:
     return out
 
 
+def final(found: list[dict]) -> list[dict]:
+    """The rows at the runs' last snapshot (the graph's: step 0, no training)."""
+    return [r for r in found if r["step"] in (0, FINAL)]
+
+
 def test_rates(found: list[dict]) -> dict[str, list[float]]:
-    """Each method's success (%) on the test tasks, one per training seed (the graph: one)."""
+    """Each method's success (%) on the test tasks at its last snapshot, one per training seed (the graph: one)."""
     out: dict[str, list[float]] = {}
-    for r in found:
+    for r in final(found):
         if not r["validation"]:
             out.setdefault(r["method"], []).append(100 * r["success_rate"])
     return dict(sorted(out.items()))
+
+
+def curves(found: list[dict]) -> dict[str, dict[int, dict[int, float]]]:
+    """GCBC's and GCIQL's test success (%) by training seed and snapshot step: ``{method: {seed: {step: rate}}}``."""
+    out: dict[str, dict[int, dict[int, float]]] = {}
+    for r in found:
+        if r["method"] in PUBLISHED and not r["validation"]:
+            out.setdefault(r["method"], {}).setdefault(r["train_seed"], {})[r["step"]] = 100 * r["success_rate"]
+    return out
+
+
+def ogbench_average(per_seed: dict[int, dict[int, float]]) -> list[float]:
+    """Per training seed with all of its last :data:`LAST` evaluations, their mean (OGBench's averaging)."""
+    out = []
+    for by_step in per_seed.values():
+        last = sorted(by_step)[-LAST:]
+        if len(last) == LAST and last[-1] == FINAL:
+            out.append(sum(by_step[k] for k in last) / LAST)
+    return out
 
 
 def block(root: Path) -> str:
@@ -73,9 +106,24 @@ def render(root: Path) -> str:
     body = []
     for method in sorted({r["method"] for r in found}):
         for validation in (False, True):
-            mine = [r for r in found if r["method"] == method and r["validation"] == validation]
+            mine = [r for r in final(found) if r["method"] == method and r["validation"] == validation]
             if mine:
                 rates = [100 * r["success_rate"] for r in mine]
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
                              fmt_mean_se(rates, one_seed="mean"), "" if validation else PUBLISHED.get(method, "-")])
-    return "\n".join([*lines, *table(["method", "tasks", "seeds", "success (%)", "published"], body)])
+    lines += table(["method", "tasks", "seeds", "success (%)", "published"], body)
+    found_curves = curves(found)
+    if found_curves:
+        steps = sorted({k for per_seed in found_curves.values() for by_step in per_seed.values() for k in by_step})
+        lines += ["", f"GCBC and GCIQL against training steps (test tasks; mean ± standard error over the training "
+                      f"seeds evaluated at that step), and as OGBench averages (per seed the mean of its last {LAST} "
+                      "evaluations, then over seeds):", ""]
+        curve_rows = []
+        for method, per_seed in sorted(found_curves.items()):
+            at = [[by_step[k] for by_step in per_seed.values() if k in by_step] for k in steps]
+            average = ogbench_average(per_seed)
+            curve_rows.append([method, *(f"{fmt_mean_se(v, one_seed='mean')} ({len(v)})" for v in at),
+                               f"{fmt_mean_se(average, one_seed='mean')} ({len(average)})" if average else "-"])
+        lines += table(["method", *(f"{k // 1000} k steps" for k in steps), f"OGBench's average (last {LAST})"],
+                       curve_rows)
+    return "\n".join(lines)
