@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, describe, execution_from_dict, label, method, parse_execution
+from bridgeplan.analysis.keys import OPEN_LOOP, MethodKey, describe, label, method, parse_execution
 from bridgeplan.analysis.load import Point, Results, Row, read_csv, read_eval_json, row_from_csv
 from bridgeplan.analysis.selection import BEST, FULL, Choice, best, resolve
 from bridgeplan.analysis.stats import compare, finding_verdict, goal_verdict, mean_se, paired
@@ -306,7 +306,7 @@ def test_a_damaged_row_names_its_file_and_id():
 ])
 def test_execution_tags_round_trip(tag, execution):
     assert parse_execution(tag) == execution and execution.tag() == tag
-    assert execution_from_dict(execution.to_dict("line")) == execution
+    assert Execution.from_dict(execution.to_dict("line")) == execution
 
 
 @pytest.mark.parametrize("tag", ["pursuit", "replanX", "warm-replan32", "cand8", "arrival", "sprint1", "replan32-"])

@@ -142,6 +142,26 @@ class Execution:
                 else None, "controller": self.controller,
                 "lookahead": self.lookahead if self.controller == "pursuit" else None}
 
+    @classmethod
+    def from_dict(cls, d: dict | None) -> Execution:
+        """The execution an evaluation JSON's ``execution`` field (:meth:`to_dict`) records; None or absent (older
+        JSONs): open loop, tracked."""
+        if not d:
+            return cls()
+        replans = d.get("replan_every") is not None or d.get("replan_tolerance") is not None
+        candidates = int(d.get("candidates") or 1)
+        default_arrival = "truncate" if replans or candidates > 1 else "end"
+        controller = d.get("controller") or "track"
+        kwargs = dict(replan_every=d.get("replan_every"), tolerance=d.get("replan_tolerance"), candidates=candidates,
+                      warm=d.get("replan_prior") == "warm",
+                      arrival=None if d.get("arrival", default_arrival) == default_arrival else d["arrival"],
+                      controller=controller)
+        if d.get("select"):
+            kwargs["select"] = d["select"]
+        if controller != "track":  # a JSON without it was pursued at Maze2D's lookahead then, 1
+            kwargs["lookahead"] = float(d["lookahead"]) if d.get("lookahead") is not None else 1.0
+        return cls(**kwargs)
+
     def tag(self) -> str:
         """A file-name suffix for these settings ('' for the default)."""
         parts = []

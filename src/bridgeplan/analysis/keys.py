@@ -145,23 +145,3 @@ def parse_execution(tag: str) -> Execution:
         raise BridgeplanError(f"unknown execution tag {tag!r}: expected parts replanK, tolD, candM-SELECT, warm, "
                               f"arrival-RULE, {'R/'.join(CONTROLLERS)}R joined by '-' in that order")
     return execution
-
-
-def execution_from_dict(d: dict | None) -> Execution:
-    """The :class:`Execution` of an evaluation JSON's ``execution`` field (``Execution.to_dict``); None or
-    absent (older JSONs): open loop, tracked."""
-    if not d:
-        return OPEN_LOOP
-    replans = d.get("replan_every") is not None or d.get("replan_tolerance") is not None
-    candidates = int(d.get("candidates") or 1)
-    default_arrival = "truncate" if replans or candidates > 1 else "end"
-    controller = d.get("controller") or "track"
-    kwargs: dict[str, Any] = dict(replan_every=d.get("replan_every"), tolerance=d.get("replan_tolerance"),
-                                  candidates=candidates, warm=d.get("replan_prior") == "warm",
-                                  arrival=None if d.get("arrival", default_arrival) == default_arrival
-                                  else d["arrival"], controller=controller)
-    if d.get("select"):
-        kwargs["select"] = d["select"]
-    if controller != "track":  # a JSON without it was pursued at Maze2D's lookahead then, 1
-        kwargs["lookahead"] = float(d["lookahead"]) if d.get("lookahead") is not None else 1.0
-    return Execution(**kwargs)

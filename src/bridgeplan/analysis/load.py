@@ -25,10 +25,11 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from bridgeplan.analysis.keys import MethodKey, execution_from_dict, key_of, parse_execution
+from bridgeplan.analysis.keys import MethodKey, key_of, parse_execution
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.experiments.store import SPLITS, split_of
 from bridgeplan.processes import process_from_dict
+from bridgeplan.replan import Execution
 
 
 @dataclass(frozen=True)
@@ -155,7 +156,7 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
         config = d.get("config") or {}
         process = process_from_dict(d["process_params"])
         key = key_of(process, d["prior"], hold_share=float(config.get("hold_share") or 0.0),
-                     execution=execution_from_dict(d.get("execution")), multi_task=bool(d.get("multi_task")))
+                     execution=Execution.from_dict(d.get("execution")), multi_task=bool(d.get("multi_task")))
         latency = d.get("decision_ms_batch1")
         learned = d.get("prior_only_learned")
         residuals = d.get("plan_residuals") or {}

@@ -323,9 +323,9 @@ def row_from_eval_json(d: dict, split: str = "test") -> dict:
     ``split``'s episodes: the run named as its config names it, the sampling tag from the process as sampled and the
     correction, the execution's tag from its settings."""
     from bridgeplan import config as cfg
-    from bridgeplan.analysis.keys import execution_from_dict
     from bridgeplan.consistency import Correction, sampling_tag
     from bridgeplan.processes import process_from_dict
+    from bridgeplan.replan import Execution
 
     if split not in SPLITS:
         raise BridgeplanError(f"unknown split {split!r}: choose from {', '.join(SPLITS)}")
@@ -345,7 +345,7 @@ def row_from_eval_json(d: dict, split: str = "test") -> dict:
         "success_rate": d["success_rate"]["mean"], "plan_ms": d["plan_ms_per_plan"], "prior_ms": d["prior_ms_per_plan"],
         "floor_minari": d["floor_line"]["score"]["minari"]["mean"],
         "sampler": sampling_tag(process_from_dict(d["process_params"]).sampling_tag(), correction),
-        "execution": execution_from_dict(d.get("execution")).tag(), "multi_task": int(d["multi_task"]),
+        "execution": Execution.from_dict(d.get("execution")).tag(), "multi_task": int(d["multi_task"]),
         "calls_per_episode": d.get("calls_per_episode"), "decision_ms_p50": latency.get("p50"),
         "decision_ms_p95": latency.get("p95"),
         "network_calls_per_plan": d.get("network_call_equivalents_per_plan"),
