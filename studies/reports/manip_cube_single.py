@@ -5,8 +5,8 @@ Rows: the evaluation JSONs in docs/results/manip-cube-single/ (``gcbc eval`` for
 seed and snapshot; ``eval`` for the planner and ``graph`` for the graph (no training: one row), each its test split
 and its validation split on tasks 6-10). Success is OGBench's
 ``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds. The main
-table is at the runs' last snapshot (:data:`FINAL` steps); GCBC and GCIQL also as OGBench averages them (per training
-seed, the mean of its last :data:`LAST` evaluations) and against training steps.
+table is at each method's last snapshot (the largest step its rows have); GCBC and GCIQL also as OGBench averages
+them (per training seed, the mean of its last :data:`LAST` evaluations) and against training steps.
 
 Made by `bridgeplan study report manip-cube-single` (studies/manip-cube-single.toml) into
 docs/results/manip-cube-single.md.
@@ -30,8 +30,6 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
 """The README's names of the study's methods (the files' names are the report's)."""
 
 
-FINAL = 20000
-"""The steps the study's runs train for: the main table's rows are their last snapshots."""
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -49,9 +47,18 @@ def rows(root: Path) -> list[dict]:
     return out
 
 
+def last_steps(found: list[dict]) -> dict[str, int]:
+    """Each method's last snapshot: the largest step its rows have (the graph's: 0, no training)."""
+    out: dict[str, int] = {}
+    for r in found:
+        out[r["method"]] = max(out.get(r["method"], 0), r["step"])
+    return out
+
+
 def final(found: list[dict]) -> list[dict]:
-    """The rows at the runs' last snapshot (the graph's: step 0, no training)."""
-    return [r for r in found if r["step"] in (0, FINAL)]
+    """The rows at their method's last snapshot."""
+    last = last_steps(found)
+    return [r for r in found if r["step"] == last[r["method"]]]
 
 
 def test_rates(found: list[dict]) -> dict[str, list[float]]:
@@ -72,12 +79,13 @@ def curves(found: list[dict]) -> dict[str, dict[int, dict[int, float]]]:
     return out
 
 
-def ogbench_average(per_seed: dict[int, dict[int, float]]) -> list[float]:
-    """Per training seed with all of its last :data:`LAST` evaluations, their mean (OGBench's averaging)."""
+def ogbench_average(per_seed: dict[int, dict[int, float]], final_step: int) -> list[float]:
+    """Per training seed whose last :data:`LAST` evaluations run up to ``final_step``, their mean (OGBench's
+    averaging)."""
     out = []
     for by_step in per_seed.values():
         last = sorted(by_step)[-LAST:]
-        if len(last) == LAST and last[-1] == FINAL:
+        if len(last) == LAST and last[-1] == final_step:
             out.append(sum(by_step[k] for k in last) / LAST)
     return out
 
@@ -121,7 +129,7 @@ def render(root: Path) -> str:
         curve_rows = []
         for method, per_seed in sorted(found_curves.items()):
             at = [[by_step[k] for by_step in per_seed.values() if k in by_step] for k in steps]
-            average = ogbench_average(per_seed)
+            average = ogbench_average(per_seed, last_steps(found)[method])
             curve_rows.append([method, *(f"{fmt_mean_se(v, one_seed='mean')} ({len(v)})" for v in at),
                                f"{fmt_mean_se(average, one_seed='mean')} ({len(average)})" if average else "-"])
         lines += table(["method", *(f"{k // 1000} k steps" for k in steps), f"OGBench's average (last {LAST})"],
