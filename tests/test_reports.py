@@ -439,16 +439,18 @@ def test_the_onestep_report_times_the_decision_at_batch_1_against_2_ms(tmp_path)
     assert any("load average was 0.5 at the start and 1.2 at the end" in line for line in lines)
 
 
-def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(tmp_path):
-    """Each method's rows by the file (GCBC, GCIQL) or folder (a planner's) they are in; the validation tasks (ids
-    above 5) apart from the test tasks; mean ± SE over training seeds; published numbers beside the test rows."""
-    mc = report("manip-cube-single")
+def test_the_manipulation_report_splits_test_from_validation_and_averages_over_seeds(tmp_path):
+    """Each dataset's rows by its folder; each method's by the file (GCBC, GCIQL) or folder (a planner's) they are in;
+    the validation tasks (ids above 5) apart from the test tasks; mean ± SE over training seeds; each dataset's
+    published numbers beside its test rows."""
+    mc = report("manipulation")
     assert "No rows yet" in mc.render(tmp_path)
-    folder = tmp_path / mc.FOLDER
+    folder = tmp_path / mc.folder("cube-single")
 
-    def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000):
+    def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000, replan=None):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"success_rate": rate, "train_seed": seed, "step": step,
+                                    "execution": {"replan_every": replan},
                                     "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
 
     write(folder / "gcbc-s0-step20000-seed0.json", 0.04)
@@ -470,3 +472,14 @@ def test_manip_cube_single_splits_test_from_validation_and_averages_over_seeds(t
         "- cube-single-play-v0, DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps): 50.0% (one run)",
         "- cube-single-play-v0, GCBC (20 k steps): 6.0 ± 2.0% over 2 training seeds; OGBench published 6 (8 seeds, "
         "1 M steps)"]
+    # a second dataset: its own section, its own published numbers, the graph named by its folder and replanning
+    write(tmp_path / mc.folder("puzzle-3x3") / "gciql-s0-step20000-seed0.json", 0.9)
+    write(tmp_path / mc.folder("puzzle-3x3") / "graph-keep10-r1.5" / "track-replan50-seed0.json", 0.7, step=0,
+          replan=50)
+    lines = mc.render(tmp_path).splitlines()
+    assert lines.index("## cube-single-play-v0") < lines.index("## puzzle-3x3-play-v0")
+    assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) |")
+    assert mc.block(tmp_path).splitlines()[2:] == [
+        "- puzzle-3x3-play-v0, GCIQL (20 k steps): 90.0% (one run); OGBench published 95 (8 seeds, 1 M steps)",
+        "- puzzle-3x3-play-v0, the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps): "
+        "70.0% (one run)"]

@@ -20,9 +20,9 @@ GENERATORS = {g.name: g for g in [
     Generator("ogbench-calibration", "ogbench_calibration", "ogbench-calibration.md",
               "OGBench pointmaze: the oracle and GCBC on locally generated data by OGBench's protocol, beside "
               "OGBench's published GCBC", ("docs/ogbench_pointmaze.md",)),
-    Generator("manip-cube-single", "manip_cube_single", "manip-cube-single.md",
-              "OGBench cube-single: GCBC, GCIQL, a DDPM planner and the dataset graph by OGBench's protocol, beside "
-              "the published numbers", ("README.md",)),
+    Generator("manipulation", "manipulation", "manipulation.md",
+              "OGBench manipulation, per play dataset: GCBC, GCIQL, planners and the dataset graph by OGBench's "
+              "protocol, beside the published numbers", ("README.md",)),
     Generator("ogbench-planners", "ogbench_planners", "ogbench-planners.md",
               "OGBench pointmaze navigate: DDPM and flow by OGBench's protocol, the controller chosen on validation, "
               "beside the line alone, the oracle and the published methods", ("docs/results/README.md",)),

@@ -1,0 +1,169 @@
+"""OGBench manipulation: GCBC, GCIQL, planners and the dataset graph by OGBench's protocol on each play dataset
+generated here, beside the published numbers with their budget.
+
+Rows: the evaluation JSONs in docs/results/manip-SCENE/ (one folder per dataset, ``manip-cube-single``; ``gcbc eval``
+for GCBC and GCIQL, one per training seed and snapshot; ``eval`` for a planner and ``graph`` for the graph (no
+training: one row), each its test split and its validation split on tasks 6-10). Success is OGBench's
+``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds. The main
+table is at each method's last snapshot (the largest step its rows have); GCBC and GCIQL also as OGBench averages
+them (per training seed, the mean of its last :data:`LAST` evaluations) and against training steps.
+
+Made by `bridgeplan study report manipulation` (the studies studies/manip-*.toml) into docs/results/manipulation.md.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from bridgeplan.analysis.tables import fmt_mean_se, table
+from bridgeplan.envs.ogbench_manipulation.names import SCENES
+
+READS = ()
+"""Its planners are named runs of the studies, not a grid's methods."""
+PUBLISHED = {"cube-single": (6, 68), "cube-double": (1, 40), "scene": (5, 51), "puzzle-3x3": (2, 95),
+             "puzzle-4x4": (0, 26)}
+"""OGBench's published success (%) of GCBC and GCIQL per play dataset (Park et al., ICLR 2025, Table 2: 8 seeds, 1 M
+steps)."""
+PEERS = ("gcbc", "gciql")
+LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
+          "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
+"""The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
+GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)")
+LAST = 3
+"""Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
+20 k)."""
+
+
+def folder(scene: str) -> str:
+    """The folder under docs/results of dataset ``scene``'s rows (``manip-cube-single``)."""
+    return f"manip-{scene}"
+
+
+def published(scene: str, method: str) -> str | None:
+    if method not in PEERS:
+        return None
+    return f"{PUBLISHED[scene][PEERS.index(method)]} (8 seeds, 1 M steps)"
+
+
+def label(method: str, found: list[dict]) -> str:
+    """A method's name in the README: its label, or for the graph its settings (its folder's) and replanning."""
+    m = GRAPH_FOLDER.fullmatch(method)
+    if m is None:
+        return LABELS.get(method, method)
+    every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
+    replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
+    return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{replan})"
+
+
+def rows(root: Path, scene: str) -> list[dict]:
+    """Every evaluation JSON under dataset ``scene``'s folder, with the method it is of (the file's or its folder's
+    stem before ``-s<seed>``) and whether it is on the validation tasks."""
+    out = []
+    home = Path(root) / folder(scene)
+    for path in sorted(home.rglob("*.json")):
+        d = json.loads(path.read_text())
+        name = path.parent.name if path.parent != home else path.stem
+        validation = any(int(t) > 5 for t in d["tasks"])
+        out.append({**d, "method": name.split("-s")[0], "validation": validation})
+    return out
+
+
+def last_steps(found: list[dict]) -> dict[str, int]:
+    """Each method's last snapshot: the largest step its rows have (the graph's: 0, no training)."""
+    out: dict[str, int] = {}
+    for r in found:
+        out[r["method"]] = max(out.get(r["method"], 0), r["step"])
+    return out
+
+
+def final(found: list[dict]) -> list[dict]:
+    """The rows at their method's last snapshot."""
+    last = last_steps(found)
+    return [r for r in found if r["step"] == last[r["method"]]]
+
+
+def test_rates(found: list[dict]) -> dict[str, list[float]]:
+    """Each method's success (%) on the test tasks at its last snapshot, one per training seed (the graph: one)."""
+    out: dict[str, list[float]] = {}
+    for r in final(found):
+        if not r["validation"]:
+            out.setdefault(r["method"], []).append(100 * r["success_rate"])
+    return dict(sorted(out.items()))
+
+
+def curves(found: list[dict]) -> dict[str, dict[int, dict[int, float]]]:
+    """GCBC's and GCIQL's test success (%) by training seed and snapshot step: ``{method: {seed: {step: rate}}}``."""
+    out: dict[str, dict[int, dict[int, float]]] = {}
+    for r in found:
+        if r["method"] in PEERS and not r["validation"]:
+            out.setdefault(r["method"], {}).setdefault(r["train_seed"], {})[r["step"]] = 100 * r["success_rate"]
+    return out
+
+
+def ogbench_average(per_seed: dict[int, dict[int, float]], final_step: int) -> list[float]:
+    """Per training seed whose last :data:`LAST` evaluations run up to ``final_step``, their mean (OGBench's
+    averaging)."""
+    out = []
+    for by_step in per_seed.values():
+        last = sorted(by_step)[-LAST:]
+        if len(last) == LAST and last[-1] == final_step:
+            out.append(sum(by_step[k] for k in last) / LAST)
+    return out
+
+
+def block(root: Path) -> str:
+    """The README's lines: per dataset with rows, each method's success on its 5 test tasks, beside the published
+    number."""
+    lines = []
+    for scene in SCENES:
+        found = rows(root, scene)
+        lines += [f"- {scene}-play-v0, {label(method, found)}: {fmt_mean_se(rates, one_seed='mean')}% "
+                  + (f"over {len(rates)} training seeds" if len(rates) > 1 else "(one run)")
+                  + (f"; OGBench published {published(scene, method)}" if method in PEERS else "")
+                  for method, rates in test_rates(found).items()]
+    return "\n".join(lines) or "- no rows yet (`bridgeplan study run manipulation`)."
+
+
+def section(scene: str, found: list[dict]) -> list[str]:
+    """Dataset ``scene``'s tables: every method at its last snapshot, then GCBC and GCIQL against training steps."""
+    lines = [f"## {scene}-play-v0", "", f"Rows in docs/results/{folder(scene)}/ ({SCENES[scene].eval_steps} steps per "
+             "episode).", ""]
+    body = []
+    for method in sorted({r["method"] for r in found}):
+        for validation in (False, True):
+            mine = [r for r in final(found) if r["method"] == method and r["validation"] == validation]
+            if mine:
+                rates = [100 * r["success_rate"] for r in mine]
+                body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
+                             fmt_mean_se(rates, one_seed="mean"), "" if validation else published(scene, method) or "-"])
+    lines += table(["method", "tasks", "seeds", "success (%)", "published"], body)
+    found_curves = curves(found)
+    if found_curves:
+        steps = sorted({k for per_seed in found_curves.values() for by_step in per_seed.values() for k in by_step})
+        lines += ["", f"GCBC and GCIQL against training steps (test tasks; mean ± standard error over the training "
+                      f"seeds evaluated at that step), and as OGBench averages (per seed the mean of its last {LAST} "
+                      "evaluations, then over seeds):", ""]
+        curve_rows = []
+        for method, per_seed in sorted(found_curves.items()):
+            at = [[by_step[k] for by_step in per_seed.values() if k in by_step] for k in steps]
+            average = ogbench_average(per_seed, last_steps(found)[method])
+            curve_rows.append([method, *(f"{fmt_mean_se(v, one_seed='mean')} ({len(v)})" for v in at),
+                               f"{fmt_mean_se(average, one_seed='mean')} ({len(average)})" if average else "-"])
+        lines += table(["method", *(f"{k // 1000} k steps" for k in steps), f"OGBench's average (last {LAST})"],
+                       curve_rows)
+    return lines
+
+
+def render(root: Path) -> str:
+    lines = ["# OGBench manipulation: GCBC, GCIQL, planners and the dataset graph by OGBench's protocol", "",
+             "Generated by `bridgeplan study report manipulation` from the JSONs in docs/results/manip-*/ (one folder "
+             "per dataset, each made by its study, studies/manip-*.toml). Datasets generated locally by OGBench's play "
+             "recipe (`bridgeplan data generate --maze NAME`); success (%) over the 5 test tasks (50 episodes per "
+             "task, evaluation seed 0), mean ± standard error over training seeds; validation rows on tasks 6-10."]
+    sections = [section(scene, found) for scene in SCENES if (found := rows(root, scene))]
+    if not sections:
+        return "\n".join([*lines, "", "No rows yet: `bridgeplan study run manipulation`, then `bridgeplan study "
+                                      "export manipulation`."])
+    return "\n".join(lines + [line for s in sections for line in ["", *s]])
