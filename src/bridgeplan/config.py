@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bridgeplan.envs import family_of
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.nets.unet import UNetConfig
 from bridgeplan.priors import PRIORS, REPLAN_ONLY
 from bridgeplan.processes import DDPM, Process, make_process, process_from_dict
@@ -27,8 +27,7 @@ PRESETS = ("diffuser", "cpu-small")
 def plan_shape(maze: str, preset: str) -> tuple[int, int]:
     """``(horizon, stride)`` of ``preset``'s plans in environment ``maze``: its family's
     (:meth:`~bridgeplan.envs.family.Family.plan_shape`)."""
-    if preset not in PRESETS:
-        raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+    check_choice("preset", preset, PRESETS)
     return family_of(maze).plan_shape(maze, preset)
 
 
@@ -122,8 +121,7 @@ class TrainConfig:
             raise BridgeplanError(f"ema_decay must be in [0, 1], got {self.ema_decay}")
         if self.ema_every < 1 or self.ema_start < 0:
             raise BridgeplanError(f"ema_every must be >= 1 and ema_start >= 0, got {self.ema_every}, {self.ema_start}")
-        if self.precision not in PRECISIONS:
-            raise BridgeplanError(f"unknown precision {self.precision!r}: choose from {', '.join(PRECISIONS)}")
+        check_choice("precision", self.precision, PRECISIONS)
         if self.compile and self.process.forward_mode:
             raise BridgeplanError(f"--compile: the {self.process.display_name} trains through a Jacobian-vector "
                                   "product (forward-mode AD), which a torch.compile'd network does not support: "
@@ -169,8 +167,7 @@ def method_label(process: Process, prior: str, hold_share: float = 0.0) -> str:
 
 def check_prior(process: Process, prior: str) -> None:
     """The one rule tying processes to priors: a process without a prior starts from Gaussian noise."""
-    if prior not in PRIORS:
-        raise BridgeplanError(f"unknown prior {prior!r}: choose from {', '.join(PRIORS)}")
+    check_choice("prior", prior, PRIORS)
     if prior in REPLAN_ONLY:
         raise BridgeplanError(f"the {prior} prior is only valid on replans (eval --replan-every K --prior {prior}), "
                               f"not for training")

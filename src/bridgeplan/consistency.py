@@ -58,7 +58,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.processes.samplers import X0Predictor
 from bridgeplan.trajectory import Conditions, Layout
@@ -213,8 +213,7 @@ Objective = Callable[[torch.Tensor], torch.Tensor]
 def corrected(predict: X0Predictor, objective: Objective, form: str) -> X0Predictor:
     """``predict`` with every x0 prediction moved down the gradient of ``objective`` (``form`` x0 or deep: see the
     module docstring); the step sizes are in ``objective``. Works inside ``torch.inference_mode`` too."""
-    if form not in FORMS:
-        raise BridgeplanError(f"unknown correction form {form!r}: choose from {', '.join(FORMS)}")
+    check_choice("correction form", form, FORMS)
 
     def predict_corrected(x_n: torch.Tensor, n: int) -> torch.Tensor:
         if form == "x0":
@@ -251,15 +250,13 @@ class Correction:
             raise BridgeplanError("a correction needs at least one residual (--correction RESIDUAL=STEP)")
         names = [name for name, _ in self.steps]
         for name, alpha in self.steps:
-            if name not in RESIDUALS:
-                raise BridgeplanError(f"unknown residual {name!r}: choose from {', '.join(RESIDUALS)}")
+            check_choice("residual", name, RESIDUALS)
             if not math.isfinite(alpha) or alpha < 0:
                 raise BridgeplanError(f"the step size of the {name} correction must be a finite number >= 0, "
                                       f"got {alpha}")
         if len(set(names)) != len(names):
             raise BridgeplanError(f"each residual takes one step size, got {', '.join(names)}")
-        if self.form not in FORMS:
-            raise BridgeplanError(f"unknown correction form {self.form!r}: choose from {', '.join(FORMS)}")
+        check_choice("correction form", self.form, FORMS)
         if self.form == "x0" and "conditions" in names:
             raise BridgeplanError("the conditions correction in x0 form would move only the conditioned entries of "
                                   "x0_hat, which every sampler overwrites (no effect): use --correction-form deep")

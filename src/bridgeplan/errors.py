@@ -16,3 +16,9 @@ def one_line_warnings() -> None:
 
 def _one_line_warning(message, category, filename, lineno, line=None) -> str:
     return f"warning: {message}\n"
+
+
+def check_choice(what: str, value, choices) -> None:
+    """A :class:`BridgeplanError` naming the choices unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise BridgeplanError(f"unknown {what} {value!r}: choose from {', '.join(map(str, choices))}")

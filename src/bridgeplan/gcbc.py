@@ -47,7 +47,7 @@ from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
 from bridgeplan.device import configure_threads, cpu_model, resolve_device
 from bridgeplan.envs import family_of
 from bridgeplan.envs.ogbench_pointmaze.names import dataset_env as environment
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import run_lock
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
@@ -124,8 +124,7 @@ class GCBCConfig:
 
     def __post_init__(self):
         cfg.check_optimization(self)
-        if self.agent not in AGENTS:
-            raise BridgeplanError(f"unknown agent {self.agent!r}: choose from {', '.join(AGENTS)}")
+        check_choice("agent", self.agent, AGENTS)
         value = (self.value_p_curgoal, self.value_p_trajgoal, self.value_p_randomgoal)
         if min(value) < 0 or not math.isclose(sum(value), 1.0):
             raise BridgeplanError(f"value goal probabilities (current, trajectory, random) must be >= 0 and sum to 1, "

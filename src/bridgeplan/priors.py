@@ -15,7 +15,7 @@ from typing import Callable, Protocol
 
 import torch
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.normalizer import Normalizer
 from bridgeplan.trajectory import Conditions, Layout, apply_conditions, span
 
@@ -287,6 +287,5 @@ def make_prior(name: str, normalizer: Normalizer, layout: Layout, net: torch.nn.
                stride: int = 1) -> Prior:
     """Build a prior by name for plans in ``layout`` whose states are ``stride`` steps apart; ``learned`` needs its
     trained ``net``."""
-    if name not in PRIORS:
-        raise BridgeplanError(f"unknown prior {name!r}: choose from {', '.join(PRIORS)}")
+    check_choice("prior", name, PRIORS)
     return PRIORS[name](normalizer, layout, net, stride)

@@ -51,7 +51,7 @@ import numpy as np
 import torch
 
 from bridgeplan.envs.controllers import Follower, check_controller
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.priors import WarmPrior
 from bridgeplan.trajectory import Layout
 
@@ -120,8 +120,7 @@ class Execution:
         check_controller(self.controller, self.lookahead)
         if self.candidates < 1:
             raise BridgeplanError(f"--candidates must be >= 1, got {self.candidates}")
-        if self.select not in SELECTIONS:
-            raise BridgeplanError(f"unknown --select {self.select!r}: choose from {', '.join(SELECTIONS)}")
+        check_choice("--select", self.select, SELECTIONS)
         if self.arrival is not None and self.arrival not in ARRIVALS:
             raise BridgeplanError(f"unknown --arrival {self.arrival!r}: choose from {', '.join(ARRIVALS)}")
         if self.arrival == "keep" and not self.replans:

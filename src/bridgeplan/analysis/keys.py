@@ -17,7 +17,7 @@ from typing import Any
 
 from bridgeplan.config import method_label
 from bridgeplan.envs.controllers import CONTROLLERS
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes import PROCESSES, make_process
 from bridgeplan.processes.base import Process
 from bridgeplan.replan import Execution
@@ -85,8 +85,7 @@ def method(process: str, prior: str = "gaussian", *, steps: int, hold_share: flo
 def key_of(process: Process, prior: str, *, hold_share: float = 0.0, sampler: str | None = None,
            execution: Execution = OPEN_LOOP, multi_task: bool = False) -> MethodKey:
     """The key of a run of ``process`` from ``prior``; ``sampler`` None takes ``process.sampling_tag()``."""
-    if process.name not in PROCESSES:
-        raise BridgeplanError(f"unknown process {process.name!r}: choose from {', '.join(PROCESSES)}")
+    check_choice("process", process.name, PROCESSES)
     return MethodKey(process=process.name, steps=int(process.steps), params=tuple(sorted(process.variant().items())),
                      prior=prior if process.uses_prior else "gaussian", hold_share=float(hold_share or 0.0),
                      sampler=process.sampling_tag() if sampler is None else sampler, execution=execution,

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.analysis.keys import MethodKey, key_of, parse_execution
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.experiments.store import SPLITS, split_of
 from bridgeplan.processes import process_from_dict
 from bridgeplan.replan import Execution
@@ -199,8 +199,7 @@ class Results:
 
     def add(self, row: Row) -> bool:
         """Index ``row``; False (and nothing changes) when a row with its key, split, step, NFE and seed is in."""
-        if row.split not in SPLITS:
-            raise BridgeplanError(f"unknown split {row.split!r}: choose from {', '.join(SPLITS)}")
+        check_choice("split", row.split, SPLITS)
         by_seed = self._index.setdefault((row.key, row.split), {}).setdefault(row.step, {}).setdefault(row.nfe, {})
         if row.seed in by_seed:
             return False

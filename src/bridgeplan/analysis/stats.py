@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 
 K_SE = 2.0
 """Standard errors a difference has to clear for a verdict other than ``tie``."""
@@ -81,8 +81,7 @@ def finding_verdict(d: MeanSE, rule: str, k: float = K_SE) -> str:
     """A finding's verdict (findings.md). ``above`` (the first beats the second): ``holds`` when better,
     ``does not`` when worse, ``not decidable`` when a tie; ``not below`` (the first keeps the second's score):
     ``holds`` unless worse (not more than k SE below), else ``does not``."""
-    if rule not in FINDING_RULES:
-        raise BridgeplanError(f"unknown finding rule {rule!r}: choose from {', '.join(FINDING_RULES)}")
+    check_choice("finding rule", rule, FINDING_RULES)
     verdict = compare(d, k)
     if rule == "above":
         return {"better": "holds", "worse": "does not", "tie": "not decidable"}[verdict]
@@ -95,8 +94,7 @@ GOAL_RULES = ("reaches", "clears")
 def goal_verdict(d: MeanSE, rule: str, k: float = K_SE) -> str:
     """The goal's words (prior-curves.md). ``reaches``: ``yes`` when the mean is not below zero, ``within noise``
     when below by no more than k SE, ``no`` when worse; ``clears``: ``yes`` when better, else ``no``."""
-    if rule not in GOAL_RULES:
-        raise BridgeplanError(f"unknown goal rule {rule!r}: choose from {', '.join(GOAL_RULES)}")
+    check_choice("goal rule", rule, GOAL_RULES)
     verdict = compare(d, k)
     if rule == "reaches":
         return "yes" if d.mean >= 0 else "within noise" if verdict != "worse" else "no"

@@ -19,7 +19,7 @@ from bridgeplan.bench.harness import machine
 from bridgeplan.bench.markdown import format_bench
 from bridgeplan.config import PRESETS
 from bridgeplan.device import resolve_device
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.files import atomic_write_text
 from bridgeplan.paths import snapshot_path, snapshot_steps
 
@@ -86,8 +86,7 @@ class BenchConfig:
             if (name != "budget_steps" and not values) or min(values, default=1) <= 0:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive integers, got {list(values)}")
         for preset in self.presets:
-            if preset not in PRESETS:
-                raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PRESETS)}")
+            check_choice("preset", preset, PRESETS)
         known = suites.method_configs(self.presets[0] if self.presets else "cpu-small")
         unknown = [m for m in self.methods if m not in known]
         if unknown:

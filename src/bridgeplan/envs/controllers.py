@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.trajectory import Layout
 
 CONTROLLERS = ("track", "pursuit", "actions")
@@ -49,8 +49,7 @@ class Body:
 
 
 def check_controller(kind: str, lookahead: float | None) -> None:
-    if kind not in CONTROLLERS:
-        raise BridgeplanError(f"unknown --controller {kind!r}: choose from {', '.join(CONTROLLERS)}")
+    check_choice("--controller", kind, CONTROLLERS)
     if lookahead is not None and not (math.isfinite(lookahead) and lookahead > 0):
         raise BridgeplanError(f"--lookahead must be a finite distance > 0 (in position), got {lookahead}")
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from bridgeplan.config import check_prior
 from bridgeplan.consistency import Correction, sampling_tag
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes import DDPM, Bridge, Process
 from bridgeplan.replan import Execution
 
@@ -179,8 +179,7 @@ EXPERIMENTS = build_experiments()
 
 def get_experiment(name: str, steps: int = 16, fixed_nfe: int = 4, informed: Process | None = None) -> Experiment:
     """The experiment ``name`` for runs trained with ``steps`` diffusion steps (see :func:`build_experiments`)."""
-    if name not in EXPERIMENTS:
-        raise BridgeplanError(f"unknown experiment {name!r}: choose from {', '.join(EXPERIMENTS)}")
+    check_choice("experiment", name, EXPERIMENTS)
     experiment = build_experiments(steps, fixed_nfe, informed)[name]
     experiment.validate()
     return experiment

@@ -16,7 +16,7 @@ from pathlib import Path
 from bridgeplan import config as cfg
 from bridgeplan import paths
 from bridgeplan.checkpoint import load_checkpoint
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
@@ -184,8 +184,7 @@ BACKENDS = ("local", "ray")
 
 
 def check_backend(backend: str) -> None:
-    if backend not in BACKENDS:
-        raise BridgeplanError(f"unknown backend {backend!r}: choose from {', '.join(BACKENDS)}")
+    check_choice("backend", backend, BACKENDS)
 
 
 def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: str = "local",

@@ -33,7 +33,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.files import atomic_write_text, check_writable
 
 SCHEMA_VERSION = 6
@@ -327,8 +327,7 @@ def row_from_eval_json(d: dict, split: str = "test") -> dict:
     from bridgeplan.processes import process_from_dict
     from bridgeplan.replan import Execution
 
-    if split not in SPLITS:
-        raise BridgeplanError(f"unknown split {split!r}: choose from {', '.join(SPLITS)}")
+    check_choice("split", split, SPLITS)
     config = cfg.from_dict(cfg.TrainConfig, d["config"])
     c = d.get("correction")
     correction = None if not c else Correction(tuple(sorted(c["steps"].items())), form=c["form"])

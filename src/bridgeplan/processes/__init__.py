@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes.base import Process
 from bridgeplan.processes.bridge import Bridge
 from bridgeplan.processes.ddpm import DDPM
@@ -38,8 +38,7 @@ PROCESSES: dict[str, type[Process]] = {"ddpm": DDPM, "bridge": Bridge, "flow": F
 
 def make_process(name: str, **params) -> Process:
     """A process by name with its parameters, e.g. ``make_process("bridge", steps=16, beta_max=0.3)``."""
-    if name not in PROCESSES:
-        raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
+    check_choice("process", name, PROCESSES)
     try:
         return PROCESSES[name](**params)
     except TypeError as e:
@@ -49,8 +48,7 @@ def make_process(name: str, **params) -> Process:
 def parse_process_params(name: str, assignments: list[str]) -> dict:
     """``["beta_max=0.3", "ot_ode=true"]`` -> typed keyword arguments for process ``name`` (each value takes
     the type of the field's default), so a new process's parameters reach the CLI with no new flags."""
-    if name not in PROCESSES:
-        raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
+    check_choice("process", name, PROCESSES)
     defaults = {f.name: f.default for f in dataclasses.fields(PROCESSES[name])}
     params = {}
     for text in assignments:
@@ -80,8 +78,7 @@ def process_from_dict(d: dict) -> Process:
     """
     d = dict(d)
     name = d.pop("name", None)
-    if name not in PROCESSES:
-        raise BridgeplanError(f"unknown process {name!r}: choose from {', '.join(PROCESSES)}")
+    check_choice("process", name, PROCESSES)
     known = {f.name for f in dataclasses.fields(PROCESSES[name])}
     return make_process(name, **{k: v for k, v in d.items() if k in known})
 

@@ -8,7 +8,7 @@ from functools import cached_property
 
 import torch
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import bridge_sample
 from bridgeplan.processes.schedules import bridge_stds, chain_marginal, gaussian_product, i2sb_betas, spaced_steps
@@ -64,10 +64,8 @@ class Bridge(Process):
             raise BridgeplanError(f"the bridge needs at least 2 diffusion steps, got {self.steps}")
         if self.beta_max <= 0:
             raise BridgeplanError(f"beta_max must be positive, got {self.beta_max}")
-        if self.predict not in PREDICTIONS:
-            raise BridgeplanError(f"unknown prediction {self.predict!r}: choose from {', '.join(PREDICTIONS)}")
-        if self.weighting not in WEIGHTINGS:
-            raise BridgeplanError(f"unknown weighting {self.weighting!r}: choose from {', '.join(WEIGHTINGS)}")
+        check_choice("prediction", self.predict, PREDICTIONS)
+        check_choice("weighting", self.weighting, WEIGHTINGS)
         if self.sampler not in SAMPLERS:
             raise BridgeplanError(f"unknown sampler {self.sampler!r} for the bridge: choose from {', '.join(SAMPLERS)}")
 

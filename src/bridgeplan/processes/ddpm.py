@@ -8,7 +8,7 @@ from functools import cached_property
 
 import torch
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import ddim, ddpm_ancestral
 from bridgeplan.processes.schedules import cosine_betas
@@ -40,8 +40,7 @@ class DDPM(Process):
     def __post_init__(self):
         if self.steps < 1:
             raise BridgeplanError(f"diffusion steps must be >= 1, got {self.steps}")
-        if self.sampler not in SAMPLERS:
-            raise BridgeplanError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
+        check_choice("sampler", self.sampler, SAMPLERS)
         if self.eta < 0:
             raise BridgeplanError(f"eta must be >= 0, got {self.eta}")
 

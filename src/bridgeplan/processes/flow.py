@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import torch
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.processes.base import Correct, Process
 from bridgeplan.processes.samplers import X0Predictor
 from bridgeplan.processes.schedules import spaced_steps
@@ -124,8 +124,7 @@ class Flow(Process):
             raise BridgeplanError(f"flow steps must be >= 1, got {self.steps}")
         if not math.isfinite(self.sigma) or self.sigma < 0:
             raise BridgeplanError(f"flow sigma must be a finite number >= 0, got {self.sigma}")
-        if self.path not in PATHS:
-            raise BridgeplanError(f"unknown flow path {self.path!r}: choose from {', '.join(PATHS)}")
+        check_choice("flow path", self.path, PATHS)
         if self.sampler not in SAMPLERS:
             raise BridgeplanError(f"unknown sampler {self.sampler!r} for flow: choose from {', '.join(SAMPLERS)}")
         if self.sampler == "stochastic" and self.sigma == 0:

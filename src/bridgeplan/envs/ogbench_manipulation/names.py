@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 
 ROBOT_COLUMNS = 19
 EFFECTOR_XY = 12
@@ -127,7 +127,6 @@ DIFFUSION_STEPS = 20
 
 def plan_shape(name: str, preset: str) -> tuple[int, int]:
     parse_dataset_name(name)
-    if preset not in PLAN_SHAPES:
-        raise BridgeplanError(f"unknown preset {preset!r}: choose from {', '.join(PLAN_SHAPES)}")
+    check_choice("preset", preset, PLAN_SHAPES)
     return PLAN_SHAPES[preset]
 
