@@ -136,8 +136,9 @@ def section(scene: str, found: list[dict]) -> list[str]:
             mine = [r for r in final(found) if r["method"] == method and r["validation"] == validation]
             if mine:
                 rates = [100 * r["success_rate"] for r in mine]
+                beside = "" if validation else published(scene, method) or "-"
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
-                             fmt_mean_se(rates, one_seed="mean"), "" if validation else published(scene, method) or "-"])
+                             fmt_mean_se(rates, one_seed="mean"), beside])
     lines += table(["method", "tasks", "seeds", "success (%)", "published"], body)
     found_curves = curves(found)
     if found_curves:
