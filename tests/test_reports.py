@@ -478,8 +478,14 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
           replan=50)
     lines = mc.render(tmp_path).splitlines()
     assert lines.index("## cube-single-play-v0") < lines.index("## puzzle-3x3-play-v0")
+    assert lines[lines.index("## puzzle-3x3-play-v0") + 2].endswith("OGBench published: GCBC 2, GCIQL 95 (8 seeds, 1 M "
+                                                                       "steps).")
     assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) |")
     assert mc.block(tmp_path).splitlines()[2:] == [
         "- puzzle-3x3-play-v0, GCIQL (20 k steps): 90.0% (one run); OGBench published 95 (8 seeds, 1 M steps)",
         "- puzzle-3x3-play-v0, the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps): "
         "70.0% (one run)"]
+    # a dataset without GCBC or GCIQL rows: their published numbers on a line of their own
+    write(tmp_path / mc.folder("scene") / "graph-keep5-r1" / "track-replan50-seed0.json", 0.5, step=0, replan=50)
+    block = mc.block(tmp_path).splitlines()
+    assert "- scene-play-v0, OGBench published: GCBC 5, GCIQL 51 (8 seeds, 1 M steps)" in block
