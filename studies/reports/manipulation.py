@@ -24,8 +24,9 @@ READS = ()
 """Its planners are named runs of the studies, not a grid's methods."""
 PUBLISHED = {"cube-single": (6, 68), "cube-double": (1, 40), "scene": (5, 51), "puzzle-3x3": (2, 95),
              "puzzle-4x4": (0, 26)}
-"""OGBench's published success (%) of GCBC and GCIQL per play dataset (Park et al., ICLR 2025, Table 2: 8 seeds, 1 M
-steps)."""
+"""OGBench's published success (%) of GCBC and GCIQL per play dataset (Park et al., ICLR 2025, Table 2), at
+:data:`BUDGET`."""
+BUDGET = "(8 seeds, 1 M steps)"
 PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
@@ -44,12 +45,12 @@ def folder(scene: str) -> str:
 def published(scene: str, method: str) -> str | None:
     if method not in PEERS:
         return None
-    return f"{PUBLISHED[scene][PEERS.index(method)]} (8 seeds, 1 M steps)"
+    return f"{PUBLISHED[scene][PEERS.index(method)]} {BUDGET}"
 
 
 def published_line(scene: str) -> str:
     """Dataset ``scene``'s published GCBC and GCIQL, with their budget."""
-    return f"GCBC {PUBLISHED[scene][0]}, GCIQL {PUBLISHED[scene][1]} (8 seeds, 1 M steps)"
+    return f"GCBC {PUBLISHED[scene][0]}, GCIQL {PUBLISHED[scene][1]} {BUDGET}"
 
 
 def label(method: str, found: list[dict]) -> str:
