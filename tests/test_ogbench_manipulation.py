@@ -647,3 +647,18 @@ def test_a_plans_marks_are_where_its_effector_would_be():
     assert len(marks) == protocol.PLAN_MARKS and np.abs(np.ptp(np.asarray(where), axis=0)).max() > 0.01
     rows = np.linspace(0, 29, protocol.PLAN_MARKS).round().astype(int)
     assert np.allclose(marks, np.asarray(where)[rows], atol=1e-6)
+
+
+def test_the_graphs_radius_is_the_scenes_where_it_has_one():
+    """scene's states meet rarely at the family's radius (chosen on cube-single): its own, chosen on its validation
+    tasks, is the default there; the other scenes keep the family's."""
+    from types import SimpleNamespace
+
+    from bridgeplan.envs.ogbench_manipulation import GRAPH
+
+    def radius(name):
+        return FAMILY.graph_pace(SimpleNamespace(maze=name))[0]["radius"]
+
+    assert radius("scene-play-v0") == 12.0
+    others = {radius(name) for name in ("cube-single-play-v0", "cube-double-play-v0", "puzzle-3x3-play-v0")}
+    assert others == {GRAPH["radius"]}
