@@ -12,6 +12,8 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.options import (
     REQUIRED,
     add_options,
+    field_docs,
+    from_config,
     group,
     opt,
     options_from_args,
@@ -131,3 +133,40 @@ def test_a_command_overrides_a_default_or_makes_an_option_required():
         parser.parse_args([])
     with pytest.raises(BridgeplanError, match="missing option 'seed'"):
         options_from_dict(Overrides, {})
+
+
+CONFIG = '''
+from dataclasses import dataclass
+
+@dataclass(frozen=True)
+class Config:
+    """A run's config."""
+
+    steps: int = 10
+    """Optimizer steps, see
+    :func:`~pkg.train.train` and :class:`pkg.Other` (``steps`` of them)."""
+    seed: int = 0
+    width: int = 8
+    """The network's width."""
+'''
+
+
+def test_an_option_from_a_config_field_has_the_fields_docstring_as_help(tmp_path, monkeypatch):
+    """A config's field documented once: its attribute docstring, on one line and without reST marks, is the help
+    of the option that sets it; a field without one cannot be an option."""
+    (tmp_path / "a_config.py").write_text(CONFIG)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    docs = field_docs("a_config:Config")
+    assert docs == {"steps": "Optimizer steps, see train and pkg.Other (steps of them).",
+                    "width": "The network's width."}
+
+    @dataclass(kw_only=True)
+    class Train:
+        steps: int | None = from_config("a_config:Config", "steps")
+        width: int = from_config("a_config:Config", "width", default=16)
+
+    text = " ".join(parser_of(Train).format_help().split())
+    assert "--steps STEPS Optimizer steps, see train and pkg.Other (steps of them)." in text
+    assert "The network's width. (default: 16)" in text
+    with pytest.raises(TypeError, match="seed has no docstring"):
+        from_config("a_config:Config", "seed")

@@ -17,8 +17,9 @@ from pathlib import Path
 from bridgeplan import eval_commands as _ec
 from bridgeplan import option_groups as og
 from bridgeplan.errors import BridgeplanError, one_line_warnings
-from bridgeplan.options import REQUIRED, add_command, group, int_tuple, opt, positive, shared, values
+from bridgeplan.options import REQUIRED, add_command, from_config, group, int_tuple, opt, positive, shared, values
 
+TRAIN_CONFIG = "bridgeplan.config:TrainConfig"
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
 
 
@@ -150,8 +151,8 @@ class TrainCommon:
     runs_root: str = opt("runs", "where a run's directory goes unless --run-dir")
     preset: str = opt("diffuser", "the defaults per maze: diffuser (Diffuser's Maze2D settings) or cpu-small; a "
                                   "learned prior takes its planners' horizon and stride")
-    horizon: int | None = opt(None, "planned states (default: the preset's for the maze)")
-    stride: int | None = opt(None, "environment steps between planned states (default: the preset's for the maze)")
+    horizon: int | None = from_config(TRAIN_CONFIG, "horizon")
+    stride: int | None = from_config(TRAIN_CONFIG, "stride")
     training: og.Training = group(og.Training)
     device: og.Device = group(og.Device, device=None)
     threads: og.Threads = group(og.Threads)
@@ -165,24 +166,21 @@ class TrainOptions:
     process_param: list[str] | None = opt(None, "any field of the process's dataclass, e.g. beta_max=0.3 "
                                                 "(repeatable)", action="append", metavar="FIELD=VALUE")
     prior: str | None = shared(og.PlanChoice, "prior")
-    prior_run: str | None = opt(None, "run directory of `bridgeplan train-prior` (learned prior)")
+    prior_run: str | None = from_config(TRAIN_CONFIG, "prior_run")
     diffusion_steps: int | None = opt(None, "diffusion steps N")
     beta_max: float | None = opt(None, "bridge: largest beta of the schedule")
     ot_ode: bool = opt(False, "bridge: noise-free marginal and sampler")
     consistent: bool = opt(False, "bridge: train on the marginals the sampling chain implies (exact at any N; I2SB's "
                                   "differ at small N)")
-    dim: int | None = opt(None, "U-Net base width")
-    dim_mults: str | None = opt(None, "U-Net channel multipliers, e.g. 1,4,8")
-    grad_accum: int | None = opt(None, "gradient accumulation steps per optimizer step")
-    ema_decay: float | None = opt(None, "decay of the EMA weights")
-    ema_every: int | None = opt(None, "update the EMA weights every this many optimizer steps")
-    ema_start: int | None = opt(None, "before this step the EMA weights are a plain copy of the model")
-    hold_share: float | None = opt(None, "share of training windows that arrive early and wait still at their end, so "
-                                         "plans may reach the goal before the horizon's end (default 0, Diffuser's)")
-    subgoal_every: int | None = opt(None, "train a hierarchy's low level: every J-th planned state is a condition (a "
-                                          "high level's subgoals when planning; `bridgeplan hierarchy eval`)")
-    precision: str | None = opt(None, "bf16: forward and backward under bfloat16 autocast (refused where the device "
-                                      "lacks it)")
+    dim: int | None = from_config("bridgeplan.nets.unet:UNetConfig", "dim")
+    dim_mults: str | None = from_config("bridgeplan.nets.unet:UNetConfig", "dim_mults", metavar="M1,M2,...")
+    grad_accum: int | None = from_config(TRAIN_CONFIG, "grad_accum")
+    ema_decay: float | None = from_config(TRAIN_CONFIG, "ema_decay")
+    ema_every: int | None = from_config(TRAIN_CONFIG, "ema_every")
+    ema_start: int | None = from_config(TRAIN_CONFIG, "ema_start")
+    hold_share: float | None = from_config(TRAIN_CONFIG, "hold_share")
+    subgoal_every: int | None = from_config(TRAIN_CONFIG, "subgoal_every")
+    precision: str | None = from_config(TRAIN_CONFIG, "precision")
     compile: bool | None = shared(_ec.EvalOptions, "compile", default=None)
 
 

@@ -81,6 +81,7 @@ class TrainConfig:
     lr: float = 2e-4
     """Adam's learning rate (a positive, finite number)."""
     ema_decay: float = 0.995
+    """Decay of the EMA weights (Diffuser: 0.995); plans are sampled from them."""
     ema_every: int = 10
     """Update the EMA weights every this many optimizer steps."""
     ema_start: int = 2000
@@ -88,7 +89,9 @@ class TrainConfig:
     checkpoint_every: int = 10_000
     """Write the resumable checkpoint and an EMA snapshot every this many steps."""
     log_every: int = 100
+    """Write a line of ``metrics.jsonl`` every this many steps."""
     seed: int = 0
+    """Seeds the initial weights and the windows' sampling."""
     device: str = "auto"
     """``auto`` (CUDA when present), ``cpu``, ``cuda``, ``cuda:1``, ..."""
     threads: int = 0

@@ -105,7 +105,7 @@ class GCBCConfig:
     """Torch CPU threads (0: one on a CPU device, see :func:`bridgeplan.device.configure_threads`)."""
     agent: str = "gcbc"
     """What is trained: ``gcbc`` (the policy alone) or ``gciql`` (:mod:`bridgeplan.gciql`: a value, critics and the
-    policy as their actor; the fields below are its, defaults OGBench's ``impls/agents/gciql.py``)."""
+    policy as their actor; the GCIQL fields are its, defaults OGBench's ``impls/agents/gciql.py``)."""
     alpha: float = 0.3
     """GCIQL: the behaviour-cloning weight of the DDPG+BC actor (OGBench 0.3; hyperparameters.sh: 1.0 on every
     manipulation dataset, 0.003 on pointmaze)."""

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
-from bridgeplan.errors import BridgeplanError
 from bridgeplan.eval_commands import GCBC_EVAL_DESCRIPTION, GCBCEvalOptions, gcbc_eval
 from bridgeplan.option_groups import Device, Environment, Progress, RunDir, Threads, Training
-from bridgeplan.options import REQUIRED, add_command, group, opt, values
+from bridgeplan.options import REQUIRED, add_command, from_config, group, int_tuple, opt, values
+
+GCBC_CONFIG = "bridgeplan.gcbc:GCBCConfig"
 
 
 @dataclass(kw_only=True)
@@ -17,17 +18,16 @@ class GCBCTrainOptions:
     run: RunDir = group(RunDir, run_dir=REQUIRED)
     environment: Environment = group(Environment)
     training: Training = group(Training)
-    p_curgoal: float | None = opt(None, "probability that the goal is the current state")
-    p_trajgoal: float | None = opt(None, "probability that the goal is a future state of the same trajectory")
-    p_randomgoal: float | None = opt(None, "probability that the goal is a random state of the dataset")
-    discount: float | None = opt(None, "the geometric offsets' discount (--geom-sample)")
-    alpha: float | None = opt(None, "GCIQL: the behaviour-cloning weight of the DDPG+BC actor")
-    expectile: float | None = opt(None, "GCIQL: the value's expectile")
-    tau: float | None = opt(None, "GCIQL: the target critics' update rate")
-    hidden_dims: str | None = opt(None, "comma-separated widths (default 512,512,512)")
-    agent: str | None = opt(None, "gcbc (default) or gciql (a value and critics, the policy their actor; --alpha, "
-                                  "--expectile, --tau are its)")
-    geom_sample: bool = opt(False, "future goals at geometric offsets")
+    p_curgoal: float | None = from_config(GCBC_CONFIG, "p_curgoal")
+    p_trajgoal: float | None = from_config(GCBC_CONFIG, "p_trajgoal")
+    p_randomgoal: float | None = from_config(GCBC_CONFIG, "p_randomgoal")
+    discount: float | None = from_config(GCBC_CONFIG, "discount")
+    alpha: float | None = from_config(GCBC_CONFIG, "alpha")
+    expectile: float | None = from_config(GCBC_CONFIG, "expectile")
+    tau: float | None = from_config(GCBC_CONFIG, "tau")
+    hidden_dims: str | None = from_config(GCBC_CONFIG, "hidden_dims", metavar="W1,W2,...")
+    agent: str | None = from_config(GCBC_CONFIG, "agent")
+    geom_sample: bool = from_config(GCBC_CONFIG, "geom_sample", default=False)
     device: Device = group(Device, device=None)
     threads: Threads = group(Threads)
     progress: Progress = group(Progress)
@@ -53,18 +53,11 @@ def _cmd_gcbc_train(o: GCBCTrainOptions) -> int:
     from bridgeplan.gcbc import GCBCConfig, train_gcbc
     from bridgeplan.paths import checkpoint_path
 
-    given = values(o)
-    given = {f: given[f] for f in ("maze", "steps", "minutes", "batch_size", "lr", "seed", "p_curgoal", "p_trajgoal",
-                                   "p_randomgoal", "discount", "checkpoint_every", "log_every", "threads", "device",
-                                   "agent", "alpha", "expectile", "tau") if given[f] is not None}
-    if o.hidden_dims:
-        try:
-            given["hidden_dims"] = tuple(int(v) for v in o.hidden_dims.split(","))
-        except ValueError:
-            raise BridgeplanError(f"--hidden-dims takes comma-separated integers, got {o.hidden_dims!r}") from None
-    if o.geom_sample:
-        given["geom_sample"] = True
-    run = train_gcbc(GCBCConfig(dataset=o.dataset, **given), Path(o.run.run_dir), resume=o.run.resume,
+    options = values(o)  # the config's fields given (not None), by the same names
+    given = {f.name: options[f.name] for f in fields(GCBCConfig) if options.get(f.name) is not None}
+    if o.hidden_dims is not None:
+        given["hidden_dims"] = int_tuple(o.hidden_dims, "--hidden-dims")
+    run = train_gcbc(GCBCConfig(**given), Path(o.run.run_dir), resume=o.run.resume,
                      progress=not o.progress.no_progress)
     print(f"trained {run} (step {load_checkpoint(checkpoint_path(run))['step']})")
     return 0

@@ -10,11 +10,15 @@ values. A field without a default is required: a positional argument, or a requi
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import functools
+import importlib.util
+import re
 import types
 import typing
 from collections.abc import Collection, Iterator, Mapping
+from pathlib import Path
 from typing import Any, Literal
 
 from bridgeplan.errors import BridgeplanError
@@ -31,6 +35,36 @@ def opt(default: Any = dataclasses.MISSING, help: str = "", **argparse_kwargs) -
     if isinstance(default, (list, tuple)):
         return dataclasses.field(default_factory=lambda: list(default), metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)
+
+
+def from_config(config: str, name: str, default: Any = None, **argparse_kwargs) -> Any:
+    """An option that sets the field ``name`` of the config dataclass ``config`` (``"module:Class"``, a run's saved
+    config): its help is that field's own docstring (:func:`field_docs`), declared there once; ``default`` None: the
+    config's value (or its preset's)."""
+    docs = field_docs(config)
+    if name not in docs:
+        raise TypeError(f"{config}.{name} has no docstring to be an option's help")
+    return opt(default, docs[name], **argparse_kwargs)
+
+
+_ROLE = re.compile(r":[a-z]+:`(~?)([^`<]*?)\s*(?:<[^>]*>)?`")
+
+
+@functools.cache
+def field_docs(config: str) -> dict[str, str]:
+    """The string under each field of the dataclass ``config`` (``"module:Class"``; its attribute docstring, as Sphinx
+    reads it), on one line, its reST marks plain (````x```` -> x, ``:func:`~a.b``` -> b). Read from the module's
+    source, not imported: a command's options need no torch."""
+    module, name = config.split(":")
+    source = Path(importlib.util.find_spec(module).origin).read_text()
+    body = next(node for node in ast.parse(source).body if isinstance(node, ast.ClassDef) and node.name == name).body
+    docs = {}
+    for field, doc in zip(body, body[1:]):
+        if (isinstance(field, ast.AnnAssign) and isinstance(field.target, ast.Name) and isinstance(doc, ast.Expr)
+                and isinstance(doc.value, ast.Constant) and isinstance(doc.value.value, str)):
+            text = _ROLE.sub(lambda m: m.group(2).rsplit(".", 1)[-1] if m.group(1) else m.group(2), doc.value.value)
+            docs[field.target.id] = " ".join(text.replace("``", "").split())
+    return docs
 
 
 def shared(options: type, name: str, **default) -> Any:
