@@ -17,7 +17,17 @@ from pathlib import Path
 from bridgeplan import eval_commands as _ec
 from bridgeplan import option_groups as og
 from bridgeplan.errors import BridgeplanError, one_line_warnings
-from bridgeplan.options import REQUIRED, add_command, from_config, group, int_tuple, opt, positive, shared, values
+from bridgeplan.options import (
+    REQUIRED,
+    add_command,
+    config_fields,
+    from_config,
+    group,
+    int_tuple,
+    opt,
+    positive,
+    shared,
+)
 
 TRAIN_CONFIG = "bridgeplan.config:TrainConfig"
 DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
@@ -191,24 +201,13 @@ def _add_train_commands(sub) -> None:
                 help="train the learned prior (MLP on start and goal)")
 
 
-def _given(options, names) -> dict:
-    """The options among ``names`` that were given (not None)."""
-    given = values(options)
-    return {n: given[n] for n in names if given[n] is not None}
-
-
-_COMMON = ("horizon", "stride", "steps", "minutes", "batch_size", "lr", "checkpoint_every", "log_every", "seed",
-           "device", "threads")
-
-
 def _cmd_train(o: TrainOptions) -> int:
     from bridgeplan import config as cfg
     from bridgeplan.train import train
 
     c = o.common
     base = cfg.preset_config(c.environment.maze, c.preset)
-    over = _given(o, _COMMON + ("prior", "prior_run", "grad_accum", "ema_decay", "ema_every", "ema_start",
-                                "hold_share", "precision", "compile", "subgoal_every"))
+    over = config_fields(o, cfg.TrainConfig, leave=("maze", "dataset", "preset", "process", "model"))
     process = _process_params(o, o.process or base.process.name)
     if o.process is not None:
         process["name"] = o.process
@@ -228,7 +227,8 @@ def _process_params(o: TrainOptions, name: str) -> dict:
     from bridgeplan.processes import parse_process_params
 
     params = parse_process_params(name, o.process_param or [])
-    params |= _given(o, ("beta_max",))
+    if o.beta_max is not None:
+        params["beta_max"] = o.beta_max
     if o.diffusion_steps is not None:
         params["steps"] = o.diffusion_steps
     if params.get("teacher"):  # a distillation's teacher run, found from anywhere (as the dataset is)
@@ -249,7 +249,7 @@ def _cmd_train_prior(o: TrainCommon) -> int:
     from bridgeplan.train import train_prior
 
     config = cfg.PriorTrainConfig(maze=o.environment.maze, dataset=_dataset_ref(o.dataset.dataset),
-                                  **_given(o, _COMMON + ("preset",)))
+                                  **config_fields(o, cfg.PriorTrainConfig, leave=("maze", "dataset")))
     run_dir = Path(o.run.run_dir) if o.run.run_dir else Path(o.runs_root) / config.run_name()
     train_prior(config, run_dir, resume=o.run.resume, progress=not o.progress.no_progress)
     print(f"run: {run_dir}")
@@ -448,7 +448,7 @@ def _cmd_demo(o: DemoOptions) -> int:
     settings = SweepSettings(maze=maze, dataset_steps=o.dataset_steps, preset="cpu-small",
                              train_steps=o.steps, checkpoint_every=max(1, o.steps // 3),
                              episodes=o.episodes, seeds=(o.seed,), results_dir=o.out,
-                             overrides=_given(o, ("threads",)))
+                             overrides={} if o.threads.threads is None else {"threads": o.threads.threads})
     added = run_sweep([demo], settings)
     report = write_report(Path(o.out))
     print(f"\n{last_snapshot_table(ResultsStore(store_path(o.out)), demo.name)}\n{DEMO_READING}")

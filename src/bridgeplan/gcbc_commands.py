@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.eval_commands import GCBC_EVAL_DESCRIPTION, GCBCEvalOptions, gcbc_eval
 from bridgeplan.option_groups import Device, Environment, Progress, RunDir, Threads, Training
-from bridgeplan.options import REQUIRED, add_command, from_config, group, int_tuple, opt, values
+from bridgeplan.options import REQUIRED, add_command, config_fields, from_config, group, int_tuple, opt
 
 GCBC_CONFIG = "bridgeplan.gcbc:GCBCConfig"
 
@@ -53,8 +53,7 @@ def _cmd_gcbc_train(o: GCBCTrainOptions) -> int:
     from bridgeplan.gcbc import GCBCConfig, train_gcbc
     from bridgeplan.paths import checkpoint_path
 
-    options = values(o)  # the config's fields given (not None), by the same names
-    given = {f.name: options[f.name] for f in fields(GCBCConfig) if options.get(f.name) is not None}
+    given = config_fields(o, GCBCConfig)
     if o.hidden_dims is not None:
         given["hidden_dims"] = int_tuple(o.hidden_dims, "--hidden-dims")
     run = train_gcbc(GCBCConfig(**given), Path(o.run.run_dir), resume=o.run.resume,

@@ -226,6 +226,14 @@ def values(options) -> dict[str, Any]:
     return out
 
 
+def config_fields(options, config: type, leave: Collection[str] = ()) -> dict[str, Any]:
+    """The options of ``options`` that were given (not None) and set a field of the dataclass ``config`` by its name,
+    less ``leave`` (those the caller sets itself): what a command passes on to its config."""
+    given = values(options)
+    return {f.name: given[f.name] for f in dataclasses.fields(config)
+            if f.name not in leave and given.get(f.name) is not None}
+
+
 def options_from_args(options: type, args: argparse.Namespace):
     """``options`` filled from the arguments :func:`add_options` parsed."""
     return _build(options, vars(args))
