@@ -662,3 +662,74 @@ def test_the_graphs_radius_is_the_scenes_where_it_has_one():
     assert radius("scene-play-v0") == 12.0
     others = {radius(name) for name in ("cube-single-play-v0", "cube-double-play-v0", "puzzle-3x3-play-v0")}
     assert others == {GRAPH["radius"]}
+
+
+def test_the_objects_apart_move_one_cube_at_a_time():
+    """Of the cubes not yet within the task's 0.4 (0.04 m) of their goal, the next moved is one whose goal no other cube
+    occupies, the lowest goal first (a stack's bottom); when all are placed, the first."""
+    from bridgeplan.graph import ObjectGraphs
+
+    graphs = ObjectGraphs([], ((0, 1, 2), (3, 4, 5)), tolerance=0.4)
+
+    def state(a, b):
+        return np.array([*a, *b], np.float64)
+
+    done = state((0, 0, 0), (2, 0, 0))
+    assert graphs.next_object(state((0, 0, 0), (1, 1, 0)), done) == 1  # cube 0 is placed (0.3 < 0.4 would be too)
+    assert graphs.next_object(state((0.3, 0, 0), (1, 1, 0)), done) == 1
+    assert graphs.next_object(state((1, 0, 0), (1, 1, 0)), done) == 0
+    assert graphs.next_object(state((1, 1, 0), (0, 0.2, 0)), done) == 1  # cube 0's goal is taken by cube 1
+    stack = state((0, 0, 0.4), (0, 0, 0))  # cube 1 below cube 0
+    assert graphs.next_object(state((1, 1, 0), (2, 2, 0)), stack) == 1
+    assert graphs.next_object(state((0, 0, 0), (2, 0, 0)), state((2, 0, 0), (0, 0, 0))) == 0  # a swap: the first
+    assert graphs.next_object(done, done) == 0
+
+
+def test_the_objects_apart_over_two_cubes(tmp_path):
+    """On cube-double the objects' graphs are the arm's and one cube's columns each (the cube's weighted as the
+    family's one graph weighs the goal's), the other cube left out; a query moves the cube not at its goal: its path
+    ends at that cube's goal, carried by the data's own states. cube-double only: a puzzle's buttons and scene's locks
+    are not objects apart."""
+    from types import SimpleNamespace
+
+    from bridgeplan.envs.ogbench_manipulation import GRAPH_GOAL_WEIGHT
+    from bridgeplan.graph import ObjectGraphs, for_stream
+
+    for name in ("puzzle-3x3-play-v0", "scene-play-v0"):
+        assert FAMILY.graph_objects(SimpleNamespace(maze=name)) is None
+    generate_dataset("cube-double-play-v0", tmp_path, seed=0, episodes=3, episode_steps=301, progress=False)
+    stream = FAMILY.load_stream(str(tmp_path / "cube-double-play-v0.npz"), "cube-double-play-v0")
+    graphs, settings = for_stream(stream, FAMILY, {"keep": 2, "radius": 6.0}, objects=True)
+    assert isinstance(graphs, ObjectGraphs) and graphs.tolerance == pytest.approx(0.4)
+    assert graphs.objects == ((19, 20, 21), (28, 29, 30))
+    for graph, cube in zip(graphs.graphs, graphs.objects):
+        assert graph.space.columns == (12, 13, 14, *cube) and graph.space.goal == cube
+        std = stream.states[:, list(cube)].std(axis=0)
+        np.testing.assert_allclose(graph.space.scale[3:], std / GRAPH_GOAL_WEIGHT)
+    # a goal that moves cube 1 only: where the data put it later in the first episode
+    start, goal = stream.states[0], stream.states[0].copy()
+    moved = np.flatnonzero(np.linalg.norm(stream.states[:301, 28:31] - start[28:31], axis=1) > 1.0)
+    assert len(moved), "the tiny data never moves cube 1 far"
+    goal[28:31] = stream.states[moved[0], 28:31]
+    path = graphs.path(start, goal)
+    assert graphs.chosen == [1]
+    np.testing.assert_allclose(path[-1, 28:31], goal[28:31])
+    assert (np.abs(np.diff(path[:, 28:31], axis=0)) > 1e-3).any()  # the data carries the cube
+    summary = graphs.summary()
+    assert summary["objects"] == 2 and summary["paths_per_object"] == [0, 1] and summary["paths_found"] == 1.0
+    assert summary["nodes"] == sum(len(g.nodes) for g in graphs.graphs)
+
+
+def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
+    """``bridgeplan graph --objects``: its JSON says so (its name, its method, its config) and counts the searches per
+    object; with a low level it is refused before anything is read."""
+    graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
+             "--keep", "2", "--no-progress", "--objects"]
+    assert _error(capsys, [*graph, "--low", str(tmp_path / "no-run")]).startswith("error: --objects: ")
+    assert main([*graph, "--out", str(tmp_path / "objects.json")]) == 0
+    row = json.loads((tmp_path / "objects.json").read_text())
+    assert row["method"] == "dataset graph, objects apart" and row["config"]["graph"]["objects"] is True
+    assert row["graph"]["objects"] == 1 and row["graph"]["paths_per_object"] == [1]
+    assert main([*graph[:-1], "--out", str(tmp_path / "one.json")]) == 0  # one cube: the one graph's own paths
+    one = json.loads((tmp_path / "one.json").read_text())
+    assert one["graph"]["path_steps"] == row["graph"]["path_steps"] and "objects" not in one["config"]["graph"]

@@ -489,3 +489,8 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     write(tmp_path / mc.folder("scene") / "graph-keep5-r1" / "track-replan50-seed0.json", 0.5, step=0, replan=50)
     block = mc.block(tmp_path).splitlines()
     assert "- scene-play-v0, OGBench published: GCBC 5, GCIQL 51 (8 seeds, 1 M steps)" in block
+    # the objects apart: named so
+    write(tmp_path / mc.folder("cube-double") / "graph-keep5-r1-objects" / "track-replan150-seed0.json", 0.2, step=0,
+          replan=150)
+    assert ("- cube-double-play-v0, the dataset graph (no network: every 5th state, radius 1, one graph per cube, "
+            "replanned every 150 steps): 20.0% (one run)") in mc.block(tmp_path).splitlines()

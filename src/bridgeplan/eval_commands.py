@@ -236,6 +236,8 @@ class GraphOptions(LevelledEvaluation):
     low: str | None = opt(None, "a low level (trained with --subgoal-every J) that plans through the graph's path "
                                 "(default: the path alone)", metavar="RUN")
     graph: GraphSettings = group(GraphSettings)
+    objects: bool = opt(False, "the objects apart (OGBench's cubes): one graph per cube over the arm and that cube, "
+                               "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs)")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone): a PNG beside "
                               "the JSON, as `bridgeplan render` draws the environment's episodes")
     picture: Picture = group(Picture)
@@ -260,6 +262,9 @@ def graph_eval(o: GraphOptions) -> int:
         raise BridgeplanError("--video goes with --render")
     if o.render and o.low is not None:
         raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
+    if o.objects and o.low is not None:
+        raise BridgeplanError("--objects: the objects' graphs are executed alone, not a low level's high level: "
+                              "not with --low")
     if o.low is not None:  # the run named first, before the flags and files that go with it
         resolve_run(Path(o.low))
     if o.tasks.episodes is not None:
@@ -290,11 +295,12 @@ def graph_eval(o: GraphOptions) -> int:
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
                             progress=not o.progress.no_progress,
-                            picture=draw and (lambda *args: heard.append(args)))
+                            picture=draw and (lambda *args: heard.append(args)), objects=o.objects)
     d = result.to_dict()
     g = d["graph"]
     tag = plan.resolved(result.family, env).tag()
-    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + (f"-nfe{d['nfe']}" if o.low else "") + (
+    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + ("-objects" if o.objects else "") + (
+        f"-nfe{d['nfe']}" if o.low else "") + (
         f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
     out = _out(o.output, o.tasks, folder, name)
     drawn = [path for args in heard for path in draw(*args, out.with_suffix(".png"),

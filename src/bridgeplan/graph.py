@@ -26,6 +26,11 @@ stream whose loops are closed by jumps within it). So is the space distances are
 standardized over the data, the objects' weighted so that a jump moves the arm, not the objects (OGBench
 manipulation), a goal then joining the nodes whose objects are where the goal puts them.
 
+Where several objects must each be moved (OGBench's cube-double), the objects' configurations rarely recur in the
+data: the graph over all of them joins almost nothing. :class:`ObjectGraphs` (``bridgeplan graph --objects``) takes
+them apart: one graph per object over the arm and that object alone, and each decision moves one object not yet at its
+goal (``Family.graph_objects``).
+
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into decisions, and ``bridgeplan
 graph`` scores them on the environment's tasks: what the data's connectivity alone allows, the floor a stitching
 planner must beat.
@@ -225,14 +230,8 @@ class DatasetGraph:
 
     def summary(self) -> dict:
         """The graph's size and what its queries so far found (a result's ``graph`` entry, beside its settings)."""
-        out = {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // 2), "jumps": self.jumps,
-               "step": self.step}
-        if self.queries:
-            steps, found, pieces = (np.array(v) for v in zip(*self.queries))
-            out.update({"paths_found": float(found.mean()),
-                        "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
-                        "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}})
-        return out
+        return {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // 2), "jumps": self.jumps,
+                "step": self.step, **queries_summary(self.queries)}
 
     def _ends(self, points: np.ndarray, tree: cKDTree) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per point (of ``tree``'s space), the nodes it joins (within ``reach``, else the nearest) and the steps to
@@ -326,19 +325,90 @@ class DatasetGraph:
         return a + (b - a) * (np.arange(1, n + 1) / n)[:, None]
 
 
-def for_stream(stream: Stream, family, settings: dict | None = None) -> tuple[DatasetGraph, dict]:
+def queries_summary(queries: list[tuple[int, bool, int]]) -> dict:
+    """What a graph's queries (:attr:`DatasetGraph.queries`) found: the share with a path, the data's episodes per
+    path, the paths' steps; empty before any."""
+    if not queries:
+        return {}
+    steps, found, pieces = (np.array(v) for v in zip(*queries))
+    return {"paths_found": float(found.mean()),
+            "episodes_per_path": {"mean": float(pieces.mean()), "max": int(pieces.max())},
+            "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}}
+
+
+@dataclass
+class ObjectGraphs:
+    """The objects apart: one :class:`DatasetGraph` per object, over the arm and that object's position alone (the
+    others' columns left out), and each query searched in the graph of the object it moves next (:meth:`next_object`).
+    A path moves one object; the next decision, the next. The same queries as a :class:`DatasetGraph`'s."""
+
+    graphs: list[DatasetGraph]
+    objects: tuple[tuple[int, ...], ...]
+    """Each object's position columns (x, y, z) in the state, the goal's alike."""
+    tolerance: float
+    """How near its goal an object is done (the task's own success distance, in the state's units)."""
+    chosen: list[int] = field(default_factory=list)
+    """Per query, the object searched for."""
+
+    def next_object(self, start: np.ndarray, goal: np.ndarray) -> int:
+        """The object to move from state ``start`` toward goal ``goal``: of those farther than :attr:`tolerance` from
+        their goal, one whose goal no other object occupies (in the plane; a swap has none: any), the lowest goal first
+        (a stack's bottom first); the first object when all are done."""
+        at = np.stack([start[list(c)] for c in self.objects])
+        to = np.stack([goal[list(c)] for c in self.objects])
+        away = np.flatnonzero(np.linalg.norm(at - to, axis=1) > self.tolerance)
+        if len(away) == 0:
+            return 0
+        free = [i for i in away
+                if all(np.linalg.norm(at[j, :2] - to[i, :2]) > self.tolerance for j in range(len(at)) if j != i)]
+        return int(min(free or away, key=lambda i: to[i, 2]))
+
+    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """``[L, obs_dim]`` the cheapest path that moves :meth:`next_object` to its goal (:meth:`DatasetGraph.path`
+        in its graph)."""
+        i = self.next_object(np.asarray(start, np.float64), np.asarray(goal, np.float64))
+        self.chosen.append(i)
+        return self.graphs[i].path(start, goal)
+
+    @property
+    def queries(self) -> list[tuple[int, bool, int]]:
+        return [q for g in self.graphs for q in g.queries]
+
+    def summary(self) -> dict:
+        """Their sizes summed and what their queries found, with the queries per object."""
+        return {"nodes": sum(len(g.nodes) for g in self.graphs),
+                "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
+                "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
+                "objects": len(self.objects), **queries_summary(self.queries),
+                "paths_per_object": np.bincount(self.chosen, minlength=len(self.objects)).tolist()}
+
+
+def for_stream(stream: Stream, family, settings: dict | None = None,
+               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs, dict]:
     """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
-    pace (``Family.graph_pace``) and space (``Family.graph_space``); returns it and the settings it was built with."""
+    pace (``Family.graph_pace``) and space (``Family.graph_space``); ``objects``: one per object
+    (:class:`ObjectGraphs`, ``Family.graph_objects``). Returns it and the settings it was built with."""
     defaults, step, within = family.graph_pace(stream)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
     wanted = family.graph_space(stream)
-    space = (GraphSpace.plane(stream.layout) if wanted is None
-             else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal))
-    step = space.pace(stream.states, stream.segment_starts) if step is None else step
-    graph = DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout, step=step,
-                               within_episodes=within, space=space)
-    return graph, settings
+    if objects:
+        found = family.graph_objects(stream)
+        if found is None or wanted is None:
+            raise BridgeplanError(f"--objects: {stream.maze}'s goals move no objects apart (OGBench's cube "
+                                  f"datasets do; a puzzle's buttons toggle one another)")
+        parts, tolerance = found
+        columns, weight = wanted
+        arm = tuple(c for c in columns if c not in stream.layout.goal)
+        spaces = [GraphSpace.standardized(stream.states, arm + part, weight, goal=part) for part in parts]
+    else:
+        spaces = [GraphSpace.plane(stream.layout) if wanted is None
+                  else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal)]
+    graphs = [DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout,
+                                 step=space.pace(stream.states, stream.segment_starts) if step is None else step,
+                                 within_episodes=within, space=space)
+              for space in spaces]
+    return (ObjectGraphs(graphs, parts, tolerance) if objects else graphs[0]), settings
 
 
 def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
@@ -353,7 +423,7 @@ class GraphSource:
     """The graph's paths as decisions (``replan.DecisionSource``): each decision plans from the episodes' current
     states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took."""
 
-    graph: DatasetGraph
+    graph: DatasetGraph | ObjectGraphs
     length: int
     plan_seconds: float = 0.0
     plans_sampled: int = 0
@@ -371,7 +441,7 @@ class GraphSource:
 class GraphDecisions:
     """The graph's decisions for :func:`bridgeplan.evaluate.evaluate` (no network: any device)."""
 
-    graph: DatasetGraph
+    graph: DatasetGraph | ObjectGraphs
     length: int
     device: object = "cpu"
 

@@ -464,7 +464,7 @@ def graph_hierarchy(low_run: Path, dataset: str | None = None, settings: dict | 
 def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
                    low_run: Path | None = None, nfe_low: int | None = None, replan_high_every: int | None = None,
                    low_snapshot: int | None = None, device: str = "auto", progress: bool = False,
-                   picture: Callable | None = None) -> EvalResult:
+                   picture: Callable | None = None, objects: bool = False) -> EvalResult:
     """The dataset graph over ``dataset`` (of ``tasks``' environment; ``bridgeplan.graph``, built with ``settings``
     over its family's) on ``tasks``: the JSON of ``bridgeplan graph``, with the graph's settings, size and what its
     queries found (``graph``) and the data's identity (``config``).
@@ -474,7 +474,8 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     hierarchy's high level (:class:`GraphHierarchy`, :func:`evaluate_hierarchy`): the low level plans through its
     path's next states every ``execution.replan_every`` steps (default: its subgoal spacing), the path searched
     again every ``replan_high_every`` steps if given. ``picture(decisions, tasks, execution)`` (the graph alone) hears
-    the graph's decisions after the evaluation (``bridgeplan graph --render``)."""
+    the graph's decisions after the evaluation (``bridgeplan graph --render``). ``objects``: the graph alone, one per
+    object (:class:`bridgeplan.graph.ObjectGraphs`)."""
 
     env, family = tasks.env, family_of(tasks.env)
     if low_run is None:
@@ -484,17 +485,19 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
 
         stream = family.load_stream(dataset, env)
         t0 = time.perf_counter()
-        graph, settings = for_stream(stream, family, settings)
+        graph, settings = for_stream(stream, family, settings, objects)
         build_seconds = time.perf_counter() - t0
         execution = (execution or Execution()).resolved(family, env)
         length = tasks.episode_steps + 1
-        entries = {"kind": "graph", "run": f"graph over {env}", "step": 0, "method": "dataset graph", "nfe": 0,
+        entries = {"kind": "graph", "run": f"graph over {env}", "step": 0,
+                   "method": "dataset graph, objects apart" if objects else "dataset graph", "nfe": 0,
                    "horizon": length, "stride": 1, "plan_span": tasks.episode_steps}
         seen = {}
         result, _ = evaluate(GraphDecisions(graph, length), family, tasks, execution, entries,
                              after_run=lambda _: seen.update(graph=graph.summary()), progress=progress)
         result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": build_seconds}
-        result.config = {"dataset": env, "dataset_identity": stream.identity(), "graph": settings}
+        result.config = {"dataset": env, "dataset_identity": stream.identity(),
+                         "graph": {**settings, "objects": True} if objects else settings}
         if picture is not None:
             picture(GraphDecisions(graph, length), tasks, execution)
         return result

@@ -31,7 +31,7 @@ PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
-GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)")
+GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?")
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -60,7 +60,8 @@ def label(method: str, found: list[dict]) -> str:
         return LABELS.get(method, method)
     every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
-    return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{replan})"
+    apart = ", one graph per cube" if m[3] else ""
+    return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{apart}{replan})"
 
 
 def rows(root: Path, scene: str) -> list[dict]:

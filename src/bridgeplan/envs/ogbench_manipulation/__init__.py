@@ -16,6 +16,9 @@ from pathlib import Path
 from bridgeplan.envs.family import Family
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
+    CUBE_COLUMNS,
+    CUBE_TOLERANCE,
+    EFFECTOR_SCALE,
     EFFECTOR_XY,
     ROBOT_COLUMNS,
     names,
@@ -159,6 +162,16 @@ class OGBenchManipulation(Family):
         objects' weighted by :data:`GRAPH_GOAL_WEIGHT`: what a task moves, and the arm that moves it; the arm's joints,
         velocities and gripper follow from these."""
         return tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3)) + stream.layout.goal, GRAPH_GOAL_WEIGHT
+
+    def graph_objects(self, stream) -> tuple[tuple[tuple[int, ...], ...], float] | None:
+        """The cubes' positions, each done within 0.04 m of its goal (0.4 in the state's units, as ``info["success"]``);
+        None where buttons, a drawer or a window are among the goals (a puzzle's buttons toggle one another; scene's
+        lock its drawer and window)."""
+        scene = parse_dataset_name(stream.maze).scene
+        if scene.buttons or scene.drawer_window:
+            return None
+        first = [ROBOT_COLUMNS + CUBE_COLUMNS * i for i in range(scene.cubes)]
+        return tuple(tuple(range(c, c + 3)) for c in first), CUBE_TOLERANCE * EFFECTOR_SCALE
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body

@@ -25,6 +25,8 @@ EFFECTOR_CENTRE, EFFECTOR_SCALE = (0.425, 0.0, 0.0), 10.0
 """The observation's effector position is its world position less this centre, times this scale
 (``compute_observation``)."""
 CUBE_COLUMNS = 9
+CUBE_TOLERANCE = 0.04
+"""How near its target a cube is placed (m): ``info["success"]``'s."""
 BUTTON_COLUMNS = 4
 ACT_DIM = 5
 """Effector x, y, z, yaw and gripper, each in [-1, 1]."""
