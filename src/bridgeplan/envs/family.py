@@ -144,7 +144,8 @@ class Family:
     # --- plans -------------------------------------------------------------------------------------------------
 
     def plan_shape(self, env: str, preset: str) -> tuple[int, int]:
-        """``(horizon, stride)`` of ``preset``'s plans in ``env`` (``diffuser`` or ``cpu-small``)."""
+        """``(horizon, stride)`` of ``preset``'s plans in ``env`` (``diffuser`` or ``cpu-small``: one of
+        ``config.PRESETS``, checked there, :func:`bridgeplan.config.plan_shape`)."""
         raise NotImplementedError
 
     def diffusion_steps(self, env: str) -> int:

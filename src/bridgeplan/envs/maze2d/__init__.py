@@ -69,11 +69,7 @@ class Maze2D(Family):
         """Diffuser's horizon at stride 1 for ``diffuser``; for ``cpu-small`` the same span planned every
         ``stride``-th step where that is what lets a CPU learn the maze in minutes (measured in docs/results)."""
         self.check(env)
-        if preset == "diffuser":
-            return DIFFUSER[env][0], 1
-        if preset == "cpu-small":
-            return CPU_SMALL_SHAPE[env]
-        raise BridgeplanError(f"unknown preset {preset!r}: choose from diffuser, cpu-small")
+        return CPU_SMALL_SHAPE[env] if preset == "cpu-small" else (DIFFUSER[env][0], 1)
 
     def diffusion_steps(self, env: str) -> int:
         return DIFFUSER[self.check(env)][1]

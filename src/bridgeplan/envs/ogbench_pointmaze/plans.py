@@ -28,7 +28,6 @@ planner learned; the stitch datasets are built to test exactly that).
 from __future__ import annotations
 
 from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, parse_dataset_name
-from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import span
 
 STRIDE = 8
@@ -47,9 +46,7 @@ def plan_shape(name: str, preset: str) -> tuple[int, int]:
     horizon = STITCH_HORIZON if spec.kind == "stitch" else NAVIGATE_HORIZON[spec.maze]
     if preset == "cpu-small":
         return horizon, STRIDE
-    if preset == "diffuser":
-        return 8 * -(-span(horizon, STRIDE) // 8), 1
-    raise BridgeplanError(f"unknown preset {preset!r}: choose from diffuser, cpu-small")
+    return 8 * -(-span(horizon, STRIDE) // 8), 1  # diffuser
 
 
 def episode_steps(name: str) -> int:
