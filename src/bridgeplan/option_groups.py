@@ -7,7 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from bridgeplan.options import int_tuple, opt
+from bridgeplan.options import from_config, int_tuple, opt
+
+EXECUTION = "bridgeplan.replan:Execution"
 
 
 @dataclass(kw_only=True)
@@ -81,10 +83,8 @@ class Device:
 @dataclass(kw_only=True)
 class Replanning:
     title: ClassVar[str] = "closed-loop execution (default: open loop, one plan per episode)"
-    replan_every: int | None = opt(None, "plan again from the current state every K environment steps (1..episode "
-                                         "length)", metavar="K")
-    replan_tolerance: float | None = opt(None, "also plan again, for the episodes concerned only, when the position "
-                                               "is more than D from where the plan put it (default: off)", metavar="D")
+    replan_every: int | None = from_config(EXECUTION, "replan_every", metavar="K")
+    replan_tolerance: float | None = from_config(EXECUTION, "tolerance", metavar="D")
 
 
 @dataclass(kw_only=True)
@@ -92,30 +92,20 @@ class PlanChoice:
     """How a planner's plans are made (a hierarchy's and the dataset graph's decisions do not take these)."""
 
     title: ClassVar[str] = Replanning.title
-    candidates: int = opt(1, "plans sampled per decision, in one batch; --select picks one", metavar="M")
-    select: str = opt("arrival", "arrival (earliest within the goal radius), agreement (the candidate closest to the "
-                                 "others) or walls (fewest planned positions in walls: uses the maze's wall map)")
+    candidates: int = from_config(EXECUTION, "candidates", default=1, metavar="M")
+    select: str = from_config(EXECUTION, "select", default="arrival")
     prior: str | None = opt(None, "what the process starts from: training a bridge, gaussian (the default), line, "
                                   "learned or coarse (a low level's: the line through its subgoals); evaluating, warm "
                                   "(replans start from the previous plan, shifted: processes with a prior, replanning; "
                                   "the first plan uses the run's own prior)")
-    arrival: str | None = opt(None, "end (the plan as sampled, arriving at t=H-1), truncate (cut at its first state "
-                                    "within the goal radius, then hold the goal) or keep (truncate, and replans hold "
-                                    "the goal from the step the previous plan arrived at); default: the family's "
-                                    "(Maze2D truncate, OGBench end: its episodes end at the goal) when replanning or "
-                                    "with candidates, else end")
+    arrival: str | None = from_config(EXECUTION, "arrival")
 
 
 @dataclass(kw_only=True)
 class Controller:
     title: ClassVar[str] = "controller (how a plan is executed)"
-    controller: str | None = opt("track", "track (Diffuser's: the planned states in time), pursuit (the plan's path at "
-                                          "the expert's pace: toward the first planned position --lookahead away) or "
-                                          "actions (a planner's own planned actions, Diffuser's joint state-action "
-                                          "plans); where no default is shown, the environment family's (pursuit; "
-                                          "OGBench manipulation: track)")
-    lookahead: float | None = opt(None, "pursuit: distance to the planned position driven toward (default: the "
-                                        "family's, Maze2D 1.0, OGBench 2.0)", metavar="R")
+    controller: str | None = from_config(EXECUTION, "controller", default="track")
+    lookahead: float | None = from_config(EXECUTION, "lookahead", metavar="R")
 
 
 @dataclass(kw_only=True)

@@ -70,26 +70,33 @@ def check_replanning(replan_every: int | None, tolerance: float | None, episode_
 
 @dataclass(frozen=True)
 class Execution:
-    """How plans are executed. The defaults are open loop as ever: one plan per episode, tracked to the end.
-
-    ``replan_every`` (K): plan again from the current state every K steps (1..episode length).
-    ``tolerance`` (D): also plan again when the position is more than D from where the plan put it now.
-    ``candidates`` (M): plans sampled per decision; ``select`` picks one (:data:`SELECTIONS`).
-    ``warm``: replans start from the previous plan (:class:`~bridgeplan.priors.WarmPrior`) instead of the
-    run's prior; needs a process with a prior and replanning. ``arrival``: ``end``, ``truncate`` or ``keep``
-    (see the module); None: :attr:`arrival_default` when replanning or sampling candidates, else ``end``.
-    ``controller``: ``track`` (Diffuser's) or ``pursuit`` (the plan's path at the expert's pace, toward the
-    first planned position ``lookahead`` away; :mod:`bridgeplan.envs.controllers`; None: the family's lookahead).
-    """
+    """How plans are executed (its fields' docs are the CLI's help, ``bridgeplan.option_groups``). The defaults are
+    open loop as ever: one plan per episode, tracked to the end."""
 
     replan_every: int | None = None
+    """Plan again from the current state every K environment steps (1..episode length)."""
     tolerance: float | None = None
+    """Also plan again, for the episodes concerned only, when the position is more than D from where the plan put it
+    (default: off)."""
     candidates: int = 1
+    """Plans sampled per decision, in one batch; ``select`` picks one."""
     select: str = "arrival"
+    """``arrival`` (earliest within the goal radius), ``agreement`` (the candidate closest to the others) or ``walls``
+    (fewest planned positions in walls: uses the maze's wall map)."""
     warm: bool = False
+    """Replans start from the previous plan (:class:`~bridgeplan.priors.WarmPrior`) instead of the run's prior; needs
+    a process with a prior and replanning."""
     arrival: str | None = None
+    """``end`` (the plan as sampled, arriving at t=H-1), ``truncate`` (cut at its first state within the goal radius,
+    then hold the goal) or ``keep`` (truncate, and replans hold the goal from the step the previous plan arrived at);
+    default: the family's (Maze2D truncate, OGBench end: its episodes end at the goal) when replanning or with
+    candidates, else end."""
     controller: str = "track"
+    """``track`` (Diffuser's: the planned states in time), ``pursuit`` (the plan's path at the expert's pace: toward
+    the first planned position ``lookahead`` away) or ``actions`` (a planner's own planned actions, Diffuser's joint
+    state-action plans); where no default is shown, the environment family's (pursuit; OGBench manipulation: track)."""
     lookahead: float | None = None
+    """Pursuit: distance to the planned position driven toward (default: the family's, Maze2D 1.0, OGBench 2.0)."""
     arrival_default: str = "truncate"
     """The arrival rule of replans and candidates when ``arrival`` is None: the family's
     (``Family.default_arrival``, set by :meth:`resolved`); not part of the settings' name."""
