@@ -690,13 +690,12 @@ def test_the_objects_apart_over_two_cubes(tmp_path):
     family's one graph weighs the goal's), the other cube left out; a query moves the cube not at its goal: its path
     ends at that cube's goal, carried by the data's own states. cube-double only: a puzzle's buttons and scene's locks
     are not objects apart."""
-    from types import SimpleNamespace
 
     from bridgeplan.envs.ogbench_manipulation import GRAPH_GOAL_WEIGHT
     from bridgeplan.graph import ObjectGraphs, for_stream
 
     for name in ("puzzle-3x3-play-v0", "scene-play-v0"):
-        assert FAMILY.graph_objects(SimpleNamespace(maze=name)) is None
+        assert FAMILY.graph_objects(name) is None
     generate_dataset("cube-double-play-v0", tmp_path, seed=0, episodes=3, episode_steps=301, progress=False)
     stream = FAMILY.load_stream(str(tmp_path / "cube-double-play-v0.npz"), "cube-double-play-v0")
     graphs, settings = for_stream(stream, FAMILY, {"keep": 2, "radius": 6.0}, objects=True)
@@ -726,6 +725,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
              "--keep", "2", "--no-progress", "--objects"]
     assert _error(capsys, [*graph, "--low", str(tmp_path / "no-run")]).startswith("error: --objects: ")
+    puzzle = ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(tiny_data), "--objects", "--out",
+              str(tmp_path / "puzzle.json")]
+    assert _error(capsys, puzzle).startswith("error: --objects: puzzle-3x3-play-v0's goals move no objects apart")
+    assert not (tmp_path / "puzzle.json").exists()
     assert main([*graph, "--out", str(tmp_path / "objects.json")]) == 0
     row = json.loads((tmp_path / "objects.json").read_text())
     assert row["method"] == "dataset graph, objects apart" and row["config"]["graph"]["objects"] is True

@@ -285,6 +285,10 @@ def graph_eval(o: GraphOptions) -> int:
         raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
+    if o.objects:
+        from bridgeplan.graph import objects_of
+
+        objects_of(family_of(env), env)  # refused before the data is read
     plan = execution(o.replanning, o.controller, env=env)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))

@@ -383,6 +383,15 @@ class ObjectGraphs:
                 "paths_per_object": np.bincount(self.chosen, minlength=len(self.objects)).tolist()}
 
 
+def objects_of(family, env: str) -> tuple[tuple[tuple[int, ...], ...], float]:
+    """The objects ``env``'s goals move apart (``Family.graph_objects``); none: the ``--objects`` error."""
+    found = family.graph_objects(env)
+    if found is None:
+        raise BridgeplanError(f"--objects: {env}'s goals move no objects apart (OGBench's cube datasets do; a "
+                              f"puzzle's buttons toggle one another, scene's lock its drawer and window)")
+    return found
+
+
 def for_stream(stream: Stream, family, settings: dict | None = None,
                objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs, dict]:
     """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
@@ -393,11 +402,7 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
     check_graph_settings(**settings)
     wanted = family.graph_space(stream)
     if objects:
-        found = family.graph_objects(stream)
-        if found is None or wanted is None:
-            raise BridgeplanError(f"--objects: {stream.maze}'s goals move no objects apart (OGBench's cube "
-                                  f"datasets do; a puzzle's buttons toggle one another)")
-        parts, tolerance = found
+        parts, tolerance = objects_of(family, stream.maze)
         columns, weight = wanted
         arm = tuple(c for c in columns if c not in stream.layout.goal)
         spaces = [GraphSpace.standardized(stream.states, arm + part, weight, goal=part) for part in parts]

@@ -201,9 +201,10 @@ class Family:
         (:meth:`bridgeplan.graph.GraphSpace.standardized`)."""
         return None
 
-    def graph_objects(self, stream) -> tuple[tuple[tuple[int, ...], ...], float] | None:
-        """The objects a goal moves, each moved apart (:class:`bridgeplan.graph.ObjectGraphs`, ``bridgeplan graph
-        --objects``): each one's position columns (x, y, z) and how near its goal it is done; None: no such objects."""
+    def graph_objects(self, env: str) -> tuple[tuple[tuple[int, ...], ...], float] | None:
+        """The objects a goal in ``env`` moves, each moved apart (:class:`bridgeplan.graph.ObjectGraphs`,
+        ``bridgeplan graph --objects``): each one's position columns (x, y, z) and how near its goal it is done; None:
+        no such objects."""
         return None
 
     # --- evaluation --------------------------------------------------------------------------------------------

@@ -163,11 +163,11 @@ class OGBenchManipulation(Family):
         velocities and gripper follow from these."""
         return tuple(range(EFFECTOR_XY, EFFECTOR_XY + 3)) + stream.layout.goal, GRAPH_GOAL_WEIGHT
 
-    def graph_objects(self, stream) -> tuple[tuple[tuple[int, ...], ...], float] | None:
+    def graph_objects(self, env: str) -> tuple[tuple[tuple[int, ...], ...], float] | None:
         """The cubes' positions, each done within 0.04 m of its goal (0.4 in the state's units, as ``info["success"]``);
         None where buttons, a drawer or a window are among the goals (a puzzle's buttons toggle one another; scene's
         lock its drawer and window)."""
-        scene = parse_dataset_name(stream.maze).scene
+        scene = parse_dataset_name(env).scene
         if scene.buttons or scene.drawer_window:
             return None
         first = [ROBOT_COLUMNS + CUBE_COLUMNS * i for i in range(scene.cubes)]
