@@ -53,7 +53,7 @@ def _cmd_gcbc_train(o: GCBCTrainOptions) -> int:
     from bridgeplan.gcbc import GCBCConfig, train_gcbc
     from bridgeplan.paths import checkpoint_path
 
-    given = config_fields(o, GCBCConfig)
+    given = config_fields(o, GCBCConfig, leave=("hidden_dims",))  # given as text, read below
     if o.hidden_dims is not None:
         given["hidden_dims"] = int_tuple(o.hidden_dims, "--hidden-dims")
     run = train_gcbc(GCBCConfig(**given), Path(o.run.run_dir), resume=o.run.resume,
