@@ -260,10 +260,17 @@ def test_cli_generate_and_info(tmp_path, capsys):
     assert main(args) == 0
     assert "60 steps in 2 episodes of 30 steps" in capsys.readouterr().out
     assert zipfile.is_zipfile(tmp_path / "pointmaze-giant-stitch-v0-val.npz")
-    assert main(args) == 2
+    made = (tmp_path / "pointmaze-giant-stitch-v0.npz").stat().st_mtime_ns
+    assert main(args) == 0  # the same identity: the cache, nothing made
+    assert "cached: " in capsys.readouterr().out
+    assert (tmp_path / "pointmaze-giant-stitch-v0.npz").stat().st_mtime_ns == made
+    record = json.loads((tmp_path / "pointmaze-giant-stitch-v0.json").read_text())
+    assert record["identity"]["seed"] == 4 and record["identity"]["episodes"] == 2
+    other = args[:-2] + ["5", "--no-progress"]  # another seed: not this dataset, refused
+    assert main(other) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "--force" in err and "\n" not in err
-    assert main(args + ["--force"]) == 0
+    assert main(other + ["--force"]) == 0
     capsys.readouterr()
     assert main(["data", "info", str(tmp_path / "pointmaze-giant-stitch-v0.npz"),
                  "--maze", "pointmaze-medium-stitch-v0"]) == 2

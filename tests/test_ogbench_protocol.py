@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from bridgeplan.cli import main
-from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.envs.ogbench_data import legacy_rng
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, make_env
 from bridgeplan.envs.ogbench_pointmaze.protocol import (
     EVAL_EPISODES_PER_TASK,
     TASK_IDS,

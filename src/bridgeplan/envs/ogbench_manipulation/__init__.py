@@ -11,9 +11,7 @@ evaluation protocol in ogbench's own environments (``protocol``). Its environmen
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from bridgeplan.envs.family import Family
+from bridgeplan.envs.ogbench_data import OGBenchFamily
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
     CUBE_COLUMNS,
@@ -25,7 +23,6 @@ from bridgeplan.envs.ogbench_manipulation.names import (
     parse_dataset_name,
 )
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import Layout
 
 SUFFIX = "-play-v0"
@@ -47,7 +44,8 @@ cube's position with the drawer's, the window's and the buttons' is rarely where
 cube-double no radius helped (1-3 0 %, 6 and 12 2 %): it keeps the family's."""
 
 
-class OGBenchManipulation(Family):
+class OGBenchManipulation(OGBenchFamily):
+    data_package = "bridgeplan.envs.ogbench_manipulation"
     name = "ogbench-manipulation"
     title = "OGBench manipulation"
     generator = "ogbench-manipulation"
@@ -111,43 +109,6 @@ class OGBenchManipulation(Family):
         starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
         return Stream(env, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
                       episodes=len(ends), source=str(dataset), layout=self.layout(env))
-
-    def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
-        return str(datasets_root() / "ogbench" / f"{parse_dataset_name(env).name}.npz")
-
-    def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
-                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
-        """OGBench's play recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz,
-        NAME-val.npz and NAME.json (identity and sha256) in ``out``'s folder (default ``datasets/ogbench``, or under
-        ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused."""
-        from bridgeplan.envs.ogbench_manipulation.generate import generate_dataset
-        if steps is not None or piece_steps is not None or workers != 1:
-            raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
-                                  "not --steps, --piece-steps or --workers")
-        folder = datasets_root() / "ogbench" if out is None else Path(out)
-        folder = folder.parent if folder.suffix == ".npz" else folder
-        made = generate_dataset(env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force,
-                                progress=progress)
-        if made.cached:
-            print(f"cached: {made.train_path} has this identity (sha256 {made.record['files'][made.train_path.name]})")
-        return made.train_path
-
-    def reads(self, path: str) -> bool:
-        """An npz file (OGBench's format); which scene it is of is :meth:`dataset_info`'s to check."""
-        import zipfile
-
-        return Path(path).is_file() and zipfile.is_zipfile(path)
-
-    def dataset_info(self, path: str, env: str | None) -> tuple[dict, str]:
-        from dataclasses import asdict
-
-        from bridgeplan.envs.ogbench_manipulation.reading import check_dataset
-
-        if env is None:
-            raise BridgeplanError(f"{path}: an OGBench file does not say its dataset: give --maze NAME")
-        c = check_dataset(path, env)
-        return asdict(c), c.summary()
 
     # --- evaluation --------------------------------------------------------------------------------------------
 

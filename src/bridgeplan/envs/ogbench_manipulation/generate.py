@@ -15,22 +15,22 @@ check: an episode in which the cube goes too far right (y >= 0.29) or too far le
 
 Random draws come, as in OGBench, from NumPy's global legacy RNG (the oracles' keyframes and noise, the stacking
 probability) and the environment's ``np_random`` (objects and targets); both are seeded here with ``seed``
-(:func:`~bridgeplan.envs.ogbench_pointmaze.maze.legacy_rng`), so a dataset is a function of its identity
+(:func:`~bridgeplan.envs.ogbench_data.legacy_rng`), so a dataset is a function of its identity
 (:func:`identity`). The training and validation episodes are one run, split after the training episodes.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from bridgeplan.envs.ogbench_data import Generated, legacy_rng, ogbench_version, validation_episodes, write_dataset
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACTION_NOISE,
     EPISODE_STEPS,
@@ -39,9 +39,8 @@ from bridgeplan.envs.ogbench_manipulation.names import (
     DatasetName,
     parse_dataset_name,
 )
-from bridgeplan.envs.ogbench_pointmaze.maze import legacy_rng
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_bytes, atomic_write_text, check_writable
+from bridgeplan.files import atomic_write_bytes, atomic_write_text
 
 VERSION = 1
 """This generator's version: part of a dataset's identity (raise it when what a seed makes changes)."""
@@ -226,119 +225,34 @@ def _episode(env, ob, info, agent, oracles: dict, p_stack: float, steps: int, bu
     return rows
 
 
-def validation_episodes(episodes: int) -> int:
-    """OGBench's ``episodes // 10``, but at least 1 (its loader cannot read an empty file)."""
-    return max(1, episodes // 10)
-
-
 def identity(name: str, seed: int, episodes: int, episode_steps: int) -> dict:
     """What makes a dataset: the recipe and its settings, this generator's version and ogbench's."""
-    from importlib.metadata import version
-
     return {"recipe": "ogbench manipspace play", "generator_version": VERSION, "name": name, "seed": seed,
             "episodes": episodes, "val_episodes": validation_episodes(episodes), "episode_steps": episode_steps,
-            "noise": ACTION_NOISE, "noise_smoothing": NOISE_SMOOTHING, "ogbench": version("ogbench")}
-
-
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def content_sha256(arrays: dict[str, np.ndarray]) -> str:
-    """The arrays' own digest (names, dtypes, shapes, bytes): equal for equal data, whatever the zip's timestamps."""
-    digest = hashlib.sha256()
-    for k in sorted(arrays):
-        a = np.ascontiguousarray(arrays[k])
-        digest.update(f"{k}:{a.dtype.str}:{a.shape}".encode())
-        digest.update(a.tobytes())
-    return digest.hexdigest()
-
-
-@dataclass
-class Generated:
-    name: str
-    train_path: Path
-    val_path: Path
-    record: dict
-    """The identity record written beside the files (``NAME.json``)."""
-    cached: bool
-    targets: Targets = field(default_factory=Targets)
-    seconds: float = 0.0
-
-
-def dataset_paths(name: str, out_dir: str | Path) -> tuple[Path, Path, Path]:
-    """``NAME.npz``, ``NAME-val.npz`` (the names ``make_env_and_datasets`` expects) and ``NAME.json`` (identity)."""
-    out_dir = Path(out_dir)
-    return out_dir / f"{name}.npz", out_dir / f"{name}-val.npz", out_dir / f"{name}.json"
-
-
-def cached_record(name: str, out_dir: str | Path, ident: dict) -> dict | None:
-    """The identity record of ``out_dir``'s dataset if it was made with ``ident`` and its files are the ones it
-    recorded (by sha256); else None."""
-    train, val, record_path = dataset_paths(name, out_dir)
-    if not (train.is_file() and val.is_file() and record_path.is_file()):
-        return None
-    try:
-        record = json.loads(record_path.read_text())
-    except (OSError, ValueError):
-        return None
-    if record.get("identity") != ident:
-        return None
-    if record.get("files", {}).get(train.name) != file_sha256(train) or \
-            record.get("files", {}).get(val.name) != file_sha256(val):
-        return None
-    return record
+            "noise": ACTION_NOISE, "noise_smoothing": NOISE_SMOOTHING, "ogbench": ogbench_version()}
 
 
 def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: int | None = None,
                      episode_steps: int | None = None, force: bool = False, progress: bool = True) -> Generated:
     """Dataset ``name`` (the recipe's size unless ``episodes`` / ``episode_steps`` say otherwise) in ``out_dir``:
-    NAME.npz, NAME-val.npz and NAME.json (its identity, each file's sha256 and the arrays' own). Files already there
-    with the same identity and the recorded digests are the cache: nothing is made. Other files there are refused
-    (BridgeplanError) unless ``force``. A generation killed on the way resumes from its last saved piece
-    (:class:`Pieces`, in ``NAME.partial``)."""
-    from tqdm import tqdm
-
+    NAME.npz, NAME-val.npz and NAME.json, cached by identity (:func:`bridgeplan.envs.ogbench_data.write_dataset`);
+    the record adds what the oracles reached (:attr:`Generated.made`: :class:`Targets`). A generation killed on the
+    way resumes from its last saved piece (:class:`Pieces`, in ``NAME.partial``)."""
     spec = parse_dataset_name(name)
     episodes = EPISODES if episodes is None else episodes
     episode_steps = EPISODE_STEPS if episode_steps is None else episode_steps
-    if episodes <= 0 or episode_steps <= 0:
-        raise BridgeplanError(f"episodes and steps must be positive, got {episodes} and {episode_steps}")
     ident = identity(spec.name, seed, episodes, episode_steps)
-    train_path, val_path, record_path = dataset_paths(name, out_dir)
-    record = None if force else cached_record(name, out_dir, ident)
-    if record is not None:
-        return Generated(name, train_path, val_path, record, cached=True)
-    existing = [str(p) for p in (train_path, val_path, record_path) if p.exists()]
-    if existing and not force:
-        raise BridgeplanError(f"{', '.join(existing)} already exist and are not this dataset (another identity, or "
-                              "changed since): pass --force to overwrite")
-    check_writable(out_dir, "dataset folder", folder=True)
-    n_val = validation_episodes(episodes)
-    t0 = time.perf_counter()
-    with tqdm(total=(episodes + n_val) * episode_steps, disable=not progress, desc=f"generate {name}",
-              unit="step", unit_scale=True, mininterval=1.0) as bar:
-        pieces = Pieces(Path(out_dir) / f"{spec.name}.partial", ident)
-        data, targets = generate_episodes(name, episodes + n_val, episode_steps, seed, progress=bar.update,
-                                          pieces=pieces)
-    seconds = time.perf_counter() - t0
-    cut = episodes * episode_steps
-    train = {k: v[:cut] for k, v in data.items()}
-    val = {k: v[cut:] for k, v in data.items()}
-    for path, arrays in ((train_path, train), (val_path, val)):
-        atomic_write_bytes(path, lambda f, arrays=arrays: np.savez_compressed(f, **arrays))
-    record = {"identity": ident,
-              "files": {train_path.name: file_sha256(train_path), val_path.name: file_sha256(val_path)},
-              "content_sha256": {train_path.name: content_sha256(train), val_path.name: content_sha256(val)},
-              "targets": {"done": targets.done, "reached": targets.reached, "unhealthy_episodes": targets.unhealthy},
-              "seconds": round(seconds, 1)}
-    atomic_write_text(record_path, json.dumps(record, indent=2) + "\n")
-    pieces.remove()
-    return Generated(name, train_path, val_path, record, cached=False, targets=targets, seconds=seconds)
+    pieces = Pieces(Path(out_dir) / f"{spec.name}.partial", ident)
+
+    def make(count: int, progress_steps):
+        data, targets = generate_episodes(name, count, episode_steps, seed, progress=progress_steps, pieces=pieces)
+        return data, {"targets": {"done": targets.done, "reached": targets.reached,
+                                  "unhealthy_episodes": targets.unhealthy}}, targets
+
+    made = write_dataset(spec.name, out_dir, ident, episodes, episode_steps, make, force=force, progress=progress)
+    if not made.cached:
+        pieces.remove()
+    return made
 
 
 def _step_alone(name: str, episodes: int, episode_steps: int, seed: int) -> None:

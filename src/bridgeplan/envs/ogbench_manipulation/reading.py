@@ -67,7 +67,7 @@ def _recorded_sha256(path: Path) -> str | None:
     """The file's sha256 as the identity record beside it (``NAME.json``, a generated dataset's) has it."""
     import json
 
-    from bridgeplan.envs.ogbench_manipulation.generate import file_sha256
+    from bridgeplan.envs.ogbench_data import file_sha256
 
     stem = path.name.removesuffix(".npz").removesuffix("-val")
     record = path.with_name(f"{stem}.json")

@@ -9,17 +9,14 @@ of data a planner learned from.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from bridgeplan.envs.controllers import Body
-from bridgeplan.envs.family import Family
+from bridgeplan.envs.ogbench_data import OGBenchFamily
 from bridgeplan.envs.ogbench_pointmaze import plans
 from bridgeplan.envs.ogbench_pointmaze.names import KINDS, MAZES, parse_dataset_name
 from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.paths import datasets_root
 from bridgeplan.trajectory import KINEMATIC_POINT, Layout
 
 PREFIX = "pointmaze-"
@@ -29,7 +26,8 @@ GOAL_TOLERANCE = 1.0
 """The evaluation environment ends an episode when the point is this close to its goal (``MazeEnv._goal_tol``)."""
 
 
-class OGBenchPointmaze(Family):
+class OGBenchPointmaze(OGBenchFamily):
+    data_package = "bridgeplan.envs.ogbench_pointmaze"
     name = "ogbench-pointmaze"
     title = "OGBench pointmaze"
     generator = "ogbench"
@@ -65,40 +63,6 @@ class OGBenchPointmaze(Family):
         from bridgeplan.envs.ogbench_pointmaze.reading import load_stream
 
         return load_stream(dataset, env)
-
-    def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
-        return str(datasets_root() / "ogbench" / f"{env}.npz")
-
-    def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
-                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
-        """OGBench's recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz and
-        NAME-val.npz in ``out``'s folder (default ``datasets/ogbench``, or under ``$BRIDGEPLAN_DATASETS``);
-        returns NAME.npz."""
-        from bridgeplan.envs.ogbench_pointmaze.generate import generate_dataset
-        if steps is not None or piece_steps is not None or workers != 1:
-            raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
-                                  "not --steps, --piece-steps or --workers")
-        folder = datasets_root() / "ogbench" if out is None else Path(out)
-        folder = folder.parent if folder.suffix == ".npz" else folder
-        return generate_dataset(env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force,
-                                progress=progress).train_path
-
-    def reads(self, path: str) -> bool:
-        """An npz file (OGBench's format)."""
-        import zipfile
-
-        return Path(path).is_file() and zipfile.is_zipfile(path)
-
-    def dataset_info(self, path: str, env: str | None) -> tuple[dict, str]:
-        from dataclasses import asdict
-
-        from bridgeplan.envs.ogbench_pointmaze.reading import check_dataset
-
-        if env is None:
-            raise BridgeplanError(f"{path}: an OGBench file does not say its maze: give --maze NAME")
-        c = check_dataset(path, env)
-        return asdict(c), c.summary()
 
     def graph_pace(self, stream) -> tuple[dict, float, bool]:
         """The point's full step along an axis, its episodes apart."""

@@ -10,27 +10,27 @@ many steps and ``terminals`` is true at its last one only. Rows are the state *b
 ``observations`` (= ``qpos``, the xy position), ``qpos`` and ``qvel`` (``info['prev_qpos' / 'prev_qvel']``).
 
 Random draws come, as in OGBench, from NumPy's global legacy RNG, in the script's order, here seeded
-(:func:`~bridgeplan.envs.ogbench_pointmaze.maze.legacy_rng`); the env's own ``np_random`` and action space are seeded
+(:func:`~bridgeplan.envs.ogbench_data.legacy_rng`); the env's own ``np_random`` and action space are seeded
 with the same seed. The training and validation episodes are one run, split after the training episodes.
 """
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, legacy_rng, make_env
+from bridgeplan.envs.ogbench_data import Generated, legacy_rng, ogbench_version, validation_episodes, write_dataset
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, bfs, geometry, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import ACTION_NOISE, KINDS, DatasetName, check_maze, parse_dataset_name
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.files import atomic_write_bytes, check_writable
 
 STITCH_CELLS = 4
 """BFS distance (in cells) from a stitch episode's start cell to its goal cell."""
 KEYS = ("observations", "actions", "terminals", "qpos", "qvel")
+VERSION = 1
+"""This generator's version: part of a dataset's identity (raise it when what a seed makes changes)."""
 
 
 def generate_episodes(maze: str, kind: str, episodes: int, episode_steps: int, seed: int,
@@ -96,62 +96,24 @@ def generate_episodes(maze: str, kind: str, episodes: int, episode_steps: int, s
     return out
 
 
-def validation_episodes(episodes: int) -> int:
-    """OGBench's ``episodes // 10``, but at least 1 (its loader cannot read an empty file)."""
-    return max(1, episodes // 10)
-
-
-@dataclass
-class Generated:
-    name: str
-    train_path: Path
-    val_path: Path
-    episodes: int
-    val_episodes: int
-    episode_steps: int
-    seed: int
-    seconds: float
-
-    @property
-    def steps(self) -> int:
-        return (self.episodes + self.val_episodes) * self.episode_steps
-
-
-def dataset_paths(name: str, out_dir: str | Path) -> tuple[Path, Path]:
-    """``out_dir/NAME.npz`` and ``out_dir/NAME-val.npz`` (the names ``make_env_and_datasets`` expects)."""
-    return Path(out_dir) / f"{name}.npz", Path(out_dir) / f"{name}-val.npz"
-
-
-def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    atomic_write_bytes(path, lambda f: np.savez_compressed(f, **arrays))
+def identity(name: str, seed: int, episodes: int, episode_steps: int) -> dict:
+    """What makes a dataset: the recipe and its settings, this generator's version and ogbench's."""
+    return {"recipe": "ogbench locomaze", "generator_version": VERSION, "name": name, "seed": seed,
+            "episodes": episodes, "val_episodes": validation_episodes(episodes), "episode_steps": episode_steps,
+            "noise": ACTION_NOISE, "ogbench": ogbench_version()}
 
 
 def generate_dataset(name: str, out_dir: str | Path, seed: int = 0, episodes: int | None = None,
                      episode_steps: int | None = None, force: bool = False, progress: bool = True) -> Generated:
-    """Generate dataset ``name`` (the recipe's size unless ``episodes`` / ``episode_steps`` are given) and
-    write ``NAME.npz`` and ``NAME-val.npz`` into ``out_dir``, each atomically (a temporary file renamed).
-
-    Refuses (BridgeplanError) when either file exists, unless ``force``; both are then rewritten.
-    """
-    from tqdm import tqdm
-
+    """Dataset ``name`` (the recipe's size unless ``episodes`` / ``episode_steps`` are given) in ``out_dir``:
+    NAME.npz, NAME-val.npz and NAME.json, cached by identity (:func:`bridgeplan.envs.ogbench_data.write_dataset`)."""
     spec: DatasetName = parse_dataset_name(name)
     episodes = spec.episodes if episodes is None else episodes
     episode_steps = spec.episode_steps if episode_steps is None else episode_steps
-    if episodes <= 0 or episode_steps <= 0:
-        raise BridgeplanError(f"episodes and steps must be positive, got {episodes} and {episode_steps}")
-    train_path, val_path = dataset_paths(name, out_dir)
-    existing = [str(p) for p in (train_path, val_path) if p.exists()]
-    if existing and not force:
-        raise BridgeplanError(f"{' and '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
-                              "pass --force to overwrite")
-    check_writable(out_dir, "dataset folder", folder=True)
-    n_val = validation_episodes(episodes)
-    t0 = time.perf_counter()
-    with tqdm(total=(episodes + n_val) * episode_steps, disable=not progress, desc=f"generate {name}",
-              unit="step", unit_scale=True, mininterval=0.5) as bar:
-        data = generate_episodes(spec.maze, spec.kind, episodes + n_val, episode_steps, seed, progress=bar.update)
-    cut = episodes * episode_steps
-    _write_npz(train_path, {k: data[k][:cut] for k in KEYS})
-    _write_npz(val_path, {k: data[k][cut:] for k in KEYS})
-    return Generated(name, train_path, val_path, episodes, n_val, episode_steps, seed, time.perf_counter() - t0)
+
+    def make(count: int, progress_steps):
+        data = generate_episodes(spec.maze, spec.kind, count, episode_steps, seed, progress=progress_steps)
+        return {k: data[k] for k in KEYS}, {}, None
+
+    return write_dataset(spec.name, out_dir, identity(spec.name, seed, episodes, episode_steps), episodes,
+                         episode_steps, make, force=force, progress=progress)

@@ -7,12 +7,10 @@ global legacy RNG; :func:`legacy_rng` seeds it for a block and restores the call
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import warnings
 from collections import deque
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 
@@ -141,17 +139,3 @@ class Oracle:
         """The unit direction towards the subgoal, normalized as OGBench's generator does (``+ 1e-6``)."""
         d = self.subgoal(xy, goal_xy) - np.asarray(xy, dtype=np.float64)
         return d / (np.linalg.norm(d) + 1e-6)
-
-
-@contextlib.contextmanager
-def legacy_rng(seed: int | np.random.RandomState) -> Iterator[None]:
-    """Within the block NumPy's global legacy RNG is ``RandomState(seed)`` (or continues the given
-    ``RandomState``, whose state is advanced); the caller's global state is restored afterwards."""
-    saved = np.random.get_state()
-    rs = seed if isinstance(seed, np.random.RandomState) else np.random.RandomState(seed)
-    np.random.set_state(rs.get_state())
-    try:
-        yield
-    finally:
-        rs.set_state(np.random.get_state())
-        np.random.set_state(saved)

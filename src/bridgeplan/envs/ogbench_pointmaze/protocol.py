@@ -25,7 +25,8 @@ import numpy as np
 
 from bridgeplan.envs.family import Tasks
 from bridgeplan.envs.ogbench_common import ProtocolResult, TaskResult, episode_seed, run_episodes
-from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, legacy_rng, make_env
+from bridgeplan.envs.ogbench_data import legacy_rng
+from bridgeplan.envs.ogbench_pointmaze.maze import Oracle, make_env
 from bridgeplan.envs.ogbench_pointmaze.names import EVAL_EPISODE_STEPS, check_maze, env_id
 from bridgeplan.errors import BridgeplanError
 

@@ -1,0 +1,187 @@
+"""OGBench's datasets as both OGBench families make them (:mod:`.ogbench_pointmaze.generate`,
+:mod:`.ogbench_manipulation.generate`): ``NAME.npz`` and ``NAME-val.npz`` in OGBench's format (the names
+``make_env_and_datasets`` expects), a tenth of the episodes for validation, and ``NAME.json``: the dataset's identity
+(its recipe and settings, the generator's and ogbench's versions) with each file's sha256. That record is the cache:
+the same identity with the recorded files is not made again. And what both families' dataset commands share
+(:class:`OGBenchFamily`)."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from importlib import import_module
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from bridgeplan.envs.family import Family
+from bridgeplan.errors import BridgeplanError
+from bridgeplan.files import atomic_write_bytes, atomic_write_text, check_writable
+from bridgeplan.paths import datasets_root
+
+
+@contextlib.contextmanager
+def legacy_rng(seed: int | np.random.RandomState) -> Iterator[None]:
+    """Within the block NumPy's global legacy RNG is ``RandomState(seed)`` (or continues the given
+    ``RandomState``, whose state is advanced); the caller's global state is restored afterwards. OGBench's recipes
+    draw from that global RNG."""
+    saved = np.random.get_state()
+    rs = seed if isinstance(seed, np.random.RandomState) else np.random.RandomState(seed)
+    np.random.set_state(rs.get_state())
+    try:
+        yield
+    finally:
+        rs.set_state(np.random.get_state())
+        np.random.set_state(saved)
+
+
+def validation_episodes(episodes: int) -> int:
+    """OGBench's ``episodes // 10``, but at least 1 (its loader cannot read an empty file)."""
+    return max(1, episodes // 10)
+
+
+def ogbench_version() -> str:
+    from importlib.metadata import version
+
+    return version("ogbench")
+
+
+def file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def content_sha256(arrays: dict[str, np.ndarray]) -> str:
+    """The arrays' own digest (names, dtypes, shapes, bytes): equal for equal data, whatever the zip's timestamps."""
+    digest = hashlib.sha256()
+    for k in sorted(arrays):
+        a = np.ascontiguousarray(arrays[k])
+        digest.update(f"{k}:{a.dtype.str}:{a.shape}".encode())
+        digest.update(a.tobytes())
+    return digest.hexdigest()
+
+
+@dataclass
+class Generated:
+    name: str
+    train_path: Path
+    val_path: Path
+    record: dict
+    """The identity record written beside the files (``NAME.json``)."""
+    cached: bool
+    seconds: float = 0.0
+    made: Any = field(default=None)
+    """What the recipe's ``make`` returned beside the arrays (manipulation: what its oracles reached)."""
+
+
+def dataset_paths(name: str, out_dir: str | Path) -> tuple[Path, Path, Path]:
+    """``NAME.npz``, ``NAME-val.npz`` and ``NAME.json`` (the identity) in ``out_dir``."""
+    out_dir = Path(out_dir)
+    return out_dir / f"{name}.npz", out_dir / f"{name}-val.npz", out_dir / f"{name}.json"
+
+
+def cached_record(name: str, out_dir: str | Path, ident: dict) -> dict | None:
+    """The identity record of ``out_dir``'s dataset if it was made with ``ident`` and its files are the ones it
+    recorded (by sha256); else None."""
+    train, val, record_path = dataset_paths(name, out_dir)
+    if not (train.is_file() and val.is_file() and record_path.is_file()):
+        return None
+    try:
+        record = json.loads(record_path.read_text())
+    except (OSError, ValueError):
+        return None
+    if record.get("identity") != ident:
+        return None
+    if record.get("files", {}).get(train.name) != file_sha256(train) or \
+            record.get("files", {}).get(val.name) != file_sha256(val):
+        return None
+    return record
+
+
+def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, episode_steps: int,
+                  make: Callable[[int, Callable[[int], Any]], tuple[dict[str, np.ndarray], dict, Any]],
+                  force: bool = False, progress: bool = True) -> Generated:
+    """Dataset ``name`` of identity ``ident`` in ``out_dir``: ``make(episodes, progress)`` (its training and
+    validation episodes in one run; ``progress`` called with steps done) returns the arrays to write, what its record
+    adds and what :attr:`Generated.made` holds. Files already there with the same identity and the recorded digests
+    are the cache: nothing is made. Other files there are refused (BridgeplanError) unless ``force``. Each file is
+    written whole (a temporary file renamed)."""
+    from tqdm import tqdm
+
+    if episodes <= 0 or episode_steps <= 0:
+        raise BridgeplanError(f"episodes and steps must be positive, got {episodes} and {episode_steps}")
+    train_path, val_path, record_path = dataset_paths(name, out_dir)
+    record = None if force else cached_record(name, out_dir, ident)
+    if record is not None:
+        return Generated(name, train_path, val_path, record, cached=True)
+    existing = [str(p) for p in (train_path, val_path, record_path) if p.exists()]
+    if existing and not force:
+        raise BridgeplanError(f"{', '.join(existing)} already exist and are not this dataset (another identity, or "
+                              "changed since): pass --force to overwrite")
+    check_writable(out_dir, "dataset folder", folder=True)
+    total = episodes + validation_episodes(episodes)
+    t0 = time.perf_counter()
+    with tqdm(total=total * episode_steps, disable=not progress, desc=f"generate {name}", unit="step",
+              unit_scale=True, mininterval=1.0) as bar:
+        data, extra, made = make(total, bar.update)
+    seconds = time.perf_counter() - t0
+    cut = episodes * episode_steps
+    train = {k: v[:cut] for k, v in data.items()}
+    val = {k: v[cut:] for k, v in data.items()}
+    for path, arrays in ((train_path, train), (val_path, val)):
+        atomic_write_bytes(path, lambda f, arrays=arrays: np.savez_compressed(f, **arrays))
+    record = {"identity": ident,
+              "files": {train_path.name: file_sha256(train_path), val_path.name: file_sha256(val_path)},
+              "content_sha256": {train_path.name: content_sha256(train), val_path.name: content_sha256(val)},
+              **extra, "seconds": round(seconds, 1)}
+    atomic_write_text(record_path, json.dumps(record, indent=2) + "\n")
+    return Generated(name, train_path, val_path, record, cached=False, seconds=seconds, made=made)
+
+
+class OGBenchFamily(Family):
+    """The data commands of a family whose datasets are OGBench's: npz files under ``datasets/ogbench`` (or
+    ``$BRIDGEPLAN_DATASETS/ogbench``), of the recipe's size, made by the package ``data_package``'s
+    ``generate.generate_dataset`` and checked by its ``reading.check_dataset``."""
+
+    data_package: str
+
+    def default_dataset(self, env: str, steps: int, piece_steps: int = 0, version: int | None = None) -> str:
+        return str(datasets_root() / "ogbench" / f"{self.check(env)}.npz")
+
+    def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
+                         piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
+                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+        """OGBench's recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz,
+        NAME-val.npz and NAME.json (identity and sha256) in ``out``'s folder (default ``datasets/ogbench``, or under
+        ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused."""
+        if steps is not None or piece_steps is not None or workers != 1:
+            raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
+                                  "not --steps, --piece-steps or --workers")
+        folder = datasets_root() / "ogbench" if out is None else Path(out)
+        folder = folder.parent if folder.suffix == ".npz" else folder
+        made = import_module(f"{self.data_package}.generate").generate_dataset(
+            env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force, progress=progress)
+        if made.cached:
+            print(f"cached: {made.train_path} has this identity (sha256 {made.record['files'][made.train_path.name]})")
+        return made.train_path
+
+    def reads(self, path: str) -> bool:
+        """An npz file (OGBench's format); which environment's it is is :meth:`dataset_info`'s to check."""
+        import zipfile
+
+        return Path(path).is_file() and zipfile.is_zipfile(path)
+
+    def dataset_info(self, path: str, env: str | None) -> tuple[dict, str]:
+        from dataclasses import asdict
+
+        if env is None:
+            raise BridgeplanError(f"{path}: an OGBench file does not say its dataset: give --maze NAME")
+        c = import_module(f"{self.data_package}.reading").check_dataset(path, env)
+        return asdict(c), c.summary()
