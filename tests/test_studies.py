@@ -459,6 +459,27 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
     assert training_rate(tmp_path, "umaze", config, cpu="B (avx2)")[0] == TRAIN_STEPS_PER_SECOND
 
 
+def test_a_run_trained_here_sets_its_own_rate_in_the_dry_run(tmp_path):
+    """GCBC/GCIQL runs have no bench figure: their rate is what this study's training measured, the run's own where
+    it has begun, else its other training seeds' median; a run with none (or of another name) has no figure."""
+    from bridgeplan.studies.plan import measured_rate
+
+    def metrics(run: str, *lines: tuple[int, float]) -> None:
+        (tmp_path / run).mkdir()
+        (tmp_path / run / "metrics.jsonl").write_text("".join(
+            json.dumps({"step": step, "loss": 1.0, "elapsed_seconds": seconds}) + "\n" for step, seconds in lines))
+
+    assert measured_rate(tmp_path / "gciql-s1") is None  # nothing trained here
+    metrics("gciql-s0", (500, 100.0), (20000, 5000.0))
+    metrics("gciql-s2", (1000, 500.0))
+    metrics("gciql-big-s0", (100, 1.0))  # another run whose name begins alike: not a seed of gciql
+    rate, source = measured_rate(tmp_path / "gciql-s1")
+    assert rate == pytest.approx((4.0 + 2.0) / 2) and source == "measured by 2 other training seeds here"
+    rate, source = measured_rate(tmp_path / "gciql-s2")  # begun: its own figure, the last line's
+    assert rate == pytest.approx(2.0) and "this run's" in source
+    assert measured_rate(tmp_path / "gcbc-s0") is None
+
+
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),
                                            ("ogbench-planners", ["ogbench-medium-navigate/*"]),
                                            # ogbench-large-navigate's folder holds two studies' runs

@@ -266,9 +266,8 @@ class Missing:
     jsons: tuple = ()
     """The evaluation JSONs of the study's ``[[evaluations]]`` not written yet (``commands.Job``)."""
 
-    def cost_seconds(self, steps_per_second: float = TRAIN_STEPS_PER_SECOND) -> tuple[float, float]:
-        train = sum(n - max(done, 0) for _, n, done in self.trains) / steps_per_second
-        return train, (sum(self.evaluations.values()) + len(self.jsons)) * self.episodes * EVAL_SECONDS_PER_EPISODE
+    def eval_seconds(self) -> float:
+        return (sum(self.evaluations.values()) + len(self.jsons)) * self.episodes * EVAL_SECONDS_PER_EPISODE
 
 
 def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tuple[float, str]:
@@ -304,6 +303,32 @@ def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tupl
                     r["busy_cores"]) == (*wanted, "bridgeplan", 1, 1):
                 return r["windows_per_s"] / (r["batch"] * r["grad_accum"]), f"{where}, a core busy"
     return TRAIN_STEPS_PER_SECOND, "assumed, no figure in the throughput bench"
+
+
+def measured_rate(run_dir: Path) -> tuple[float, str] | None:
+    """Steps per second of ``run_dir``'s run as this study's own training measured it (``gcbc train``'s
+    metrics.jsonl: its last line's steps over its elapsed seconds, the machine's load included): the run's own where
+    it has begun, else the median of its other training seeds' beside it (``NAME-sK``); None where none has a figure
+    (a planner run: :func:`training_rate`'s bench)."""
+    import json
+    import re
+    import statistics
+
+    def rate(directory: Path) -> float | None:
+        try:
+            last = json.loads((directory / "metrics.jsonl").read_text().strip().splitlines()[-1])
+            return last["step"] / last["elapsed_seconds"] if last["elapsed_seconds"] > 0 else None
+        except (OSError, ValueError, KeyError, IndexError, TypeError):
+            return None
+
+    if (own := rate(run_dir)) is not None:
+        return own, "measured by this run's training so far"
+    stem = re.sub(r"-s\d+$", "", run_dir.name)
+    seeds = [d for d in run_dir.parent.glob(f"{stem}-s*") if re.fullmatch(rf"{re.escape(stem)}-s\d+", d.name)]
+    rates = [r for d in sorted(seeds) if d != run_dir and (r := rate(d)) is not None]
+    if not rates:
+        return None
+    return statistics.median(rates), f"measured by {len(rates)} other training seed{'s' * (len(rates) > 1)} here"
 
 
 def missing(study: Study, root: Path, scale: Scale = Scale()) -> Missing:
@@ -395,8 +420,18 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     where = (f"store {store}{'' if store.exists() else ' (absent)'}" if study.experiments else
              f"runs and evaluation JSONs under {results_dir(study, root, scale)}")
     lines = [f"study {study.name} ({scale_note}): {where}"]
+    from bridgeplan import config as cfg
+
+    rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
+        study.dataset.maze, study.training.preset, **dict(study.training.overrides)))
+    train_s, guessed = 0.0, 0
     for run, n, done in m.trains:
-        lines.append(f"  train {run}: {n - max(done, 0)} steps ({max(done, 0)} of {n} done)")
+        left = n - max(done, 0)
+        measured = measured_rate(results_dir(study, root, scale) / "runs" / run)
+        train_s += left / (measured[0] if measured else rate)
+        guessed += measured is None
+        lines.append(f"  train {run}: {left} steps ({max(done, 0)} of {n} done)" + (
+            f", {_hours(left / measured[0])} at {measured[0]:.2f} steps/s ({measured[1]})" if measured else ""))
     for name, count in m.evaluations.items():
         lines.append(f"  evaluate {name}: {count} evaluations x {m.episodes} episodes")
         by_correction = sorted((tag, n) for (exp, tag), n in m.corrections.items() if exp == name)
@@ -413,14 +448,10 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     if shared:
         lines.append(f"  link {shared} evaluations to more experiments: stored already, or named by an earlier "
                      f"experiment above (computed once)")
-    from bridgeplan import config as cfg
-
-    rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
-        study.dataset.maze, study.training.preset, **dict(study.training.overrides)))
-    train_s, eval_s = m.cost_seconds(rate)
+    at = (f" at {rate:.1f} steps/s per run ({source})" if guessed == len(m.trains) else
+          f" ({guessed} runs at {rate:.1f} steps/s: {source})" if guessed else "")
     lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values()) + len(m.jsons)} evaluations; "
-                 f"estimated "
-                 f"{_hours(train_s)} of training at {rate:.1f} steps/s per run ({source}) and {_hours(eval_s)} "
+                 f"estimated {_hours(train_s)} of training{at} and {_hours(m.eval_seconds())} "
                  f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumed; one CPU core per job: "
                  f"divide by --workers)")
     return lines
