@@ -620,6 +620,33 @@ def test_a_tiny_command_study_trains_its_runs_then_writes_its_jsons_once(tiny_da
         assert (root / "docs" / "results" / path).read_text() == (results / path).read_text()
 
 
+def test_the_dry_run_times_a_json_by_the_committed_ones_of_its_command(tmp_path):
+    """An evaluation JSON to make is estimated at the median seconds its command's committed JSONs record (OGBench's
+    ``protocol_seconds``), not at the assumed seconds per episode; a command whose JSONs record none keeps those."""
+    from bridgeplan.studies.plan import EVAL_SECONDS_PER_EPISODE, measured_json_seconds
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(TINY_HIERARCHY.format(dataset="d"))
+    study = load_studies(root)["tiny"]
+    docs = root / "docs" / "results"
+    assert measured_json_seconds(study, root) == {}
+    for name, seconds in (("single", 10.0), ("multi", 40.0)):
+        (docs / "tiny-hierarchy-flat").mkdir(parents=True, exist_ok=True)
+        (docs / "tiny-hierarchy-flat" / f"{name}-seed0.json").write_text(json.dumps({"protocol_seconds": seconds}))
+    (docs / "tiny-hierarchy" / "nfe2").mkdir(parents=True)
+    (docs / "tiny-hierarchy" / "nfe2" / "single-seed0.json").write_text(json.dumps({"episodes": 3}))  # no seconds
+    (docs / "unrelated.json").write_text(json.dumps({"protocol_seconds": 1e6}))  # not this study's
+    assert measured_json_seconds(study, root) == {"eval": 25.0}
+    m = missing(study, root)
+    assert sorted(j.command for j in m.jsons) == ["eval", "eval", "graph", "hierarchy eval", "hierarchy eval"]
+    assert m.eval_seconds(measured_json_seconds(study, root)) == pytest.approx(
+        2 * 25.0 + 3 * m.episodes * EVAL_SECONDS_PER_EPISODE)
+    assert any(line.startswith("  eval: 2 evaluation JSONs") and line.endswith(", 0.4 min each (the committed "
+                                                                                "ones' median)")
+               for line in describe_missing(study, root))
+
+
 @pytest.mark.parametrize("evaluation, message", [
     ('command = "render"\nruns = ["high"]\nout = "x.json"', "evaluations[0].command: unknown command 'render'"),
     ('command = "eval"\nruns = ["nope"]\nout = "x.json"', "evaluations[0].runs: unknown run 'nope'"),

@@ -266,8 +266,13 @@ class Missing:
     jsons: tuple = ()
     """The evaluation JSONs of the study's ``[[evaluations]]`` not written yet (``commands.Job``)."""
 
-    def eval_seconds(self) -> float:
-        return (sum(self.evaluations.values()) + len(self.jsons)) * self.episodes * EVAL_SECONDS_PER_EPISODE
+    def eval_seconds(self, per_json: dict[str, float] | None = None) -> float:
+        """Seconds of the evaluations to compute: :data:`EVAL_SECONDS_PER_EPISODE` per episode, but a JSON of a
+        command in ``per_json`` (:func:`measured_json_seconds`) at its figure."""
+        per_json = per_json or {}
+        guessed = sum(self.evaluations.values()) + sum(j.command not in per_json for j in self.jsons)
+        return guessed * self.episodes * EVAL_SECONDS_PER_EPISODE + sum(per_json.get(j.command, 0.0)
+                                                                          for j in self.jsons)
 
 
 def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tuple[float, str]:
@@ -409,6 +414,25 @@ def committed_not_imported(study: Study, root: Path, m: Missing) -> str | None:
     return None
 
 
+def measured_json_seconds(study: Study, root: Path) -> dict[str, float]:
+    """Per command, the median seconds its evaluation JSONs committed in docs/results took where they record them
+    (OGBench's families: ``protocol_seconds``, the episodes' own time, this machine's load included); a command
+    with none is absent."""
+    import json
+    import statistics
+
+    results = results_dir(study, root, Scale())
+    seconds: dict[str, list[float]] = {}
+    for job in jobs(Scale().apply(study), results, results, False):
+        try:
+            d = json.loads((Path(root) / "docs" / "results" / job.path.relative_to(results)).read_text())
+            took = float(d["protocol_seconds"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        seconds.setdefault(job.command, []).append(took)
+    return {command: statistics.median(values) for command, values in seconds.items()}
+
+
 def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[str]:
     """``study run --dry-run``'s lines."""
     m = missing(study, root, scale)
@@ -440,8 +464,10 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     by_command: dict[str, list] = {}
     for job in m.jsons:
         by_command.setdefault(job.command, []).append(job)
+    per_json = measured_json_seconds(study, root) if scale.committed and m.jsons else {}
     for command, todo in by_command.items():
-        lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}")
+        lines.append(f"  {command}: {len(todo)} evaluation JSONs, e.g. {todo[0].path}" + (
+            f", {_hours(per_json[command])} each (the committed ones' median)" if command in per_json else ""))
     if scale.committed and (note := committed_not_imported(study, root, m)):
         lines.append(f"  committed: {note}")
     shared = sum(len(keys) for keys in m.wanted.values()) - sum(m.evaluations.values())
@@ -451,9 +477,9 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     at = (f" at {rate:.1f} steps/s per run ({source})" if guessed == len(m.trains) else
           f" ({guessed} runs at {rate:.1f} steps/s: {source})" if guessed else "")
     lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values()) + len(m.jsons)} evaluations; "
-                 f"estimated {_hours(train_s)} of training{at} and {_hours(m.eval_seconds())} "
-                 f"of evaluation at {EVAL_SECONDS_PER_EPISODE} s per episode (assumed; one CPU core per job: "
-                 f"divide by --workers)")
+                 f"estimated {_hours(train_s)} of training{at} and {_hours(m.eval_seconds(per_json))} "
+                 f"of evaluation (at {EVAL_SECONDS_PER_EPISODE} s per episode, assumed, where no committed JSON of "
+                 f"its command says; one CPU core per job: divide by --workers)")
     return lines
 
 
