@@ -585,6 +585,66 @@ def test_the_actions_controller_executes_planned_actions():
         follower.actions(states, layout.states(plans), np.array([0, 0]))
 
 
+def test_a_policy_executes_a_plan_toward_its_state_ahead():
+    """A policy low level: at step t of a plan its goal is the plan's state ``ahead`` steps on (the last past the
+    plan's end), of a joint plan its state columns; a goal behind the policy refused."""
+    from bridgeplan.envs.controllers import PolicyFollower
+
+    layout = FAMILY.layout("cube-single-play-v0")
+    heard = []
+
+    def act(states, goals):
+        heard.append(goals.copy())
+        return np.zeros((len(states), 5))
+
+    follower = PolicyFollower(2, FAMILY.body("cube-single-play-v0"), act, ahead=3)
+    plans = np.arange(2 * 6, dtype=np.float64)[:, None].repeat(28, axis=1).reshape(2, 6, 28)  # state k: all k
+    states = np.zeros((2, 28))
+    assert follower.actions(states, plans, np.array([0, 4])).shape == (2, 5)
+    np.testing.assert_array_equal(heard[-1][:, 0], [plans[0, 3, 0], plans[1, 5, 0]])  # 0 + 3; 4 + 3 past the end
+    joint = np.concatenate([np.full((2, 6, layout.act_dim), -7.0), plans], axis=2)
+    follower.actions(states, joint, np.array([1, 1]))
+    np.testing.assert_array_equal(heard[-1], plans[:, 4])
+    with pytest.raises(BridgeplanError, match="at least 1 step ahead"):
+        PolicyFollower(2, FAMILY.body("cube-single-play-v0"), act, ahead=0)
+
+
+def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypatch):
+    """``bridgeplan graph --low`` a GCBC run: the graph's path executed by the policy, every step, toward the path's
+    state --policy-ahead steps on (not the task's goal); the row names the policy and its settings; the options of a
+    planner low level, and --policy-ahead without a policy, refused."""
+    import bridgeplan.gcbc
+
+    run = tmp_path / "gcbc"
+    assert main(["gcbc", "train", str(tiny_data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps",
+                 "4", "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--log-every", "2",
+                 "--device", "cpu", "--no-progress"]) == 0
+    capsys.readouterr()
+    goals, real = [], bridgeplan.gcbc.GCBCPolicy.act
+    monkeypatch.setattr(bridgeplan.gcbc.GCBCPolicy, "act",
+                        lambda self, observations, g: goals.append(np.array(g)) or real(self, observations, g))
+    graph = ["graph", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1", "--keep", "2", "--no-progress",
+             "--json", "--low", str(run), "--replan-every", "50"]
+    assert main([*graph, "--policy-ahead", "3", "--out", str(tmp_path / "policy.json")]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["method"] == "dataset graph, GCBC low level" and row["maze"] == "cube-single-play-v0"
+    assert row["low"] == {"run": "gcbc", "agent": "gcbc", "step": 4, "ahead": 3}
+    assert row["config"]["low"]["dataset"] == "cube-single-play-v0" and row["config"]["graph"]["keep"] == 2
+    assert row["graph"]["paths_found"] == 1.0 and row["plans_per_episode"]["mean"] == 4  # searched every 50 steps
+    acted = sum(len(g) for g in goals)
+    assert acted == 2 * row["tasks"]["1"]["steps"][0]  # at every step of the episode, and of the latency's again
+    task_goal = goals[0][0]
+    assert any(not np.allclose(g[0], task_goal) for g in goals[1:])  # toward the path, not the task's goal alone
+    default = main([*graph, "--out", str(tmp_path / "default.json")])
+    assert default == 0 and json.loads(capsys.readouterr().out)["low"]["ahead"] == 25
+    for flags, message in ((["--nfe-low", "2"], "error: --nfe-low and --replan-high-every are a planner low level's"),
+                           (["--policy-ahead", "0"], "error: --policy-ahead must be")):
+        assert _error(capsys, [*graph, *flags, "--out", str(tmp_path / "bad.json")]).startswith(message)
+    assert _error(capsys, ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--policy-ahead", "5",
+                           "--out", str(tmp_path / "bad.json")]).startswith("error: --policy-ahead is a policy low")
+    assert not (tmp_path / "bad.json").exists()
+
+
 def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
     """``bridgeplan graph --render --video`` on cube-single: the first episode executed again and drawn by ogbench's
     camera: a PNG of its start, middle and end side by side, and a GIF of every 4th of its 201 states (and the last),
@@ -721,10 +781,10 @@ def test_the_objects_apart_over_two_cubes(tmp_path):
 
 def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     """``bridgeplan graph --objects``: its JSON says so (its name, its method, its config) and counts the searches per
-    object; with a low level it is refused before anything is read."""
+    object; with a planner low level (a directory that is no GCBC run) it is refused before anything is read."""
     graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
              "--keep", "2", "--no-progress", "--objects"]
-    assert _error(capsys, [*graph, "--low", str(tmp_path / "no-run")]).startswith("error: --objects: ")
+    assert _error(capsys, [*graph, "--low", str(tmp_path)]).startswith("error: --objects: ")
     puzzle = ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(tiny_data), "--objects", "--out",
               str(tmp_path / "puzzle.json")]
     assert _error(capsys, puzzle).startswith("error: --objects: puzzle-3x3-play-v0's goals move no objects apart")

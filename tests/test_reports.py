@@ -494,3 +494,12 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
           replan=150)
     assert ("- cube-double-play-v0, the dataset graph (no network: every 5th state, radius 1, one graph per cube, "
             "replanned every 150 steps): 20.0% (one run)") in mc.block(tmp_path).splitlines()
+    # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
+    for seed, rate in ((0, 0.8), (1, 0.9)):
+        write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /
+              "track-replan50-seed0.json", rate, step=0, replan=50)
+    assert "| graph-keep5-r1-gciql-ahead25 | test | 2 | 85.0 ± 5.0 | - |" in mc.render(tmp_path).splitlines()
+    assert ("- cube-double-play-v0, the dataset graph (every 5th state, radius 1, replanned every 50 steps), its paths "
+            "executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on: 85.0 ± 5.0% over 2 "
+            "training seeds"
+            ) in mc.block(tmp_path).splitlines()

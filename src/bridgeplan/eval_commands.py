@@ -233,8 +233,12 @@ class GraphSettings:
 class GraphOptions(LevelledEvaluation):
     environment: Environment = group(Environment)
     dataset: Dataset = group(Dataset)
-    low: str | None = opt(None, "a low level (trained with --subgoal-every J) that plans through the graph's path "
-                                "(default: the path alone)", metavar="RUN")
+    low: str | None = opt(None, "a low level: a planner trained with --subgoal-every J that plans through the "
+                                "graph's path, or a GCBC or GCIQL run (`gcbc train`) whose policy acts toward the "
+                                "path's state --policy-ahead steps on (default: the path alone, executed by the "
+                                "family's controller)", metavar="RUN")
+    policy_ahead: int | None = opt(None, "a policy low level's goal: the graph's path this many steps on (default "
+                                         "25, chosen on cube-single's validation tasks)", metavar="K")
     graph: GraphSettings = group(GraphSettings)
     objects: bool = opt(False, "the objects apart (OGBench's cubes): one graph per cube over the arm and that cube, "
                                "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs)")
@@ -252,21 +256,26 @@ GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short
 
 def graph_eval(o: GraphOptions) -> int:
     from bridgeplan.envs import family_of
+    from bridgeplan.envs.ogbench_pointmaze.names import dataset_env
     from bridgeplan.evaluate import check_result_path, make_tasks
+    from bridgeplan.gcbc import is_gcbc_run
     from bridgeplan.graph import check_graph_settings
     from bridgeplan.hierarchy import evaluate_graph
-    from bridgeplan.paths import eval_dir
+    from bridgeplan.paths import config_path, eval_dir
     from bridgeplan.runs import load_planner, resolve_run, run_dir_of
 
     if o.picture.video and not o.render:
         raise BridgeplanError("--video goes with --render")
     if o.render and o.low is not None:
         raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
-    if o.objects and o.low is not None:
-        raise BridgeplanError("--objects: the objects' graphs are executed alone, not a low level's high level: "
-                              "not with --low")
     if o.low is not None:  # the run named first, before the flags and files that go with it
         resolve_run(Path(o.low))
+    policy_low = o.low is not None and is_gcbc_run(o.low)
+    if o.objects and o.low is not None and not policy_low:
+        raise BridgeplanError("--objects: the objects' graphs are executed alone or by a policy, not a planner low "
+                              "level's high level")
+    if o.policy_ahead is not None:
+        positive("--policy-ahead", o.policy_ahead)
     if o.tasks.episodes is not None:
         positive("--episodes", o.tasks.episodes)
     if o.controller.controller is not None:
@@ -275,7 +284,11 @@ def graph_eval(o: GraphOptions) -> int:
     check_graph_settings(**settings)
     env, dataset = o.environment.maze, o.dataset.dataset
     low_level = o.low_level
-    if o.low is not None:
+    if policy_low:
+        trained = json.loads(config_path(o.low).read_text())["config"]
+        env = env or (trained["maze"] and dataset_env(trained["maze"]))
+        dataset = dataset or trained["dataset"]
+    elif o.low is not None:
         _, low = load_planner(Path(o.low), snapshot=low_level.low_snapshot, device="cpu")
         env = env or low.config.maze
         dataset = dataset or low.config.dataset
@@ -299,12 +312,14 @@ def graph_eval(o: GraphOptions) -> int:
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
                             progress=not o.progress.no_progress,
-                            picture=draw and (lambda *args: heard.append(args)), objects=o.objects)
+                            picture=draw and (lambda *args: heard.append(args)), objects=o.objects,
+                            policy_ahead=o.policy_ahead)
     d = result.to_dict()
     g = d["graph"]
     tag = plan.resolved(result.family, env).tag()
-    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + ("-objects" if o.objects else "") + (
-        f"-nfe{d['nfe']}" if o.low else "") + (
+    low_tag = (f"-{d['low']['agent']}-ahead{d['low']['ahead']}" if policy_low else
+               f"-nfe{d['nfe']}" if o.low else "")
+    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + ("-objects" if o.objects else "") + low_tag + (
         f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
     out = _out(o.output, o.tasks, folder, name)
     drawn = [path for args in heard for path in draw(*args, out.with_suffix(".png"),

@@ -31,6 +31,7 @@ from bridgeplan import config as cfg
 from bridgeplan.consistency import Correction
 from bridgeplan.device import cpu_model
 from bridgeplan.envs import Family, family_of
+from bridgeplan.envs.controllers import Follower
 from bridgeplan.envs.family import Tasks
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, check_writable, code_version
@@ -136,19 +137,27 @@ class Episodes:
                 "decision_ms_per_batch": per_batch, "step_ms": percentiles_ms(ex.step_seconds)}
 
 
+def followers(family: Family, tasks: Tasks, execution: Execution,
+              follower: Callable[[int], Follower] | None = None) -> Callable[[int], Follower]:
+    """``follower`` (``n`` -> the controllers of ``n`` episodes) if given (a policy low level's), else the
+    family's controllers of ``execution``'s kind."""
+    return follower or (lambda n: family.follower(tasks.env, n, execution.controller, execution.lookahead))
+
+
 def run_episodes(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution, seed: int | None = None,
-                 warm_up: Callable | None = None, progress: bool = False, run: Callable | None = None) -> Episodes:
+                 warm_up: Callable | None = None, progress: bool = False, run: Callable | None = None,
+                 follower: Callable[[int], Follower] | None = None) -> Episodes:
     """Every episode of ``tasks``, decided by ``decisions`` (one generator seeded ``seed``, default the tasks',
-    across the batches) and executed as ``execution`` says by ``family``'s controllers, in ``run(tasks, agent,
-    progress)`` (default ``family.run``; ``render``: its film)."""
+    across the batches) and executed as ``execution`` says by ``family``'s controllers (or ``follower``'s), in
+    ``run(tasks, agent, progress)`` (default ``family.run``; ``render``: its film)."""
     gen = generator(decisions.device, tasks.seed if seed is None else seed)
-    executor = PlanExecutor(lambda n: decisions.source(n, gen),
-                            lambda n: family.follower(tasks.env, n, execution.controller, execution.lookahead),
+    executor = PlanExecutor(lambda n: decisions.source(n, gen), followers(family, tasks, execution, follower),
                             execution.replan_every, execution.tolerance, warm_up)
     return Episodes((run or family.run)(tasks, executor, progress), executor)
 
 
-def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution) -> dict:
+def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution,
+                   follower: Callable[[int], Follower] | None = None) -> dict:
     """Decision latency at batch 1 (p50/p95/mean ms): the first episode of ``tasks`` run again alone by a fresh
     source (its generator seeded with the tasks' seed + 1), after one untimed decision on its first state (then
     forgotten), every one of its decisions timed."""
@@ -160,9 +169,8 @@ def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution
         if hasattr(lone, "reset"):
             lone.reset()
 
-    executor = PlanExecutor(lambda n: lone, lambda n: family.follower(tasks.env, n, execution.controller,
-                                                                       execution.lookahead),
-                            execution.replan_every, execution.tolerance, warm_up)
+    executor = PlanExecutor(lambda n: lone, followers(family, tasks, execution, follower), execution.replan_every,
+                            execution.tolerance, warm_up)
     family.run(tasks.first(), executor)
     return percentiles_ms(executor.decision_seconds)
 
@@ -239,17 +247,19 @@ def planner_entries(planner: Planner, nfe: int, run: RunInfo | None) -> dict:
 
 def evaluate(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution, entries: dict,
              floors: dict | None = None, candidates: int = 1, warm_up: Callable | None = None,
-             after_run: Callable[[Episodes], None] | None = None, progress: bool = False
-             ) -> tuple[EvalResult, Episodes]:
+             after_run: Callable[[Episodes], None] | None = None, progress: bool = False,
+             follower: Callable[[int], Follower] | None = None) -> tuple[EvalResult, Episodes]:
     """The one evaluation: ``decisions`` on ``tasks`` of ``family``, executed as ``execution`` says (resolved for
-    the family: :meth:`Execution.resolved`); ``entries`` name what is evaluated, ``floors`` are what it must beat.
-    ``after_run(episodes)`` hears the episodes before the batch-1 latency's lone episode runs. Returns the result
-    and the episodes (their outcome and executor, for what a kind of decisions adds)."""
+    the family: :meth:`Execution.resolved`) by the family's controllers, or by ``follower``'s (a policy low level's);
+    ``entries`` name what is evaluated, ``floors`` are what it must beat. ``after_run(episodes)`` hears the episodes
+    before the batch-1 latency's lone episode runs. Returns the result and the episodes (their outcome and executor,
+    for what a kind of decisions adds)."""
     execution.validate(None, tasks.episode_steps)
-    episodes = run_episodes(decisions, family, tasks, execution, warm_up=warm_up, progress=progress)
+    episodes = run_episodes(decisions, family, tasks, execution, warm_up=warm_up, progress=progress,
+                            follower=follower)
     if after_run is not None:
         after_run(episodes)
-    latency = batch1_latency(decisions, family, tasks, execution)
+    latency = batch1_latency(decisions, family, tasks, execution, follower)
     cost = {**episodes.cost(candidates), "decision_ms_batch1": latency}
     result = EvalResult(family, tasks, entries, family.score(tasks, episodes.outcome), floors or {},
                         execution.to_dict(entries.get("prior") or ""), cost, environment_of(decisions.device))

@@ -461,10 +461,37 @@ def graph_hierarchy(low_run: Path, dataset: str | None = None, settings: dict | 
     return hierarchy, settings, low_info
 
 
+POLICY_AHEAD = 25
+"""A policy low level's goal: the graph's path this many steps on (``bridgeplan graph --low`` a GCBC or GCIQL run).
+Chosen on cube-single's validation tasks (6-10, 10 episodes each, GCIQL seed 0 at 20 k steps, the path searched again
+every 50 steps; studies/manip-cube-single.toml)."""
+
+
+def graph_policy(run: Path, snapshot: int | None, device: str, obs_dim: int):
+    """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) as a graph's low
+    level in an environment of ``obs_dim``-D states."""
+    from bridgeplan.gcbc import load_policy, policy_snapshots
+    from bridgeplan.paths import checkpoint_path
+
+    path = checkpoint_path(run)
+    if snapshot is not None:
+        available = dict(policy_snapshots(run))
+        if snapshot not in available:
+            raise BridgeplanError(f"{run} has no snapshot at step {snapshot} (it has: "
+                                  f"{', '.join(map(str, available)) or 'none'})")
+        path = available[snapshot]
+    policy = load_policy(path, device)
+    if policy.net.obs_dim != obs_dim:
+        raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, the environment's are "
+                              f"{obs_dim}-D")
+    return policy
+
+
 def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
                    low_run: Path | None = None, nfe_low: int | None = None, replan_high_every: int | None = None,
                    low_snapshot: int | None = None, device: str = "auto", progress: bool = False,
-                   picture: Callable | None = None, objects: bool = False) -> EvalResult:
+                   picture: Callable | None = None, objects: bool = False,
+                   policy_ahead: int | None = None) -> EvalResult:
     """The dataset graph over ``dataset`` (of ``tasks``' environment; ``bridgeplan.graph``, built with ``settings``
     over its family's) on ``tasks``: the JSON of ``bridgeplan graph``, with the graph's settings, size and what its
     queries found (``graph``) and the data's identity (``config``).
@@ -473,14 +500,27 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     if given). With ``low_run`` (a planner of that environment trained with ``--subgoal-every``), the graph is a
     hierarchy's high level (:class:`GraphHierarchy`, :func:`evaluate_hierarchy`): the low level plans through its
     path's next states every ``execution.replan_every`` steps (default: its subgoal spacing), the path searched
-    again every ``replan_high_every`` steps if given. ``picture(decisions, tasks, execution)`` (the graph alone) hears
+    again every ``replan_high_every`` steps if given. With ``low_run`` a GCBC or GCIQL run (``gcbc train``), its
+    policy executes the graph's paths (:class:`~bridgeplan.envs.controllers.PolicyFollower`: its goal the path's state
+    ``policy_ahead`` steps on, default :data:`POLICY_AHEAD`), the paths searched again every
+    ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution)`` (the graph alone) hears
     the graph's decisions after the evaluation (``bridgeplan graph --render``). ``objects``: the graph alone, one per
     object (:class:`bridgeplan.graph.ObjectGraphs`)."""
+    from bridgeplan.gcbc import is_gcbc_run
 
     env, family = tasks.env, family_of(tasks.env)
-    if low_run is None:
+    policy = None
+    if low_run is not None and is_gcbc_run(low_run):
         if nfe_low is not None or replan_high_every is not None:
+            raise BridgeplanError("--nfe-low and --replan-high-every are a planner low level's: a policy acts at every "
+                                  "step toward the graph's path, searched again every --replan-every steps")
+        policy = graph_policy(low_run, low_snapshot, device, family.layout(env).obs_dim)
+    elif policy_ahead is not None:
+        raise BridgeplanError("--policy-ahead is a policy low level's: give --low a GCBC or GCIQL run")
+    if low_run is None or policy is not None:
+        if low_run is None and (nfe_low is not None or replan_high_every is not None):
             raise BridgeplanError("--nfe-low and --replan-high-every are the low level's: give --low RUN")
+        from bridgeplan.envs.controllers import PolicyFollower
         from bridgeplan.graph import GraphDecisions, for_stream
 
         stream = family.load_stream(dataset, env)
@@ -489,15 +529,25 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
         build_seconds = time.perf_counter() - t0
         execution = (execution or Execution()).resolved(family, env)
         length = tasks.episode_steps + 1
-        entries = {"kind": "graph", "run": f"graph over {env}", "step": 0,
-                   "method": "dataset graph, objects apart" if objects else "dataset graph", "nfe": 0,
+        method = "dataset graph" + (", objects apart" if objects else "") + (
+            f", {policy.config.agent.upper()} low level" if policy else "")
+        entries = {"kind": "graph", "run": f"graph over {env}", "step": 0, "method": method, "nfe": 0,
                    "horizon": length, "stride": 1, "plan_span": tasks.episode_steps}
+        ahead = POLICY_AHEAD if policy_ahead is None else policy_ahead
+        follower = None if policy is None else (
+            lambda n: PolicyFollower(n, family.body(env), policy.act, ahead))
         seen = {}
         result, _ = evaluate(GraphDecisions(graph, length), family, tasks, execution, entries,
-                             after_run=lambda _: seen.update(graph=graph.summary()), progress=progress)
+                             after_run=lambda _: seen.update(graph=graph.summary()), progress=progress,
+                             follower=follower)
         result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": build_seconds}
         result.config = {"dataset": env, "dataset_identity": stream.identity(),
                          "graph": {**settings, "objects": True} if objects else settings}
+        if policy is not None:
+            result.extra["low"] = {"run": Path(low_run).name, "agent": policy.config.agent, "step": policy.step,
+                                   "ahead": ahead}
+            result.config["low"] = {**dataclasses.asdict(policy.config),
+                                    "dataset": Path(policy.config.dataset).stem}  # named, no path of this machine
         if picture is not None:
             picture(GraphDecisions(graph, length), tasks, execution)
         return result

@@ -3,7 +3,8 @@ generated here, beside the published numbers with their budget.
 
 Rows: the evaluation JSONs in docs/results/manip-SCENE/ (one folder per dataset, ``manip-cube-single``; ``gcbc eval``
 for GCBC and GCIQL, one per training seed and snapshot; ``eval`` for a planner and ``graph`` for the graph (no
-training: one row), each its test split and its validation split on tasks 6-10). Success is OGBench's
+training: one row; with a policy low level, one per training seed of the policy), each its test split and its
+validation split on tasks 6-10). Success is OGBench's
 ``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds. The main
 table is at each method's last snapshot (the largest step its rows have); GCBC and GCIQL also as OGBench averages
 them (per training seed, the mean of its last :data:`LAST` evaluations) and against training steps.
@@ -31,7 +32,7 @@ PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
-GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?")
+GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?(?:-(gcbc|gciql)-ahead(\d+))?")
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -61,6 +62,9 @@ def label(method: str, found: list[dict]) -> str:
     every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
     apart = ", one graph per cube" if m[3] else ""
+    if m[4]:  # a policy low level
+        return (f"the dataset graph (every {m[1]}th state, radius {m[2]}{apart}{replan}), its paths executed by "
+                f"the policy of {LABELS[m[4]]} toward the path's state {m[5]} steps on")
     return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{apart}{replan})"
 
 

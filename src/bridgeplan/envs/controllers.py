@@ -128,3 +128,24 @@ class Follower:
             expected = planned[np.arange(len(planned)), np.minimum(age, planned.shape[1] - 1)]
             return np.linalg.norm(positions - expected, axis=1)
         return np.linalg.norm(planned - positions[:, None], axis=2).min(axis=1)
+
+
+class PolicyFollower(Follower):
+    """Plans executed by a trained goal-conditioned policy instead of the family's body: at step ``t`` of a plan the
+    policy's goal is the plan's state ``ahead`` steps on (its last past its end) and ``act(states, goals)`` its action.
+    A hierarchy whose low level is a policy (HIQL's form), its subgoals the plan's states: a GCBC or GCIQL policy
+    reaches a state a few steps away far more surely than a task's goal (``bridgeplan graph --low`` a GCBC run).
+    Drift is ``track``'s."""
+
+    def __init__(self, n: int, body: Body, act: Callable[[np.ndarray, np.ndarray], np.ndarray], ahead: int):
+        super().__init__(n, body, "track")
+        if ahead < 1:
+            raise BridgeplanError(f"a policy's goal must be at least 1 step ahead on the plan, got {ahead}")
+        self.act, self.ahead = act, int(ahead)
+
+    def actions(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
+        plans, layout = np.asarray(plans, np.float64), self.body.layout
+        if plans.shape[-1] == layout.transition_dim:  # joint plans: their states
+            plans = layout.states(plans)
+        index = np.minimum(np.asarray(age) + self.ahead, plans.shape[1] - 1)
+        return self.act(np.asarray(states, np.float64), plans[np.arange(len(plans)), index])
