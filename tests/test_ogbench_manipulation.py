@@ -637,6 +637,10 @@ def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypa
     assert any(not np.allclose(g[0], task_goal) for g in goals[1:])  # toward the path, not the task's goal alone
     default = main([*graph, "--out", str(tmp_path / "default.json")])
     assert default == 0 and json.loads(capsys.readouterr().out)["low"]["ahead"] == 25
+    before = sum(len(g) for g in goals)  # drawn: the episode run again, executed by the policy as evaluated
+    assert main([*graph, "--render", "--size", "24", "--out", str(tmp_path / "drawn.json")]) == 0
+    steps = json.loads(capsys.readouterr().out)["tasks"]["1"]["steps"][0]
+    assert (tmp_path / "drawn.png").exists() and sum(len(g) for g in goals) - before == 3 * steps
     for flags, message in ((["--nfe-low", "2"], "error: --nfe-low and --replan-high-every are a planner low level's"),
                            (["--policy-ahead", "0"], "error: --policy-ahead must be")):
         assert _error(capsys, [*graph, *flags, "--out", str(tmp_path / "bad.json")]).startswith(message)

@@ -242,8 +242,9 @@ class GraphOptions(LevelledEvaluation):
     graph: GraphSettings = group(GraphSettings)
     objects: bool = opt(False, "the objects apart (OGBench's cubes): one graph per cube over the arm and that cube, "
                                "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs)")
-    render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone): a PNG beside "
-                              "the JSON, as `bridgeplan render` draws the environment's episodes")
+    render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
+                              "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
+                              "episodes")
     picture: Picture = group(Picture)
 
 
@@ -266,11 +267,12 @@ def graph_eval(o: GraphOptions) -> int:
 
     if o.picture.video and not o.render:
         raise BridgeplanError("--video goes with --render")
-    if o.render and o.low is not None:
-        raise BridgeplanError("--render draws the graph's own paths executed: not with --low")
     if o.low is not None:  # the run named first, before the flags and files that go with it
         resolve_run(Path(o.low))
     policy_low = o.low is not None and is_gcbc_run(o.low)
+    if o.render and o.low is not None and not policy_low:
+        raise BridgeplanError("--render draws the graph's own paths executed, alone or by a policy: not with a "
+                              "planner low level")
     if o.objects and o.low is not None and not policy_low:
         raise BridgeplanError("--objects: the objects' graphs are executed alone or by a policy, not a planner low "
                               "level's high level")
@@ -308,7 +310,7 @@ def graph_eval(o: GraphOptions) -> int:
     check_result_path(o.output.out, folder)
     draw = _graph_drawing(o, env) if o.render else None
     tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
-    heard = []  # the graph's decisions, tasks and execution, drawn once the result's name is known
+    heard = []  # the graph's decisions, tasks, execution and follower, drawn once the result's name is known
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
                             progress=not o.progress.no_progress,
@@ -323,7 +325,7 @@ def graph_eval(o: GraphOptions) -> int:
         f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
     out = _out(o.output, o.tasks, folder, name)
     drawn = [path for args in heard for path in draw(*args, out.with_suffix(".png"),
-                                                     f"{env}: dataset graph, {tag or 'open loop'}")]
+                                                     f"{env}: {d['method']}, {tag or 'open loop'}")]
     _show(result, o.output, out)
     if not o.output.json:  # the JSON alone on stdout; the pictures lie beside it
         print("\n".join(f"wrote {path}" for path in drawn))
@@ -332,7 +334,7 @@ def graph_eval(o: GraphOptions) -> int:
 
 def _graph_drawing(o: GraphOptions, env: str):
     """``--render``'s drawing of the graph's first episode (checked before anything runs): a function of the graph's
-    decisions, its tasks and execution, the picture's path and title."""
+    decisions, its tasks, execution and follower (a policy low level's, or None), the picture's path and title."""
     from bridgeplan.envs import family_of
     from bridgeplan.render import check_offscreen, render_episodes
 
@@ -342,9 +344,9 @@ def _graph_drawing(o: GraphOptions, env: str):
         raise BridgeplanError(f"--render: {family.title} episodes cannot be drawn")
     check_offscreen()
 
-    def draw(decisions, tasks, execution, path, title):
+    def draw(decisions, tasks, execution, follower, path, title):
         return render_episodes(decisions, family, tasks.first(), execution, path, title, o.picture.video,
-                               o.picture.size)
+                               o.picture.size, follower)
 
     return draw
 

@@ -503,9 +503,9 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     again every ``replan_high_every`` steps if given. With ``low_run`` a GCBC or GCIQL run (``gcbc train``), its
     policy executes the graph's paths (:class:`~bridgeplan.envs.controllers.PolicyFollower`: its goal the path's state
     ``policy_ahead`` steps on, default :data:`POLICY_AHEAD`), the paths searched again every
-    ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution)`` (the graph alone) hears
-    the graph's decisions after the evaluation (``bridgeplan graph --render``). ``objects``: the graph alone, one per
-    object (:class:`bridgeplan.graph.ObjectGraphs`)."""
+    ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution, follower)`` (the graph alone
+    or over a policy) hears the graph's decisions after the evaluation (``bridgeplan graph --render``).
+    ``objects``: the graph alone or over a policy, one per object (:class:`bridgeplan.graph.ObjectGraphs`)."""
     from bridgeplan.gcbc import is_gcbc_run
 
     env, family = tasks.env, family_of(tasks.env)
@@ -549,7 +549,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
             result.config["low"] = {**dataclasses.asdict(policy.config),
                                     "dataset": Path(policy.config.dataset).stem}  # named, no path of this machine
         if picture is not None:
-            picture(GraphDecisions(graph, length), tasks, execution)
+            picture(GraphDecisions(graph, length), tasks, execution, follower)
         return result
     hierarchy, high, low_info = graph_hierarchy(low_run, dataset, settings, low_snapshot, device, tasks.episode_steps,
                                                 env)

@@ -144,9 +144,10 @@ def gif(frames: list[np.ndarray], duration_ms: int = 40) -> bytes:
 
 
 def render_episodes(decisions, family, tasks, execution, base: Path, title: str, video: bool = False,
-                    size: int = 240) -> list[Path]:
+                    size: int = 240, follower=None) -> list[Path]:
     """Plan and execute ``tasks``' episodes by ``decisions`` (:class:`~bridgeplan.evaluate.Decisions`) as
-    ``execution`` says, and draw them as their family does (``Family.picture``): ``base`` (PNG), and with ``video``
+    ``execution`` says (by ``follower``'s controllers where given: a policy low level's), and draw them as their
+    family does (``Family.picture``): ``base`` (PNG), and with ``video``
     ``base`` as a GIF of the first episode, frames ``size`` pixels square. Returns the files written; none is written
     unless every picture was drawn.
 
@@ -185,7 +186,7 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
         return [next((plan for t, plan in reversed(made) if t <= k), None) for k in steps]
 
     episodes = run_episodes(FirstPlans(), family, tasks, execution,
-                            run=lambda t, agent, progress: family.film(t, agent, size))
+                            run=lambda t, agent, progress: family.film(t, agent, size), follower=follower)
     outcome, film = episodes.outcome
     steps = video_steps(film.length)
     movie = gif(film.frames(steps, in_force(steps))) if video else None
