@@ -642,7 +642,8 @@ def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypa
     steps = json.loads(capsys.readouterr().out)["tasks"]["1"]["steps"][0]
     assert (tmp_path / "drawn.png").exists() and sum(len(g) for g in goals) - before == 3 * steps
     for flags, message in ((["--nfe-low", "2"], "error: --nfe-low and --replan-high-every are a planner low level's"),
-                           (["--policy-ahead", "0"], "error: --policy-ahead must be")):
+                           (["--policy-ahead", "0"], "error: --policy-ahead must be"),
+                           (["--low-snapshot", "3"], f"error: {run} has no snapshot at step 3 (it has: 4)")):
         assert _error(capsys, [*graph, *flags, "--out", str(tmp_path / "bad.json")]).startswith(message)
     assert _error(capsys, ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--policy-ahead", "5",
                            "--out", str(tmp_path / "bad.json")]).startswith("error: --policy-ahead is a policy low")

@@ -331,6 +331,17 @@ def is_gcbc_run(path: str | Path) -> bool:
         return False
 
 
+def policy_path(run_dir: str | Path, step: int | None = None) -> Path:
+    """Run ``run_dir``'s latest checkpoint (``step`` None) or its policy snapshot at ``step``."""
+    if step is None:
+        return checkpoint_path(run_dir)
+    available = dict(policy_snapshots(run_dir))
+    if step not in available:
+        raise BridgeplanError(f"{run_dir} has no snapshot at step {step} (it has: "
+                              f"{', '.join(map(str, available)) or 'none'})")
+    return available[step]
+
+
 def policy_snapshots(run_dir: str | Path) -> list[tuple[int, Path]]:
     """``(step, path)`` of every policy snapshot of a run, ascending."""
     return [(s, snapshot_path(run_dir, s)) for s in snapshot_steps(run_dir)]
@@ -512,13 +523,7 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
     from bridgeplan.paths import eval_dir
 
     run_dir = Path(run_dir)
-    available = dict(policy_snapshots(run_dir))
-    paths = [checkpoint_path(run_dir)] if steps is None else []
-    for s in steps or []:
-        if s not in available:
-            raise BridgeplanError(f"{run_dir} has no snapshot at step {s} (it has: "
-                                  f"{', '.join(map(str, available)) or 'none'})")
-        paths.append(available[s])
+    paths = [policy_path(run_dir)] if steps is None else [policy_path(run_dir, s) for s in steps]
     results = []
     for path in paths:
         policy = load_policy(path)

@@ -470,17 +470,9 @@ every 50 steps; studies/manip-cube-single.toml)."""
 def graph_policy(run: Path, snapshot: int | None, device: str, obs_dim: int):
     """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) as a graph's low
     level in an environment of ``obs_dim``-D states."""
-    from bridgeplan.gcbc import load_policy, policy_snapshots
-    from bridgeplan.paths import checkpoint_path
+    from bridgeplan.gcbc import load_policy, policy_path
 
-    path = checkpoint_path(run)
-    if snapshot is not None:
-        available = dict(policy_snapshots(run))
-        if snapshot not in available:
-            raise BridgeplanError(f"{run} has no snapshot at step {snapshot} (it has: "
-                                  f"{', '.join(map(str, available)) or 'none'})")
-        path = available[snapshot]
-    policy = load_policy(path, device)
+    policy = load_policy(policy_path(run, snapshot), device)
     if policy.net.obs_dim != obs_dim:
         raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, the environment's are "
                               f"{obs_dim}-D")
