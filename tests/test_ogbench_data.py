@@ -258,11 +258,13 @@ def test_cli_generate_and_info(tmp_path, capsys):
     args = ["data", "generate", "--maze", "pointmaze-giant-stitch-v0", "--out", str(tmp_path), "--episodes", "2",
             "--episode-steps", "30", "--seed", "4", "--no-progress"]
     assert main(args) == 0
-    assert "60 steps in 2 episodes of 30 steps" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "60 steps in 2 episodes of 30 steps" in out and "wrote " in out and "cached" not in out
     assert zipfile.is_zipfile(tmp_path / "pointmaze-giant-stitch-v0-val.npz")
     made = (tmp_path / "pointmaze-giant-stitch-v0.npz").stat().st_mtime_ns
     assert main(args) == 0  # the same identity: the cache, nothing made
-    assert "cached: " in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "cached: " in out and "wrote" not in out
     assert (tmp_path / "pointmaze-giant-stitch-v0.npz").stat().st_mtime_ns == made
     record = json.loads((tmp_path / "pointmaze-giant-stitch-v0.json").read_text())
     assert record["identity"]["seed"] == 4 and record["identity"]["episodes"] == 2

@@ -79,13 +79,13 @@ def _cmd_data_generate(o: DataGenerateOptions) -> int:
     for flag in ("steps", "workers", "episodes", "episode_steps"):
         if getattr(o, flag) is not None:
             positive("--" + flag.replace("_", "-"), getattr(o, flag))
-    out = family.generate_dataset(maze, Path(o.out) if o.out else None,
+    out, written = family.generate_dataset(maze, Path(o.out) if o.out else None,
                                   seed=family.data_seed if o.seed is None else o.seed,
                                   steps=o.steps, piece_steps=o.piece_steps, episodes=o.episodes,
                                   episode_steps=o.episode_steps, workers=o.workers, force=o.force,
                                   progress=not o.progress.no_progress)
     print(family.dataset_info(str(out), maze)[1])
-    print(f"wrote {out}")
+    print(f"wrote {out}" if written else f"cached: {out} has this identity (nothing written; --force remakes it)")
     return 0
 
 

@@ -174,9 +174,10 @@ class Family:
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+                         workers: int = 1, force: bool = False, progress: bool = True) -> tuple[Path, bool]:
         """Make ``env``'s dataset by the family's recipe at ``out`` (None: its default place); returns the path
-        that :meth:`load_stream` reads. Options the recipe has no use for are refused."""
+        that :meth:`load_stream` reads and whether it was written now (False: the same identity was there, a
+        cache). Options the recipe has no use for are refused."""
         raise NotImplementedError
 
     def reads(self, path: str) -> bool:

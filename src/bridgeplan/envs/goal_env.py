@@ -407,7 +407,7 @@ class GoalEnv(Family):
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+                         workers: int = 1, force: bool = False, progress: bool = True) -> tuple[Path, bool]:
         raise BridgeplanError(f"{env} is your own environment: bridgeplan has no recipe for its data; give your "
                               f"dataset (its spec's dataset, or --dataset)")
 

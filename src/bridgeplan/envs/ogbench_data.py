@@ -157,10 +157,10 @@ class OGBenchFamily(Family):
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+                         workers: int = 1, force: bool = False, progress: bool = True) -> tuple[Path, bool]:
         """OGBench's recipe (its size unless ``episodes`` and ``episode_steps`` say otherwise): NAME.npz,
         NAME-val.npz and NAME.json (identity and sha256) in ``out``'s folder (default ``datasets/ogbench``, or under
-        ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused."""
+        ``$BRIDGEPLAN_DATASETS``); returns NAME.npz. The same identity already there is reused (a cache)."""
         if steps is not None or piece_steps is not None or workers != 1:
             raise BridgeplanError("an OGBench dataset has its recipe's size: give --episodes and --episode-steps, "
                                   "not --steps, --piece-steps or --workers")
@@ -168,9 +168,7 @@ class OGBenchFamily(Family):
         folder = folder.parent if folder.suffix == ".npz" else folder
         made = import_module(f"{self.data_package}.generate").generate_dataset(
             env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force, progress=progress)
-        if made.cached:
-            print(f"cached: {made.train_path} has this identity (sha256 {made.record['files'][made.train_path.name]})")
-        return made.train_path
+        return made.train_path, not made.cached
 
     def reads(self, path: str) -> bool:
         """An npz file (OGBench's format); which environment's it is is :meth:`dataset_info`'s to check."""

@@ -99,7 +99,7 @@ class Maze2D(Family):
 
     def generate_dataset(self, env: str, out: Path | None, seed: int, steps: int | None = None,
                          piece_steps: int | None = None, episodes: int | None = None, episode_steps: int | None = None,
-                         workers: int = 1, force: bool = False, progress: bool = True) -> Path:
+                         workers: int = 1, force: bool = False, progress: bool = True) -> tuple[Path, bool]:
         """The noisy expert's stream of ``steps`` transitions (default 1 M; or pieces of ``piece_steps``) in the
         Minari format (default ``datasets/<maze>-<steps>``)."""
         from bridgeplan.envs.maze2d.datasets import generate_dataset
@@ -108,7 +108,7 @@ class Maze2D(Family):
             raise BridgeplanError("a Maze2D dataset is one stream of --steps transitions (or pieces of "
                                   "--piece-steps): it takes no --episodes or --episode-steps")
         return generate_dataset(env, 1_000_000 if steps is None else steps, seed=seed, out=out, force=force,
-                                progress=progress, workers=workers, piece_steps=piece_steps)
+                                progress=progress, workers=workers, piece_steps=piece_steps), True
 
     def reads(self, path: str) -> bool:
         """A Minari dataset (directory or id) or a legacy D4RL hdf5 file."""
