@@ -12,6 +12,7 @@ from bridgeplan.errors import BridgeplanError
 from bridgeplan.options import (
     REQUIRED,
     add_options,
+    field_defaults,
     field_docs,
     from_config,
     group,
@@ -170,3 +171,57 @@ def test_an_option_from_a_config_field_has_the_fields_docstring_as_help(tmp_path
     assert "The network's width. (default: 16)" in text
     with pytest.raises(TypeError, match="seed has no docstring"):
         from_config("a_config:Config", "seed")
+
+
+@dataclass(kw_only=True)
+class Budget:
+    steps: int | None = opt(None, "optimizer steps")
+    seed: int | None = opt(None, "the seed (default: the run's)")
+
+
+@dataclass(kw_only=True)
+class Train:
+    width: int | None = opt(None, "the width")
+    training: Budget = group(Budget)
+
+
+def test_an_option_left_to_the_config_shows_the_configs_default(tmp_path, monkeypatch):
+    """An option that defaults to None (the command's config decides) shows that config's default, read from its
+    source; only in the groups named, and not where its help already says its default."""
+    (tmp_path / "b_config.py").write_text(CONFIG.replace("width: int = 8", "width: int = 8\n    name: str = str(3)"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert field_defaults("b_config:Config") == {"steps": 10, "seed": 0, "width": 8}  # str(3) is not a literal
+
+    def help_of(*config):
+        return " ".join(add_options(argparse.ArgumentParser(prog="x"), Train, *config).format_help().split())
+
+    text = help_of("b_config:Config", ("training",))
+    assert "optimizer steps (default: 10)" in text and text.endswith("the seed (default: the run's)")
+    assert "the width --steps" in text  # not in the groups named
+    assert "the width (default: 8)" in help_of("b_config:Config")  # every option
+    assert "(default: 10)" not in help_of()
+
+
+def test_the_configs_defaults_read_from_source_are_its_own():
+    from bridgeplan.config import PriorTrainConfig
+    from bridgeplan.gcbc import GCBCConfig
+
+    for name, config in (("bridgeplan.gcbc:GCBCConfig", GCBCConfig()),
+                         ("bridgeplan.config:PriorTrainConfig", PriorTrainConfig())):
+        read = field_defaults(name)
+        assert {"steps", "batch_size", "lr", "seed"} <= set(read)
+        assert all(getattr(config, k) == v for k, v in read.items() if k not in ("horizon", "stride")), name
+
+
+@pytest.mark.parametrize("command, shown", [(["gcbc", "train"], "per gradient (default: 1024)"),
+                                            (["train-prior"], "per gradient (default: 64)"),
+                                            (["train"], "optimizer steps (default: 2000000)")])
+def test_each_training_command_shows_its_own_configs_defaults(command, shown, capsys):
+    from bridgeplan.cli import main
+
+    with pytest.raises(SystemExit):
+        main([*command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert shown in text
+    if command != ["gcbc", "train"]:  # the horizon is the preset's for the maze: none shown
+        assert "divisible by the U-Net's downsampling factor. --stride" in text

@@ -195,9 +195,11 @@ class TrainOptions:
 
 
 def _add_train_commands(sub) -> None:
-    add_command(sub, "train", TrainOptions, _cmd_train, help="train a planner (DDPM, the I2SB bridge or flow matching)",
-                description="Train a planner. Defaults come from --preset per maze; flags override them.")
-    add_command(sub, "train-prior", TrainCommon, _cmd_train_prior,
+    add_command(sub, "train", TrainOptions, _cmd_train, TRAIN_CONFIG, ("training",),
+                help="train a planner (DDPM, the I2SB bridge or flow matching)",
+                description="Train a planner. Defaults come from --preset per maze (the training defaults shown are "
+                            "--preset diffuser's; cpu-small's are smaller, per maze); flags override them.")
+    add_command(sub, "train-prior", TrainCommon, _cmd_train_prior, "bridgeplan.config:PriorTrainConfig", ("training",),
                 help="train the learned prior (MLP on start and goal)")
 
 

@@ -37,12 +37,11 @@ def add_gcbc_commands(sub) -> None:
     """The ``bridgeplan gcbc`` group: ``train`` and ``eval``."""
     p = sub.add_parser("gcbc", help="goal-conditioned behaviour cloning, OGBench's baseline on its own data")
     og = p.add_subparsers(dest="gcbc_command", required=True)
-    add_command(og, "train", GCBCTrainOptions, _cmd_gcbc_train,
+    add_command(og, "train", GCBCTrainOptions, _cmd_gcbc_train, GCBC_CONFIG,
                 help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
-                description="Defaults: OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py): lr 3e-4, "
-                            "batch 1024, MLP 512x3, future-state goals, 1M steps. --maze: the OGBench dataset the "
-                            "data is of (pointmaze-medium-navigate-v0, cube-single-play-v0, or a bare pointmaze maze; "
-                            "checked; evaluation's default).")
+                description="Defaults (shown): OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py). "
+                            "--maze: the OGBench dataset the data is of (pointmaze-medium-navigate-v0, "
+                            "cube-single-play-v0, or a bare pointmaze maze; checked; evaluation's default).")
     add_command(og, "eval", GCBCEvalOptions, gcbc_eval, description=GCBC_EVAL_DESCRIPTION,
                 help="a GCBC run's snapshots on OGBench's 5-task evaluation protocol (one snapshot on any tasks, "
                      "validation's too: `bridgeplan eval RUN --tasks 6,7,8,9,10`)")

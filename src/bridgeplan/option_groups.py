@@ -138,13 +138,12 @@ class RunDir:
 
 @dataclass(kw_only=True)
 class Training:
-    """How long and how a model is trained (defaults: the config's)."""
+    """How long and how a model is trained (None: the command's config's default, which its help shows)."""
 
     steps: int | None = opt(None, "optimizer steps")
-    minutes: float | None = opt(None, "wall-clock budget (stops at steps or minutes)")
-    batch_size: int | None = opt(None, "windows per gradient (default: the config's, for a planner its preset's for "
-                                       "the maze)")
-    lr: float | None = opt(None, "Adam's learning rate (default as --batch-size)")
+    minutes: float | None = opt(None, "wall-clock budget in minutes, 0 none (stops at steps or minutes)")
+    batch_size: int | None = opt(None, "windows (GCBC: transitions) per gradient")
+    lr: float | None = opt(None, "Adam's learning rate")
     checkpoint_every: int | None = opt(None, "write the checkpoint (and a snapshot) every this many steps")
     log_every: int | None = opt(None, "log every this many steps")
     seed: int | None = opt(None, "the training seed")

@@ -67,6 +67,23 @@ def field_docs(config: str) -> dict[str, str]:
     return docs
 
 
+@functools.cache
+def field_defaults(config: str) -> dict[str, Any]:
+    """The literal defaults of the dataclass ``config``'s fields (``"module:Class"``; ``1_000_000``, ``(512, 512)``),
+    read from its source as :func:`field_docs` reads their docs; a field whose default is not a literal is left out."""
+    module, name = config.split(":")
+    source = Path(importlib.util.find_spec(module).origin).read_text()
+    body = next(node for node in ast.parse(source).body if isinstance(node, ast.ClassDef) and node.name == name).body
+    out = {}
+    for field in body:
+        if isinstance(field, ast.AnnAssign) and isinstance(field.target, ast.Name) and field.value is not None:
+            try:
+                out[field.target.id] = ast.literal_eval(field.value)
+            except ValueError:
+                continue
+    return out
+
+
 def shared(options: type, name: str, **default) -> Any:
     """The option ``name`` of the group ``options``, taken alone into another command's options (declared there, not
     again here); ``default=``: this command's own default."""
@@ -178,17 +195,26 @@ def _default_text(value: Any) -> str:
     return ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
 
 
-def add_options(parser: argparse.ArgumentParser, options: type) -> argparse.ArgumentParser:
-    """The arguments of ``options`` (and its groups) added to ``parser``; its help shows each default."""
+def add_options(parser: argparse.ArgumentParser, options: type, config: str | None = None,
+                config_groups: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The arguments of ``options`` (and its groups) added to ``parser``; its help shows each default. An option
+    that defaults to None (the command's config then decides) shows the default of the field of its name in the
+    dataclass ``config`` (``"module:Class"``, the config the command fills), where its help does not already say
+    one; ``config_groups``: only in these groups (the group fields' names; None: every option)."""
     groups: dict[str, Any] = {}
+    config_default = field_defaults(config) if config else {}
     for leaf in _check_once(options):
         kind, many, choices = _shape(leaf)
         target = parser if leaf.title is None else groups.setdefault(
             leaf.title, parser.add_argument_group(leaf.title))
         kwargs = dict(leaf.extra)
         kwargs.pop("positional", None)
-        shown = not any(leaf.default is v for v in (None, False, dataclasses.MISSING)) and leaf.default != []
-        kwargs["help"] = leaf.help + (f" (default: {_default_text(leaf.default)})" if shown else "")
+        value = leaf.default
+        if (value is None and "default" not in leaf.help and leaf.name in config_default
+                and (config_groups is None or set(leaf.path) & set(config_groups))):
+            value = config_default[leaf.name]
+        shown = not any(value is v for v in (None, False, dataclasses.MISSING)) and value not in ("", [], ())
+        kwargs["help"] = leaf.help + (f" (default: {_default_text(value)})" if shown else "")
         if kind is bool and not many:
             kwargs.setdefault("action", "store_true")
         else:
@@ -285,9 +311,11 @@ def _one(leaf: Leaf, kind: type, choices: tuple | None, value: Any) -> Any:
     return out
 
 
-def add_command(sub, name: str, options: type, run, **parser_kwargs) -> argparse.ArgumentParser:
-    """The subcommand ``name``: its flags from ``options``; running it calls ``run(options)``."""
-    parser = add_options(sub.add_parser(name, **parser_kwargs), options)
+def add_command(sub, name: str, options: type, run, config: str | None = None,
+                config_groups: Collection[str] | None = None, **parser_kwargs) -> argparse.ArgumentParser:
+    """The subcommand ``name``: its flags from ``options`` (their help showing ``config``'s defaults:
+    :func:`add_options`); running it calls ``run(options)``."""
+    parser = add_options(sub.add_parser(name, **parser_kwargs), options, config, config_groups)
     parser.set_defaults(func=lambda args: run(options_from_args(options, args)))
     return parser
 
