@@ -650,6 +650,64 @@ def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypa
     assert not (tmp_path / "bad.json").exists()
 
 
+def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, tmp_path, capsys, monkeypatch):
+    """``PlannerPolicy.from_graph(RUN)`` over a GCBC run, in a loop over ogbench's own environment (``info["goal"]``
+    given): the same episode as ``bridgeplan graph --low RUN`` evaluates, the policy asked the same observations and
+    goals at every step, the same steps and success; the graph alone (``env``, ``dataset``) the same way; a goal of
+    another width refused."""
+    import ogbench
+
+    import bridgeplan.gcbc
+    from bridgeplan.envs.ogbench_common import episode_seed
+    from bridgeplan.policy import PlannerPolicy
+
+    run = tmp_path / "gcbc"
+    assert main(["gcbc", "train", str(tiny_data), "--run-dir", str(run), "--maze", "cube-single-play-v0", "--steps",
+                 "4", "--batch-size", "8", "--hidden-dims", "8,8", "--checkpoint-every", "4", "--device", "cpu",
+                 "--no-progress"]) == 0
+    asked, real = [], bridgeplan.gcbc.GCBCPolicy.act
+    monkeypatch.setattr(bridgeplan.gcbc.GCBCPolicy, "act",
+                        lambda self, o, g: asked.append((np.array(o), np.array(g))) or real(self, o, g))
+    graph = ["graph", "--episodes", "1", "--tasks", "1", "--keep", "2", "--replan-every", "50", "--no-progress",
+             "--json", "--low", str(run), "--policy-ahead", "3"]
+    capsys.readouterr()
+    assert main([*graph, "--out", str(tmp_path / "row.json")]) == 0
+    row = json.loads(capsys.readouterr().out)
+    steps, evaluated = row["tasks"]["1"]["steps"][0], asked[:]
+
+    def own_loop(policy):
+        env = ogbench.make_env_and_datasets("cube-single-play-v0", env_only=True)
+        obs, info = env.reset(seed=episode_seed(0, 1, 0), options={"task_id": 1})  # the evaluation's episode 0
+        goal = info["goal"]  # the reset's info holds it
+        policy.reset()
+        done, n = False, 0
+        while not done:
+            action = policy(obs, goal)
+            assert action.shape == (5,) and action.dtype == np.float32 and np.abs(action).max() <= 1
+            obs, _, terminated, truncated, info = env.step(action)
+            done, n = terminated or truncated, n + 1
+        env.close()
+        return n, bool(info["success"])
+
+    asked.clear()
+    policy = PlannerPolicy.from_graph(run, replan_every=50, graph={"keep": 2}, policy_ahead=3, device="cpu")
+    assert policy.env == "cube-single-play-v0" and policy.maze is None
+    assert own_loop(policy) == (steps, row["tasks"]["1"]["successes"] == 1)
+    assert len(asked) == steps and policy.plans_made == row["plans_per_episode"]["mean"]
+    np.testing.assert_array_equal(asked[0][0], evaluated[0][0])  # the same first state
+    for (o, g), (o_eval, g_eval) in zip(asked, evaluated):  # the evaluation's first pass over its episode: the same
+        np.testing.assert_allclose(o, o_eval, rtol=0, atol=1e-6)  # but for the float32 actions a policy returns
+        np.testing.assert_allclose(g, g_eval, rtol=0, atol=1e-6)
+    alone = PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, replan_every=50, graph={"keep": 2})
+    assert own_loop(alone)[0] == 200 and alone.plans_made == 4 and alone.execution.controller == "track"
+    with pytest.raises(BridgeplanError, match="an observation of 28 numbers and its goal of 28"):
+        alone(np.zeros(28), np.zeros(3))
+    with pytest.raises(BridgeplanError, match="give env and dataset"):
+        PlannerPolicy.from_graph(env="cube-single-play-v0")
+    with pytest.raises(BridgeplanError, match="policy_ahead is a policy low level's"):
+        PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, policy_ahead=3)
+
+
 def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
     """``bridgeplan graph --render --video`` on cube-single: the first episode executed again and drawn by ogbench's
     camera: a PNG of its start, middle and end side by side, and a GIF of every 4th of its 201 states (and the last),

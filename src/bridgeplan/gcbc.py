@@ -301,6 +301,11 @@ class GCBCPolicy:
     def __init__(self, net: GoalPolicy, step: int, config: GCBCConfig, device: torch.device):
         self.net, self.step, self.config, self.device = net.eval(), step, config, device
 
+    @property
+    def env(self) -> str | None:
+        """The environment the policy was trained for (None: its run named none)."""
+        return environment(self.config.maze) if self.config.maze else None
+
     def act(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """Actions ``[N, a]`` (the mean, clipped to [-1, 1]) for observations and goals ``[N, d]``."""
         obs = torch.as_tensor(np.asarray(observations, dtype=np.float32), device=self.device)

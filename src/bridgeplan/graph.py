@@ -441,6 +441,9 @@ class GraphSource:
         self.plans_sampled += len(states)
         return paths
 
+    def reset(self) -> None:
+        """A new episode (:class:`bridgeplan.policy.PlannerPolicy`): each decision searches afresh, nothing to forget."""
+
 
 @dataclass
 class GraphDecisions:

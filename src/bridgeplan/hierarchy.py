@@ -467,16 +467,55 @@ Chosen on cube-single's validation tasks (6-10, 10 episodes each, GCIQL seed 0 a
 every 50 steps; studies/manip-cube-single.toml)."""
 
 
-def graph_policy(run: Path, snapshot: int | None, device: str, obs_dim: int):
+def graph_policy(run: Path, snapshot: int | None, device: str, env: str | None = None):
     """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) as a graph's low
-    level in an environment of ``obs_dim``-D states."""
+    level in ``env`` (default: the run's own), whose states must be the policy's."""
     from bridgeplan.gcbc import load_policy, policy_path
 
     policy = load_policy(policy_path(run, snapshot), device)
+    env = env or policy.env
+    if env is None:
+        raise BridgeplanError(f"{run} names no environment: give it (--maze NAME)")
+    obs_dim = family_of(env).layout(env).obs_dim
     if policy.net.obs_dim != obs_dim:
         raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, the environment's are "
                               f"{obs_dim}-D")
     return policy
+
+
+@dataclass
+class GraphAgent:
+    """The dataset graph's decisions and, over a policy, the follower that executes them (:func:`graph_agent`)."""
+
+    decisions: object
+    """A :class:`bridgeplan.graph.GraphDecisions`: paths from the current states to the goals."""
+    follower: Callable | None
+    """``follower(n)``: the policy's :class:`~bridgeplan.envs.controllers.PolicyFollower` over ``n`` episodes; None:
+    the execution's controller executes the paths."""
+    settings: dict
+    """The graph's settings (the family's, under those given)."""
+    identity: dict
+    """The data's identity."""
+    build_seconds: float
+
+
+def graph_agent(env: str, dataset: str, length: int, settings: dict | None = None, policy=None, objects: bool = False,
+                ahead: int | None = None) -> GraphAgent:
+    """The dataset graph over ``dataset`` (of ``env``; :func:`bridgeplan.graph.for_stream`, ``objects``: one per
+    object), its paths ``length`` states long, executed by ``policy`` (a GCBC or GCIQL run's, :func:`graph_policy`;
+    its goal the path's state ``ahead`` steps on, default :data:`POLICY_AHEAD`) or, without one, by the execution's
+    controller: what ``bridgeplan graph`` evaluates and ``PlannerPolicy.from_graph`` acts by."""
+    from bridgeplan.envs.controllers import PolicyFollower
+    from bridgeplan.graph import GraphDecisions, for_stream
+
+    family = family_of(env)
+    stream = family.load_stream(dataset, env)
+    t0 = time.perf_counter()
+    graph, settings = for_stream(stream, family, settings, objects)
+    build_seconds = time.perf_counter() - t0
+    ahead = POLICY_AHEAD if ahead is None else ahead
+    follower = None if policy is None else (lambda n: PolicyFollower(n, family.body(env), policy.act, ahead))
+    return GraphAgent(GraphDecisions(graph, length), follower, settings, stream.identity(), build_seconds)
 
 
 def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
@@ -506,42 +545,33 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
         if nfe_low is not None or replan_high_every is not None:
             raise BridgeplanError("--nfe-low and --replan-high-every are a planner low level's: a policy acts at every "
                                   "step toward the graph's path, searched again every --replan-every steps")
-        policy = graph_policy(low_run, low_snapshot, device, family.layout(env).obs_dim)
+        policy = graph_policy(low_run, low_snapshot, device, env)
     elif policy_ahead is not None:
         raise BridgeplanError("--policy-ahead is a policy low level's: give --low a GCBC or GCIQL run")
     if low_run is None or policy is not None:
         if low_run is None and (nfe_low is not None or replan_high_every is not None):
             raise BridgeplanError("--nfe-low and --replan-high-every are the low level's: give --low RUN")
-        from bridgeplan.envs.controllers import PolicyFollower
-        from bridgeplan.graph import GraphDecisions, for_stream
-
-        stream = family.load_stream(dataset, env)
-        t0 = time.perf_counter()
-        graph, settings = for_stream(stream, family, settings, objects)
-        build_seconds = time.perf_counter() - t0
+        agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead)
+        graph, settings = agent.decisions.graph, agent.settings
         execution = (execution or Execution()).resolved(family, env)
-        length = tasks.episode_steps + 1
         method = "dataset graph" + (", objects apart" if objects else "") + (
             f", {policy.config.agent.upper()} low level" if policy else "")
         entries = {"kind": "graph", "run": f"graph over {env}", "step": 0, "method": method, "nfe": 0,
-                   "horizon": length, "stride": 1, "plan_span": tasks.episode_steps}
-        ahead = POLICY_AHEAD if policy_ahead is None else policy_ahead
-        follower = None if policy is None else (
-            lambda n: PolicyFollower(n, family.body(env), policy.act, ahead))
+                   "horizon": agent.decisions.length, "stride": 1, "plan_span": tasks.episode_steps}
         seen = {}
-        result, _ = evaluate(GraphDecisions(graph, length), family, tasks, execution, entries,
+        result, _ = evaluate(agent.decisions, family, tasks, execution, entries,
                              after_run=lambda _: seen.update(graph=graph.summary()), progress=progress,
-                             follower=follower)
-        result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": build_seconds}
-        result.config = {"dataset": env, "dataset_identity": stream.identity(),
+                             follower=agent.follower)
+        result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": agent.build_seconds}
+        result.config = {"dataset": env, "dataset_identity": agent.identity,
                          "graph": {**settings, "objects": True} if objects else settings}
         if policy is not None:
             result.extra["low"] = {"run": Path(low_run).name, "agent": policy.config.agent, "step": policy.step,
-                                   "ahead": ahead}
+                                   "ahead": POLICY_AHEAD if policy_ahead is None else policy_ahead}
             result.config["low"] = {**dataclasses.asdict(policy.config),
                                     "dataset": Path(policy.config.dataset).stem}  # named, no path of this machine
         if picture is not None:
-            picture(GraphDecisions(graph, length), tasks, execution, follower)
+            picture(agent.decisions, tasks, execution, agent.follower)
         return result
     hierarchy, high, low_info = graph_hierarchy(low_run, dataset, settings, low_snapshot, device, tasks.episode_steps,
                                                 env)

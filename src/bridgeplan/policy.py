@@ -1,47 +1,55 @@
-"""A trained planner as a policy for your own loop: a gymnasium-robotics ``PointMaze_*-v3`` observation dict
-in, an action out, replanning inside.
+"""A trained planner (or the dataset graph) as a policy for your own loop: an observation and its goal in, an action
+out, replanning inside.
 
     policy = PlannerPolicy.from_run("runs/umaze-bridge-learned-N16-H128-cpu-small-s0", nfe=1, replan_every=8)
-    obs, _ = env.reset(seed=0)
+    obs, _ = env.reset(seed=0)   # gymnasium-robotics' PointMaze_*-v3
     policy.reset()
-    action = policy(obs)
+    action = policy(obs)         # its observation dict: "observation" (x, y, vx, vy) and "desired_goal" (x, y)
 
-It is the evaluation's closed loop (``replan.PlanExecutor`` over ``replan.PlanSource``) for one
-episode at a time: it plans from ``obs["observation"]`` (x, y, vx, vy) to ``obs["desired_goal"]`` (x, y) at
-the first step after :meth:`PlannerPolicy.reset`, again every ``replan_every`` steps (and/or when the
-position drifts more than ``tolerance`` from the plan, or when ``desired_goal`` changes), and tracks the
-newest plan with Diffuser's controller.
+    policy = PlannerPolicy.from_graph("runs/gciql-s0", replan_every=50)   # the graph over a GCIQL run's own data
+    obs, info = env.reset(options={"task_id": 1})   # ogbench's cube-single-play-v0
+    policy.reset()
+    action = policy(obs, info["goal"])   # OGBench: the observation and the goal's
+
+It is the evaluation's closed loop (``replan.PlanExecutor`` over a decision source: ``replan.PlanSource``, a
+hierarchy's or the graph's) for one episode at a time: it plans at the first step after :meth:`PlannerPolicy.reset`,
+again every ``replan_every`` steps (and/or when the state drifts more than ``tolerance`` from the plan, or when the
+goal changes), and executes the newest plan as ``bridgeplan eval`` (or ``graph``) does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from bridgeplan.envs import maze2d
-from bridgeplan.envs.maze2d.grids import Maze, get_maze
+from bridgeplan.envs import family_of, maze2d
+from bridgeplan.envs.maze2d.grids import get_maze
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.replan import Execution, PlanExecutor, PlanSource
-from bridgeplan.trajectory import MAZE2D
 
 
 class PlannerPolicy:
-    """One episode at a time: ``policy(obs_dict) -> action [2]``; ``reset()`` between episodes.
+    """One episode at a time: ``policy(obs, goal) -> action``; ``reset()`` between episodes.
 
-    Built from a run (:meth:`from_run`), from a hierarchy's two runs (:meth:`from_hierarchy`) or from a low level
-    under the dataset graph (:meth:`from_graph`). Attributes:
-    ``source`` (the closed loop's ``plan_fn``: a ``replan.PlanSource`` or a ``hierarchy.HierarchySource``),
-    ``maze`` (the run's maze: make the env with ``maze.gym_id``), ``execution``, ``steps`` (steps since the
-    last reset) and ``plans_made`` (plans in this episode).
+    Built from a run (:meth:`from_run`), from a hierarchy's two runs (:meth:`from_hierarchy`) or from the dataset
+    graph, alone, over a policy or over a planner low level (:meth:`from_graph`). Attributes:
+    ``source`` (the closed loop's decisions: a ``replan.PlanSource``, a ``hierarchy.HierarchySource`` or a
+    ``graph.GraphSource``), ``env`` (the environment's name), ``maze`` (a Maze2D maze: make the env with
+    ``maze.gym_id``; None in another family), ``execution``, ``steps`` (steps since the last reset) and
+    ``plans_made`` (plans in this episode).
     """
 
-    def __init__(self, source, maze: Maze, execution: Execution):
-        self.source, self.maze, self.execution = source, maze, execution
-        self.executor = PlanExecutor(lambda n: source, lambda n: maze2d.FAMILY.follower(
-            maze.name, n, execution.controller, execution.lookahead), execution.replan_every, execution.tolerance)
+    def __init__(self, source, env: str, execution: Execution, follower: Callable | None = None):
+        """``follower(n)``: what executes the plans (default: ``execution``'s controller in ``env``)."""
+        self.source, self.env, self.execution = source, env, execution
+        family = family_of(env)
+        self.layout = family.layout(env)
+        self.maze = get_maze(env) if maze2d.FAMILY.owns(env) else None
+        self.executor = PlanExecutor(lambda n: source, follower or (lambda n: family.follower(
+            env, n, execution.controller, execution.lookahead)), execution.replan_every, execution.tolerance)
         self.reset()
 
     @classmethod
@@ -68,7 +76,7 @@ class PlannerPolicy:
         execution.validate(planner.process, maze.episode_steps)
         source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed), 1,
                             maze2d.FAMILY.goal_radius, maze.is_free_xy)
-        return cls(source, maze, execution)
+        return cls(source, maze.name, execution)
 
     @classmethod
     def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
@@ -87,19 +95,53 @@ class PlannerPolicy:
             lookahead=lookahead), seed, replan_high_every)
 
     @classmethod
-    def from_graph(cls, low_run: str | Path, nfe_low: int | None = None, replan_every: int | None = None,
-                   tolerance: float | None = None, controller: str = "pursuit", lookahead: float | None = None,
+    def from_graph(cls, low_run: str | Path | None = None, nfe_low: int | None = None, replan_every: int | None = None,
+                   tolerance: float | None = None, controller: str | None = None, lookahead: float | None = None,
                    device: str = "auto", seed: int = 0, replan_high_every: int | None = None,
-                   graph: dict | None = None) -> PlannerPolicy:
-        """The dataset graph over a low level's own training data as its high level (``bridgeplan.graph``; settings
-        ``graph`` over Maze2D's), the low level through its path every ``replan_every`` steps (default: its subgoal
-        spacing), as ``bridgeplan graph --low`` executes them."""
-        from bridgeplan.hierarchy import graph_hierarchy
+                   graph: dict | None = None, *, env: str | None = None, dataset: str | Path | None = None,
+                   objects: bool = False, policy_ahead: int | None = None,
+                   low_snapshot: int | None = None) -> PlannerPolicy:
+        """The dataset graph (``bridgeplan.graph``; settings ``graph`` over the family's) as ``bridgeplan graph``
+        executes it:
 
-        hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, device=device)
-        return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
-            replan_every=replan_every or hierarchy.spacing, tolerance=tolerance, controller=controller,
-            lookahead=lookahead), seed, replan_high_every)
+        - ``low_run`` a planner trained with ``--subgoal-every``: the graph over the low level's own training data is
+          a hierarchy's high level, the low level planning through its path every ``replan_every`` steps (default:
+          its subgoal spacing; ``controller`` default pursuit);
+        - ``low_run`` a GCBC or GCIQL run (``gcbc train``): its policy executes the graph's paths, toward the state
+          ``policy_ahead`` steps on (``hierarchy.POLICY_AHEAD``), the graph over ``dataset`` (default: the run's);
+        - no ``low_run``: the graph over ``dataset`` of ``env``, its paths executed by ``controller`` (default: the
+          family's).
+
+        Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
+        goal); ``objects``: one graph per object (``--objects``)."""
+        from bridgeplan.gcbc import is_gcbc_run
+        from bridgeplan.hierarchy import graph_agent, graph_hierarchy, graph_policy
+
+        if low_run is not None and not is_gcbc_run(low_run):
+            if env is not None or dataset is not None or objects or policy_ahead is not None:
+                raise BridgeplanError("a planner low level's graph is over its own training data, one graph: no env, "
+                                      "dataset, objects or policy_ahead")
+            hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, low_snapshot, device=device)
+            return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
+                replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
+                controller=controller or "pursuit", lookahead=lookahead), seed, replan_high_every)
+        if nfe_low is not None or replan_high_every is not None:
+            raise BridgeplanError("nfe_low and replan_high_every are a planner low level's")
+        policy = None if low_run is None else graph_policy(Path(low_run), low_snapshot, device, env)
+        if policy is not None:
+            env, dataset = env or policy.env, dataset or policy.config.dataset
+        elif policy_ahead is not None:
+            raise BridgeplanError("policy_ahead is a policy low level's: give low_run a GCBC or GCIQL run")
+        if env is None or dataset is None:
+            raise BridgeplanError("the graph alone is over a dataset of an environment: give env and dataset")
+        family = family_of(env)
+        execution = Execution(replan_every=replan_every, tolerance=tolerance,
+                              controller=controller or family.path_controller, lookahead=lookahead)
+        execution = execution.resolved(family, env)
+        episode_steps = family.tasks(env, 1).episode_steps
+        execution.validate(None, episode_steps)
+        agent = graph_agent(env, str(dataset), episode_steps + 1, graph, policy, objects, policy_ahead)
+        return cls(agent.decisions.source(1), env, execution, agent.follower)
 
     @classmethod
     def _of_hierarchy(cls, hierarchy, maze_name: str, nfe_high: int | None, nfe_low: int | None,
@@ -113,7 +155,7 @@ class PlannerPolicy:
         check_high_replanning(replan_high_every, maze.episode_steps)
         source = HierarchySource(hierarchy, nfe_high, nfe_low,
                                  torch.Generator(device=hierarchy.low.device).manual_seed(seed), 1, replan_high_every)
-        return cls(source, maze, execution)
+        return cls(source, maze.name, execution)
 
     def reset(self) -> None:
         """Start a new episode: the next call plans afresh."""
@@ -130,20 +172,26 @@ class PlannerPolicy:
     def plans_made(self) -> int:
         return int(self.executor.made[-1][0])
 
-    def __call__(self, obs: dict) -> np.ndarray:
-        """The action ``[2]`` (float32, in [-1, 1]) for a PointMaze observation dict."""
+    def __call__(self, obs, goal=None) -> np.ndarray:
+        """The action (float32, in [-1, 1]) for an observation and its goal: a PointMaze observation dict alone
+        (its ``observation`` and ``desired_goal``), or an observation array and the goal (OGBench's ``info["goal"]``:
+        a goal observation where the task is its objects', else a position)."""
+        obs_dim, goal_width = self.layout.obs_dim, self.layout.goal_width
         try:
-            if not isinstance(obs, Mapping):
-                raise TypeError("not a mapping")
-            state = np.asarray(obs["observation"], dtype=np.float64).reshape(1, MAZE2D.obs_dim)
-            goal = np.asarray(obs["desired_goal"], dtype=np.float64).reshape(1, 2)
+            if isinstance(obs, Mapping):
+                obs, goal = obs["observation"], obs["desired_goal"]
+            elif goal is None:
+                raise TypeError("no goal given")
+            state = np.asarray(obs, dtype=np.float64).reshape(1, obs_dim)
+            goal = np.asarray(goal, dtype=np.float64).reshape(1, goal_width)
         except (KeyError, TypeError, ValueError) as e:
-            raise BridgeplanError("a PointMaze observation dict with 'observation' (x, y, vx, vy) and "
-                                  f"'desired_goal' (x, y) is needed, got {type(obs).__name__}: {e}") from None
+            raise BridgeplanError(f"{self.env}: an observation of {obs_dim} numbers and its goal of {goal_width} are "
+                                  f"needed (a PointMaze observation dict holds both), got {type(obs).__name__}: "
+                                  f"{e}") from None
         if self.goal is not None and not np.array_equal(goal, self.goal):
             self.executor.replan(np.zeros(1, dtype=np.int64))  # the goal moved: plan for the new one now, from scratch
             self.source.reset()
         self.goal = goal
-        return self.executor.act(state, goal)[0].astype(np.float32)
+        return np.clip(self.executor.act(state, goal)[0], -1, 1).astype(np.float32)
 
     act = __call__

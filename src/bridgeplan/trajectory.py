@@ -105,6 +105,12 @@ class Layout:
         return slice(self.velocity, self.velocity + 2)
 
     @property
+    def goal_width(self) -> int:
+        """A goal's width as an environment gives it: a whole goal observation where the layout names goal columns,
+        else the position."""
+        return self.obs_dim if self.goal else self.goal_dim
+
+    @property
     def given_columns(self) -> list[int]:
         """The state's columns a goal gives: those the layout names, else the position's."""
         return list(self.goal) or list(range(self.position, self.position + self.goal_dim))
