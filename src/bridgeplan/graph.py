@@ -442,7 +442,7 @@ class GraphSource:
         return paths
 
     def reset(self) -> None:
-        """A new episode (:class:`bridgeplan.policy.PlannerPolicy`): each decision searches afresh, nothing to forget."""
+        """A new episode (:class:`bridgeplan.policy.PlannerPolicy`): each decision searches afresh."""
 
 
 @dataclass
