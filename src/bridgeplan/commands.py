@@ -30,7 +30,8 @@ from bridgeplan.options import (
 )
 
 TRAIN_CONFIG = "bridgeplan.config:TrainConfig"
-DESCRIPTION = "planning with diffusion models and bridges from informative priors, in Maze2D and OGBench pointmaze"
+DESCRIPTION = ("planning with diffusion models and bridges from informative priors, in Maze2D, OGBench (pointmaze "
+               "and manipulation) and your own goal-conditioned environment")
 
 
 @dataclasses.dataclass(kw_only=True)
@@ -273,8 +274,8 @@ def _add_eval_commands(sub) -> None:
                 help="evaluate a high-level run and a low-level run (--subgoal-every) together, in any environment "
                      "family")
     add_command(sub, "graph", _ec.GraphOptions, _ec.graph_eval, description=_ec.GRAPH_DESCRIPTION,
-                help="the dataset graph (the data's own states; no network, no map) on an environment's tasks, alone "
-                     "or as a low level's high level")
+                help="the dataset graph (the data's own states; no network, no map) on an environment's tasks, alone, "
+                     "executed by a GCBC/GCIQL policy, or as a planner low level's high level")
     add_command(sub, "oracle", _ec.OracleOptions, _ec.oracle,
                 help="the environment family's expert, noise-free, on its evaluation tasks (what the reports show "
                      "beside the planners)")

@@ -35,7 +35,7 @@ class GCBCTrainOptions:
 
 def add_gcbc_commands(sub) -> None:
     """The ``bridgeplan gcbc`` group: ``train`` and ``eval``."""
-    p = sub.add_parser("gcbc", help="goal-conditioned behaviour cloning, OGBench's baseline on its own data")
+    p = sub.add_parser("gcbc", help="OGBench's goal-conditioned baselines on its own data: GCBC and GCIQL")
     og = p.add_subparsers(dest="gcbc_command", required=True)
     add_command(og, "train", GCBCTrainOptions, _cmd_gcbc_train, GCBC_CONFIG,
                 help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
