@@ -91,7 +91,8 @@ def test_bench_bad_input(tmp_path, capsys, bad, message):
 def test_bench_times_the_methods_asked_for_at_any_nfe_and_skips_the_overheads(tmp_path, capsys):
     """``--methods`` keeps the latency table to those methods; an NFE above 16 gets networks with enough steps
     (the bridge takes N - 1 at most); ``--overhead-repeats 0`` skips the overhead tables."""
-    args = [*TINY_BENCH, "--methods", "DDPM [ancestral],bridge (line)", "--nfes", "1,20", "--overhead-repeats", "0"]
+    args = [*TINY_BENCH, "--methods", "DDPM [ancestral],bridge (line)", "--nfes", "1,20", "--overhead-repeats", "0",
+            "--busy-steps", "0"]  # the busy-core figure is another test's
     assert main(["bench", "--out", str(tmp_path), *args]) == 0
     capsys.readouterr()
     result = json.loads((tmp_path / "bench.json").read_text())
@@ -105,7 +106,7 @@ def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, caps
     """The mean flow and the shortcut model (their network takes a second time input) are timed like the others;
     the shortcut model only at powers of two, on a network of N a power of two (N = 32 for NFE 20)."""
     args = [*TINY_BENCH, "--methods", "mean flow (line),shortcut (line)", "--nfes", "1,3,20", "--overhead-repeats",
-            "0"]
+            "0", "--busy-steps", "0"]
     assert main(["bench", "--out", str(tmp_path), *args]) == 0
     capsys.readouterr()
     result = json.loads((tmp_path / "bench.json").read_text())
