@@ -704,7 +704,7 @@ def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, t
         alone(np.zeros(28), np.zeros(3))
     with pytest.raises(BridgeplanError, match="give env and dataset"):
         PlannerPolicy.from_graph(env="cube-single-play-v0")
-    with pytest.raises(BridgeplanError, match="policy_ahead is a policy low level's"):
+    with pytest.raises(BridgeplanError, match="--policy-ahead is a policy low level's"):
         PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, policy_ahead=3)
 
 

@@ -467,6 +467,18 @@ Chosen on cube-single's validation tasks (6-10, 10 episodes each, GCIQL seed 0 a
 every 50 steps; studies/manip-cube-single.toml)."""
 
 
+def check_graph_low(low_run, policy_low: bool, nfe_low: int | None, replan_high_every: int | None,
+                    policy_ahead: int | None) -> None:
+    """The dataset graph's low-level options fit its low level: a planner's (``low_run`` not ``policy_low``), a
+    policy's or none."""
+    if (low_run is None or policy_low) and (nfe_low is not None or replan_high_every is not None):
+        raise BridgeplanError("--nfe-low and --replan-high-every are a planner low level's: " + (
+            "give --low RUN" if low_run is None else
+            "a policy acts at every step toward the graph's path, searched again every --replan-every steps"))
+    if policy_ahead is not None and not policy_low:
+        raise BridgeplanError("--policy-ahead is a policy low level's: give --low a GCBC or GCIQL run")
+
+
 def graph_policy(run: Path, snapshot: int | None, device: str, env: str | None = None):
     """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) as a graph's low
     level in ``env`` (default: the run's own), whose states must be the policy's."""
@@ -540,17 +552,10 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     from bridgeplan.gcbc import is_gcbc_run
 
     env, family = tasks.env, family_of(tasks.env)
-    policy = None
-    if low_run is not None and is_gcbc_run(low_run):
-        if nfe_low is not None or replan_high_every is not None:
-            raise BridgeplanError("--nfe-low and --replan-high-every are a planner low level's: a policy acts at every "
-                                  "step toward the graph's path, searched again every --replan-every steps")
-        policy = graph_policy(low_run, low_snapshot, device, env)
-    elif policy_ahead is not None:
-        raise BridgeplanError("--policy-ahead is a policy low level's: give --low a GCBC or GCIQL run")
+    policy_low = low_run is not None and is_gcbc_run(low_run)
+    check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
+    policy = graph_policy(low_run, low_snapshot, device, env) if policy_low else None
     if low_run is None or policy is not None:
-        if low_run is None and (nfe_low is not None or replan_high_every is not None):
-            raise BridgeplanError("--nfe-low and --replan-high-every are the low level's: give --low RUN")
         agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead)
         graph, settings = agent.decisions.graph, agent.settings
         execution = (execution or Execution()).resolved(family, env)

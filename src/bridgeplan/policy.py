@@ -115,23 +115,21 @@ class PlannerPolicy:
         Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
         goal); ``objects``: one graph per object (``--objects``)."""
         from bridgeplan.gcbc import is_gcbc_run
-        from bridgeplan.hierarchy import graph_agent, graph_hierarchy, graph_policy
+        from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy, graph_policy
 
-        if low_run is not None and not is_gcbc_run(low_run):
-            if env is not None or dataset is not None or objects or policy_ahead is not None:
+        policy_low = low_run is not None and is_gcbc_run(low_run)
+        check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
+        if low_run is not None and not policy_low:
+            if env is not None or dataset is not None or objects:
                 raise BridgeplanError("a planner low level's graph is over its own training data, one graph: no env, "
-                                      "dataset, objects or policy_ahead")
+                                      "dataset or objects")
             hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, low_snapshot, device=device)
             return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
                 replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
                 controller=controller or "pursuit", lookahead=lookahead), seed, replan_high_every)
-        if nfe_low is not None or replan_high_every is not None:
-            raise BridgeplanError("nfe_low and replan_high_every are a planner low level's")
         policy = None if low_run is None else graph_policy(Path(low_run), low_snapshot, device, env)
         if policy is not None:
             env, dataset = env or policy.env, dataset or policy.config.dataset
-        elif policy_ahead is not None:
-            raise BridgeplanError("policy_ahead is a policy low level's: give low_run a GCBC or GCIQL run")
         if env is None or dataset is None:
             raise BridgeplanError("the graph alone is over a dataset of an environment: give env and dataset")
         family = family_of(env)
