@@ -471,7 +471,8 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert mc.block(tmp_path).splitlines() == [
         "- cube-single-play-v0, DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps): 50.0% (one run)",
         "- cube-single-play-v0, GCBC (20 k steps): 6.0 ± 2.0% over 2 training seeds; OGBench published 6 (8 seeds, "
-        "1 M steps)"]
+        "1 M steps)",
+        "- cube-single-play-v0, OGBench published: GCIQL 68 (8 seeds, 1 M steps)"]  # the peer not trained here
     # a second dataset: its own section, its own published numbers, the graph named by its folder and replanning
     write(tmp_path / mc.folder("puzzle-3x3") / "gciql-s0-step20000-seed0.json", 0.9)
     write(tmp_path / mc.folder("puzzle-3x3") / "graph-keep10-r1.5" / "track-replan50-seed0.json", 0.7, step=0,
@@ -481,10 +482,11 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert lines[lines.index("## puzzle-3x3-play-v0") + 2].endswith("OGBench published: GCBC 2, GCIQL 95 (8 seeds, 1 M "
                                                                        "steps).")
     assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) |")
-    assert mc.block(tmp_path).splitlines()[2:] == [
+    assert mc.block(tmp_path).splitlines()[3:] == [
         "- puzzle-3x3-play-v0, GCIQL (20 k steps): 90.0% (one run); OGBench published 95 (8 seeds, 1 M steps)",
         "- puzzle-3x3-play-v0, the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps): "
-        "70.0% (one run)"]
+        "70.0% (one run)",
+        "- puzzle-3x3-play-v0, OGBench published: GCBC 2 (8 seeds, 1 M steps)"]
     # a dataset without GCBC or GCIQL rows: their published numbers on a line of their own
     write(tmp_path / mc.folder("scene") / "graph-keep5-r1" / "track-replan50-seed0.json", 0.5, step=0, replan=50)
     block = mc.block(tmp_path).splitlines()

@@ -135,8 +135,10 @@ def block(root: Path) -> str:
                   + (f"over {len(r)} training seeds" if len(r) > 1 else "(one run)")
                   + (f"; OGBench published {published(scene, method)}" if method in PEERS else "")
                   for method, r in rates.items()]
-        if rates and not set(PEERS) & set(rates):
-            lines.append(f"- {scene}-play-v0, OGBench published: {published_line(scene)}")
+        unmeasured = [m for m in PEERS if m not in rates]  # a peer not trained here: its published number alone
+        if rates and unmeasured:
+            lines.append(f"- {scene}-play-v0, OGBench published: " + ", ".join(
+                f"{m.upper()} {PUBLISHED[scene][PEERS.index(m)]}" for m in unmeasured) + f" {BUDGET}")
     return "\n".join(lines) or "- no rows yet (`bridgeplan study run manipulation`)."
 
 
