@@ -509,6 +509,8 @@ class GraphAgent:
     identity: dict
     """The data's identity."""
     build_seconds: float
+    ahead: int | None
+    """The policy's goal: the path's state this many steps on (None: no policy)."""
 
 
 def graph_agent(env: str, dataset: str, length: int, settings: dict | None = None, policy=None, objects: bool = False,
@@ -525,9 +527,11 @@ def graph_agent(env: str, dataset: str, length: int, settings: dict | None = Non
     t0 = time.perf_counter()
     graph, settings = for_stream(stream, family, settings, objects)
     build_seconds = time.perf_counter() - t0
+    if policy is None:
+        return GraphAgent(GraphDecisions(graph, length), None, settings, stream.identity(), build_seconds, None)
     ahead = POLICY_AHEAD if ahead is None else ahead
-    follower = None if policy is None else (lambda n: PolicyFollower(n, family.body(env), policy.act, ahead))
-    return GraphAgent(GraphDecisions(graph, length), follower, settings, stream.identity(), build_seconds)
+    return GraphAgent(GraphDecisions(graph, length), lambda n: PolicyFollower(n, family.body(env), policy.act, ahead),
+                      settings, stream.identity(), build_seconds, ahead)
 
 
 def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, execution: Execution | None = None,
@@ -572,7 +576,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
                          "graph": {**settings, "objects": True} if objects else settings}
         if policy is not None:
             result.extra["low"] = {"run": Path(low_run).name, "agent": policy.config.agent, "step": policy.step,
-                                   "ahead": POLICY_AHEAD if policy_ahead is None else policy_ahead}
+                                   "ahead": agent.ahead}
             result.config["low"] = {**dataclasses.asdict(policy.config),
                                     "dataset": Path(policy.config.dataset).stem}  # named, no path of this machine
         if picture is not None:

@@ -55,9 +55,7 @@ def field_docs(config: str) -> dict[str, str]:
     """The string under each field of the dataclass ``config`` (``"module:Class"``; its attribute docstring, as Sphinx
     reads it), on one line, its reST marks plain (````x```` -> x, ``:func:`~a.b``` -> b). Read from the module's
     source, not imported: a command's options need no torch."""
-    module, name = config.split(":")
-    source = Path(importlib.util.find_spec(module).origin).read_text()
-    body = next(node for node in ast.parse(source).body if isinstance(node, ast.ClassDef) and node.name == name).body
+    body = _class_body(config)
     docs = {}
     for field, doc in zip(body, body[1:]):
         if (isinstance(field, ast.AnnAssign) and isinstance(field.target, ast.Name) and isinstance(doc, ast.Expr)
@@ -67,15 +65,19 @@ def field_docs(config: str) -> dict[str, str]:
     return docs
 
 
+def _class_body(config: str) -> list[ast.stmt]:
+    """The statements of the class ``config`` (``"module:Class"``), parsed from its module's source."""
+    module, name = config.split(":")
+    source = Path(importlib.util.find_spec(module).origin).read_text()
+    return next(node for node in ast.parse(source).body if isinstance(node, ast.ClassDef) and node.name == name).body
+
+
 @functools.cache
 def field_defaults(config: str) -> dict[str, Any]:
     """The literal defaults of the dataclass ``config``'s fields (``"module:Class"``; ``1_000_000``, ``(512, 512)``),
     read from its source as :func:`field_docs` reads their docs; a field whose default is not a literal is left out."""
-    module, name = config.split(":")
-    source = Path(importlib.util.find_spec(module).origin).read_text()
-    body = next(node for node in ast.parse(source).body if isinstance(node, ast.ClassDef) and node.name == name).body
     out = {}
-    for field in body:
+    for field in _class_body(config):
         if isinstance(field, ast.AnnAssign) and isinstance(field.target, ast.Name) and field.value is not None:
             try:
                 out[field.target.id] = ast.literal_eval(field.value)
