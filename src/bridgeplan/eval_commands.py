@@ -257,12 +257,11 @@ GRAPH_DESCRIPTION = ("The data's states joined along their episodes and by short
 
 def graph_eval(o: GraphOptions) -> int:
     from bridgeplan.envs import family_of
-    from bridgeplan.envs.ogbench_pointmaze.names import dataset_env
     from bridgeplan.evaluate import check_result_path, make_tasks
-    from bridgeplan.gcbc import is_gcbc_run
+    from bridgeplan.gcbc import is_gcbc_run, run_env_and_dataset
     from bridgeplan.graph import check_graph_settings
     from bridgeplan.hierarchy import evaluate_graph
-    from bridgeplan.paths import config_path, eval_dir
+    from bridgeplan.paths import eval_dir
     from bridgeplan.runs import load_planner, resolve_run, run_dir_of
 
     if o.picture.video and not o.render:
@@ -287,9 +286,8 @@ def graph_eval(o: GraphOptions) -> int:
     env, dataset = o.environment.maze, o.dataset.dataset
     low_level = o.low_level
     if policy_low:
-        trained = json.loads(config_path(o.low).read_text())["config"]
-        env = env or (trained["maze"] and dataset_env(trained["maze"]))
-        dataset = dataset or trained["dataset"]
+        trained_env, trained_data = run_env_and_dataset(o.low)
+        env, dataset = env or trained_env, dataset or trained_data
     elif o.low is not None:
         _, low = load_planner(Path(o.low), snapshot=low_level.low_snapshot, device="cpu")
         env = env or low.config.maze

@@ -304,7 +304,7 @@ class GCBCPolicy:
     @property
     def env(self) -> str | None:
         """The environment the policy was trained for (None: its run named none)."""
-        return environment(self.config.maze) if self.config.maze else None
+        return trained_env(self.config.maze)
 
     def act(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """Actions ``[N, a]`` (the mean, clipped to [-1, 1]) for observations and goals ``[N, d]``."""
@@ -323,6 +323,19 @@ def load_policy(path: str | Path, device: str = "cpu") -> GCBCPolicy:
     net = build_policy(config, state["obs_dim"], state["action_dim"]).to(dev)
     net.load_state_dict(state["policy"])
     return GCBCPolicy(net, state["step"], config, dev)
+
+
+def trained_env(maze: str) -> str | None:
+    """The environment of a GCBC config's ``maze`` (earlier runs name a bare pointmaze maze; None: none named)."""
+    return environment(maze) if maze else None
+
+
+def run_env_and_dataset(run_dir: str | Path) -> tuple[str | None, str]:
+    """A GCBC run's environment (:func:`trained_env`) and training data, from its ``config.json``."""
+    from bridgeplan.paths import config_path
+
+    trained = json.loads(config_path(run_dir).read_text())["config"]
+    return trained_env(trained["maze"]), trained["dataset"]
 
 
 def is_gcbc_run(path: str | Path) -> bool:
