@@ -236,3 +236,136 @@ def test_the_report_looks_the_shipped_rows_up_at_the_headlines_choice(tmp_path):
     after = report.entries(root)
     assert [e["shipped"] is None for e in after] == [e is drop for e in found]
     assert f"medium single-task, {drop['setting']}: not evaluated" in report.block(root)
+
+
+POLICY_STUDY = """
+title = "a shipped policy"
+
+[dataset]
+maze = "pointmaze-medium-navigate-v0"
+path = "{dataset}"
+
+[training]
+steps = 4
+checkpoint_every = 2
+seeds = [0]
+
+[runs.gciql]
+trainer = "gcbc"
+maze = "pointmaze-medium-navigate-v0"
+agent = "gciql"
+batch_size = 8
+hidden_dims = [8, 8]
+log_every = 2
+device = "cpu"
+
+[[evaluations]]
+command = "gcbc eval"
+runs = ["gciql"]
+args = {{ steps = 4, episodes = 1 }}
+out = "shipped/tiny/gciql-s{{seed}}.json"
+task_seed = 0
+
+[[evaluations]]
+command = "graph"
+runs = ["gciql"]
+args = {{ episodes = 1, tasks = "1", keep = 5, replan_every = 20, policy_ahead = 3 }}
+out = "shipped/tiny/graph-gciql-s{{seed}}.json"
+task_seed = 0
+"""
+
+
+def test_a_shipped_policy_plans_with_the_graph_over_the_users_own_data(tmp_path, monkeypatch, capsys):
+    """An evaluation study's GCIQL run exported as a shipped policy (the policy alone, its data named, the identity
+    of the data its graph rows were built over): `graph --low NAME` builds the graph over the user's own generated
+    data and gives the committed row again, `eval NAME` the policy's row; data of another identity at the default
+    place is one error line; unscored weights are not shipped."""
+    from bridgeplan.policy import PlannerPolicy
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("BRIDGEPLAN_DATASETS", str(tmp_path / "ds"))
+    data = tmp_path / "ds" / "ogbench" / "pointmaze-medium-navigate-v0.npz"
+    assert main(["data", "generate", "--maze", "pointmaze-medium-navigate-v0", "--episodes", "4",
+                 "--episode-steps", "40", "--no-progress"]) == 0
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "shipped-tiny.toml").write_text(POLICY_STUDY.format(dataset=data))
+    (root / "studies" / "ship.toml").write_text('uses = ["shipped-tiny"]\n')
+    out = tmp_path / "out"
+    import bridgeplan.gcbc
+
+    monkeypatch.setattr(bridgeplan.gcbc, "code_version", lambda: "0.1.0+abc1234")
+    assert main(["study", "run", "shipped-tiny", "--no-progress", "--root", str(root)]) == 0
+    capsys.readouterr()
+    assert main(["planners", "export", "--study", "ship", "--root", str(root), "--out", str(out)]) == 2
+    assert "has no committed rows docs/results/shipped/tiny/" in capsys.readouterr().err  # unscored: not shipped
+    assert not (out / "tiny.pt").exists()
+    assert main(["study", "export", "shipped-tiny", "--root", str(root)]) == 0
+    assert main(["planners", "export", "--study", "ship", "--root", str(root), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "wrote tiny.pt (tiny: the dataset graph over GCIQL on pointmaze-medium-navigate-v0" in said
+    (entry,) = json.loads((out / "manifest.json").read_text())["planners"]
+    committed = json.loads((root / "docs" / "results" / "shipped" / "tiny" / "graph-gciql-s0.json").read_text())
+    assert entry["kind"] == "policy" and entry["dataset"] == data.name and entry["run"] == "gciql-s0"
+    assert entry["dataset_identity"] == committed["config"]["dataset_identity"]
+    assert str(tmp_path) not in (out / "manifest.json").read_text()  # no path of the machine that made it
+
+    monkeypatch.setattr(shipped, "DIR", out)
+    assert bridgeplan.gcbc.is_gcbc_run("tiny") and run_dir_of("tiny") == Path("runs/shipped/tiny")
+    assert main(["graph", "--low", "tiny", "--episodes", "1", "--tasks", "1", "--keep", "5", "--replan-every", "20",
+                 "--policy-ahead", "3", "--no-progress", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["tasks"] == committed["tasks"] and again["low"] == dict(committed["low"], run="tiny")
+    assert list((tmp_path / "runs" / "shipped" / "tiny" / "eval").glob("graph-*.json"))
+    assert main(["eval", "tiny", "--episodes", "1", "--no-progress", "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    policy_row = json.loads((root / "docs" / "results" / "shipped" / "tiny" / "gciql-s0.json").read_text())
+    assert alone["tasks"] == policy_row["tasks"] and alone["run"] == "tiny"
+    assert PlannerPolicy.from_graph("tiny", replan_every=20, graph={"keep": 5}).env == "pointmaze-medium-navigate-v0"
+
+    with np.load(data) as f:  # other data at the default place: refused, nothing written
+        arrays = dict(f)
+    arrays["observations"] = arrays["observations"] + 0.01
+    np.savez(data, **arrays)
+    before = sorted((tmp_path / "runs").rglob("*"))
+    assert main(["graph", "--low", "tiny", "--episodes", "1", "--tasks", "1", "--keep", "5", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "not the data the shipped policy was scored over" in err
+    assert len(err.strip().splitlines()) == 1 and sorted((tmp_path / "runs").rglob("*")) == before
+    assert main(["eval", "tiny", "--snapshot", "2", "--no-progress"]) == 2
+    assert "has the weights of step 4 only" in capsys.readouterr().err
+
+
+def test_the_report_puts_a_shipped_policys_rows_beside_its_campaigns(tmp_path, monkeypatch):
+    """A shipped policy's lines: its graph row's success, the flags that evaluate it again (read from the row), the
+    policy alone, and its campaign's mean over training seeds, saying whether its seed's run is this one (equal
+    episodes). Here the campaign's own seed-0 rows stand in for the shipped ones, so they are that run."""
+    from tests.reports import report as generator
+
+    report = generator("shipped")
+    root = tmp_path / "results"
+    shutil.copytree(REPO / "docs" / "results", root, ignore=shutil.ignore_patterns("*.png", "*.gif"))
+    home = root / "shipped" / "cube-single"
+    shutil.copytree(root / "manip-cube-single" / "graph-keep5-r1-gciql-ahead25-s0",
+                    home / "graph-keep5-r1-gciql-ahead25-s0")
+    shutil.copy(root / "manip-cube-single" / "gciql-s0-step20000-seed0.json", home)
+    listed = dict(json.loads((shipped.DIR / "manifest.json").read_text()))
+    entry = dict(listed["planners"][0], name="cube-single", maze="cube-single-play-v0", kind="policy",
+                 rows="docs/results/shipped/cube-single", method="the dataset graph over GCIQL")
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "manifest.json").write_text(json.dumps({"planners": [entry]}))
+    monkeypatch.setattr(shipped, "DIR", tmp_path / "pkg")
+    (p,) = report.policies(root)
+    graph = json.loads((home / "graph-keep5-r1-gciql-ahead25-s0" / "track-replan50-seed0.json").read_text())
+    alone = json.loads((home / "gciql-s0-step20000-seed0.json").read_text())
+    line = report.policy_line(p)
+    assert p["same"] and "(seed 0 is this run)" in line and len(p["theirs"]) == 3
+    assert f": {100 * graph['success_rate']:.1f}% of its 5 test tasks' 250 episodes" in line
+    assert f"the policy alone: {100 * alone['success_rate']:.1f}%" in line
+    assert "`bridgeplan graph --low cube-single --keep 5 --radius 1 --replan-every 50 --policy-ahead 25`" in line
+    assert 'PlannerPolicy.from_graph("cube-single", replan_every=50, graph={"keep": 5, "radius": 1}, ' \
+           'policy_ahead=25)' in line
+    assert line in report.block(root) and line in report.render(root)
+    graph["tasks"]["1"]["successes"] -= 1  # another run: its episodes differ
+    (home / "graph-keep5-r1-gciql-ahead25-s0" / "track-replan50-seed0.json").write_text(json.dumps(graph))
+    assert "(not this run)" in report.policy_line(report.policies(root)[0])

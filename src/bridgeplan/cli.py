@@ -315,8 +315,10 @@ class PlannersExportOptions:
 def _add_planners_commands(sub) -> None:
     p = sub.add_parser("planners", help="the shipped planners: trained weights that come with bridgeplan",
                        description="Shipped planners plan without training: give a name wherever a run directory "
-                                   "goes (`bridgeplan eval medium`, `PlannerPolicy.from_run(\"medium\")`). Their "
-                                   "scores: docs/results/shipped.md.")
+                                   "goes (`bridgeplan eval medium`, `PlannerPolicy.from_run(\"medium\")`); a shipped "
+                                   "policy (OGBench manipulation) is the dataset graph's low level over your own "
+                                   "generated data (`bridgeplan graph --low NAME`, `PlannerPolicy.from_graph(NAME)`). "
+                                   "Their scores: docs/results/shipped.md.")
     planners = p.add_subparsers(dest="planners_command")
     add_command(planners, "list", PlannersListOptions, _cmd_planners_list,
                 help="each shipped planner with its manifest's facts (the default)")
@@ -339,7 +341,8 @@ def _cmd_planners_list(o: PlannersListOptions) -> int:
         print("no shipped planners in this install")
         return 0
     for e in entries:
-        print(f"{e.name}\t{e.maze}\t{e.method}\tstep {e.step}\tseed {e.seed}\t{e.parameters} parameters\t"
+        use = " (bridgeplan graph --low NAME)" if e.kind == "policy" else ""
+        print(f"{e.name}\t{e.maze}\t{e.method}{use}\tstep {e.step}\tseed {e.seed}\t{e.parameters} parameters\t"
               f"{e.bytes / 1e6:.2f} MB\tcode {e.code_version}\t{e.study}\tsha256 {e.sha256}")
     print("scores: docs/results/shipped.md (bridgeplan study report shipped)")
     return 0

@@ -298,13 +298,24 @@ def build_policy(config: GCBCConfig, obs_dim: int, action_dim: int) -> GoalPolic
 class GCBCPolicy:
     """A trained GCBC policy behind the batched interface evaluation uses: numpy in, numpy out."""
 
-    def __init__(self, net: GoalPolicy, step: int, config: GCBCConfig, device: torch.device):
+    def __init__(self, net: GoalPolicy, step: int, config: GCBCConfig, device: torch.device,
+                 dataset_identity: str = ""):
         self.net, self.step, self.config, self.device = net.eval(), step, config, device
+        self.dataset_identity = dataset_identity
+        """A shipped policy's: the identity of the data its scores' graph was built over (else empty)."""
 
     @property
     def env(self) -> str | None:
         """The environment the policy was trained for (None: its run named none)."""
         return trained_env(self.config.maze)
+
+    @property
+    def dataset(self) -> str:
+        """Its training data: the run's file, or for a shipped policy (its config names the file alone) where
+        ``bridgeplan data generate`` puts that dataset on this machine."""
+        if self.dataset_identity and self.env is not None:
+            return family_of(self.env).default_dataset(self.env, 0)
+        return self.config.dataset
 
     def act(self, observations: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """Actions ``[N, a]`` (the mean, clipped to [-1, 1]) for observations and goals ``[N, d]``."""
@@ -314,15 +325,17 @@ class GCBCPolicy:
 
 
 def load_policy(path: str | Path, device: str = "cpu") -> GCBCPolicy:
-    """The policy of a GCBC run directory (its latest checkpoint) or of one snapshot file."""
-    state = load_checkpoint(Path(path))
+    """The policy of a GCBC run directory (its latest checkpoint), of one snapshot file or a shipped policy's name."""
+    from bridgeplan.runs import resolve_run
+
+    state = load_checkpoint(resolve_run(path))
     if state["kind"] != KIND:
         raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a GCBC one")
     config = cfg.from_dict(GCBCConfig, state["config"])
     dev = resolve_device(device)
     net = build_policy(config, state["obs_dim"], state["action_dim"]).to(dev)
     net.load_state_dict(state["policy"])
-    return GCBCPolicy(net, state["step"], config, dev)
+    return GCBCPolicy(net, state["step"], config, dev, state.get("dataset_identity", ""))
 
 
 def trained_env(maze: str) -> str | None:
@@ -331,17 +344,31 @@ def trained_env(maze: str) -> str | None:
 
 
 def run_env_and_dataset(run_dir: str | Path) -> tuple[str | None, str]:
-    """A GCBC run's environment (:func:`trained_env`) and training data, from its ``config.json``."""
+    """A GCBC run's environment (:func:`trained_env`) and training data, from its ``config.json`` (a shipped
+    policy's: :attr:`GCBCPolicy.dataset`)."""
     from bridgeplan.paths import config_path
 
+    if _shipped(run_dir) is not None:
+        policy = load_policy(run_dir)
+        return policy.env, policy.dataset
     trained = json.loads(config_path(run_dir).read_text())["config"]
     return trained_env(trained["maze"]), trained["dataset"]
 
 
+def _shipped(run: str | Path):
+    """The shipped policy named ``run`` (:mod:`bridgeplan.shipped`), when no path of that name exists."""
+    from bridgeplan import shipped
+
+    entry = None if Path(run).exists() else shipped.get(str(run))
+    return entry if entry is not None and entry.kind == "policy" else None
+
+
 def is_gcbc_run(path: str | Path) -> bool:
-    """Whether ``path`` is a GCBC run directory (its ``config.json`` says so)."""
+    """Whether ``path`` is a GCBC run directory (its ``config.json`` says so) or a shipped policy's name."""
     from bridgeplan.paths import config_path
 
+    if _shipped(path) is not None:
+        return True
     config = config_path(path)
     try:
         return Path(path).is_dir() and json.loads(config.read_text()).get("kind") == KIND
@@ -350,7 +377,16 @@ def is_gcbc_run(path: str | Path) -> bool:
 
 
 def policy_path(run_dir: str | Path, step: int | None = None) -> Path:
-    """Run ``run_dir``'s latest checkpoint (``step`` None) or its policy snapshot at ``step``."""
+    """Run ``run_dir``'s latest checkpoint (``step`` None) or its policy snapshot at ``step``; a shipped policy's
+    file (its one step)."""
+    entry = _shipped(run_dir)
+    if entry is not None:
+        from bridgeplan.shipped import verified_path
+
+        if step is not None and step != entry.step:
+            raise BridgeplanError(f"shipped policy {entry.name!r} has the weights of step {entry.step} only, not "
+                                  f"step {step}")
+        return verified_path(entry)
     if step is None:
         return checkpoint_path(run_dir)
     available = dict(policy_snapshots(run_dir))
@@ -539,9 +575,11 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
     ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>[-tasks...].json``; returns them in order."""
     from bridgeplan.files import atomic_write_text
     from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import run_dir_of
 
     run_dir = Path(run_dir)
     paths = [policy_path(run_dir)] if steps is None else [policy_path(run_dir, s) for s in steps]
+    folder = eval_dir(run_dir_of(run_dir))  # a shipped policy's: runs/shipped/NAME/eval
     results = []
     for path in paths:
         policy = load_policy(path)
@@ -562,7 +600,7 @@ def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None =
                **family.score(tasks, outcome)}
         row = json.loads(json.dumps(row))  # as written: task ids as strings
         which = "" if task_ids is None else "-tasks" + "_".join(map(str, task_ids))
-        atomic_write_text(eval_dir(run_dir) / f"gcbc-step{policy.step}-ep{row['episodes_per_task']}-seed{seed}"
+        atomic_write_text(folder / f"gcbc-step{policy.step}-ep{row['episodes_per_task']}-seed{seed}"
                           f"{which}.json", json.dumps(row, indent=2) + "\n")
         results.append(row | {"text": format_score(row)})
     return results

@@ -523,7 +523,15 @@ def graph_agent(env: str, dataset: str, length: int, settings: dict | None = Non
     from bridgeplan.graph import GraphDecisions, for_stream
 
     family = family_of(env)
+    if policy is not None and policy.dataset_identity and not Path(dataset).exists():
+        raise BridgeplanError(f"no dataset {dataset}: the shipped policy's graph is over the data it was scored on, "
+                              f"made by `bridgeplan data generate --maze {env}`")
     stream = family.load_stream(dataset, env)
+    if policy is not None and policy.dataset_identity and Path(dataset) == Path(policy.dataset) and (
+            stream.identity() != policy.dataset_identity):
+        raise BridgeplanError(f"{dataset} is {stream.identity()}, not the data the shipped policy was scored over "
+                              f"({policy.dataset_identity}): make it again with `bridgeplan data generate --maze "
+                              f"{env} --force`, or give another dataset on purpose (--dataset)")
     t0 = time.perf_counter()
     graph, settings = for_stream(stream, family, settings, objects)
     build_seconds = time.perf_counter() - t0

@@ -129,7 +129,7 @@ class PlannerPolicy:
                 controller=controller or "pursuit", lookahead=lookahead), seed, replan_high_every)
         policy = None if low_run is None else graph_policy(Path(low_run), low_snapshot, device, env)
         if policy is not None:
-            env, dataset = env or policy.env, dataset or policy.config.dataset
+            env, dataset = env or policy.env, dataset or policy.dataset
         if env is None or dataset is None:
             raise BridgeplanError("the graph alone is over a dataset of an environment: give env and dataset")
         family = family_of(env)

@@ -11,20 +11,26 @@ The settings are not copied from the headline: this report reads the headline's 
 looks the shipped rows up at that setting; a setting the shipped study did not evaluate says so (the study file then
 needs the new setting). The files' facts come from the manifest ``bridgeplan planners export`` writes.
 
+A shipped policy (OGBench manipulation: the dataset graph over a GCIQL policy, the best planner of
+docs/results/manipulation.md) is one training run (seed 0) at its study's config (studies/shipped-<name>.toml),
+evaluated alone and under the graph as docs/results/manip-<name>/ evaluates it: its rows are
+docs/results/shipped/<name>/*.json, beside manip-<name>'s rows of the same method over 3 training seeds.
+
 Made by `bridgeplan study report shipped` (studies/shipped.toml) into docs/results/shipped.md and the README's
 generated block.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from bridgeplan.analysis.keys import MethodKey, method
 from bridgeplan.analysis.load import Point, Results, Row, load_csvs
 from bridgeplan.analysis.selection import best
-from bridgeplan.analysis.tables import table
+from bridgeplan.analysis.tables import fmt_mean_se, table
 
-from . import headline
+from . import headline, manipulation
 
 ROWS = "shipped/{maze}/results.csv"
 """A shipped planner's committed rows, relative to docs/results (its study's ``data`` folder)."""
@@ -131,23 +137,73 @@ def block(root: Path) -> str:
         lines.append(f"- `PlannerPolicy.from_run(\"{e['maze']}\", {call_args(e['key'], e['nfe'])})`: {e['maze']} "
                      f"single-task, {e['setting']}: {score}; the headline's 3 training runs of the method (seeds 0-2, "
                      f"{which}): {_success(e['headline'])}, mean ± SE over seeds")
-    return "\n".join(lines)
+    return "\n".join(lines + [policy_line(p) for p in policies(Path(root))])
 
 
-def files_table(found: list[dict]) -> list[str]:
+def policies(root: Path) -> list[dict]:
+    """Per shipped policy of the manifest: its committed rows (the graph over it and the policy alone), the graph's
+    flags, and manip-NAME's test success of the same method by training seed; ``same``: its graph row's episodes equal
+    that study's row of the same training seed."""
     from bridgeplan import shipped
 
-    planners = shipped.manifest()
+    out = []
+    for e in shipped.manifest().values():
+        if e.kind != "policy":
+            continue
+        home = Path(root) / Path(e.rows).relative_to("docs/results")
+        found = {p: json.loads(p.read_text()) for p in sorted(home.rglob("*.json"))}
+        graph = next(((p, r) for p, r in found.items() if "graph" in r), None)
+        if graph is None:
+            out.append(dict(entry=e, graph=None))
+            continue
+        path, row = graph
+        method = path.parent.name.split("-s")[0]  # its folder's, as manip-NAME's
+        theirs = manipulation.rows(root, e.name)
+        seed_row = next((r for r in theirs if r["method"] == method and not r["validation"]
+                         and r["config"]["low"]["seed"] == e.seed), None)
+        g = row["graph"]
+        out.append(dict(entry=e, graph=row, alone=next((r for r in found.values() if "graph" not in r), None),
+                        label=manipulation.label(method, theirs),
+                        theirs=manipulation.test_rates(theirs).get(method, []),
+                        same=seed_row is not None and seed_row["tasks"] == row["tasks"],
+                        flags=f"--keep {g['keep']} --radius {g['radius']:g} --replan-every "
+                              f"{row['execution']['replan_every']} --policy-ahead {row['low']['ahead']}",
+                        call=f"replan_every={row['execution']['replan_every']}, graph={{\"keep\": {g['keep']}, "
+                             f"\"radius\": {g['radius']:g}}}, policy_ahead={row['low']['ahead']}"))
+    return out
+
+
+def policy_line(p: dict) -> str:
+    """The README's line of a shipped policy."""
+    e = p["entry"]
+    if p["graph"] is None:
+        return f"- `{e.name}`: not evaluated: run studies/shipped-{e.name}.toml and export it"
+    row, alone = p["graph"], p["alone"]
+    which = f"seed {e.seed} is this run" if p["same"] else "not this run"
+    return (f"- `bridgeplan graph --low {e.name} {p['flags']}` (`PlannerPolicy.from_graph(\"{e.name}\", {p['call']})`; "
+            f"the graph over your own `bridgeplan data generate --maze {e.maze}`): {e.maze}, {p['label']}: "
+            f"{100 * row['success_rate']:.1f}% of its 5 test tasks' {row['episodes']} episodes, one run"
+            + (f" (the policy alone: {100 * alone['success_rate']:.1f}%, `bridgeplan eval {e.name}`)" if alone else "")
+            + f"; docs/results/manip-{e.name}'s {len(p['theirs'])} training runs ({which}): "
+              f"{fmt_mean_se(p['theirs'], one_seed='mean')}%, mean ± SE over seeds")
+
+
+def files_table(found: list[dict], policy_list: list[dict]) -> list[str]:
+    from bridgeplan import shipped
+
+    same = {p["entry"].name: p["graph"] is not None and p["same"] for p in policy_list}
     rows = [[e.name, e.maze, e.method, e.step, e.seed, f"{e.parameters:,}", f"{e.bytes / 1e6:.2f} MB",
-             f"`{e.study}`", e.code_version, "yes (equal rows)" if same_run(found, e.maze) else "no (rows differ)",
-             f"`{e.sha256[:16]}`"] for e in planners.values()]
+             f"`{e.study}`", e.code_version,
+             "yes (equal rows)" if same.get(e.name, same_run(found, e.maze)) else "no (rows differ)",
+             f"`{e.sha256[:16]}`"] for e in shipped.manifest().values()]
     return table(["name", "maze", "method", "training step", "training seed", "parameters", "file",
-                  "study", "trained at code", "the headline's run of that seed", "sha256 (first 16)"], rows)
+                  "study", "trained at code", "its campaign's run of that seed", "sha256 (first 16)"], rows)
 
 
 def render(root: Path) -> str:
     root = Path(root)
     found = entries(root)
+    policy_list = policies(root)
     versions = sorted({e["row"].code_version for e in found if e["row"] is not None})
     rows = [[e["maze"], "Multi2D" if e["multi_task"] else "single-task", "pursued" if e["pursued"] else "tracked",
              e["setting"], e["shipped"] or _missing(e), e["headline"],
@@ -167,8 +223,14 @@ def render(root: Path) -> str:
         "standard error over 3 training seeds. `bridgeplan eval NAME` with the flags shown evaluates the same "
         "episodes (seed 0, 200 episodes are its defaults).", "",
         "## The files", "",
-        *files_table(found), "",
+        *files_table(found, policy_list), "",
         "## Their scores", "",
         *table(["planner", "tasks", "executed", "setting (the headline's choice)",
                 "shipped: score ± SE over 200 episodes (success), one run", "headline: mean ± SE over 3 seeds "
-                "(success)", "command"], rows)])
+                "(success)", "command"], rows),
+        *(["", "## Shipped policies: OGBench manipulation", "",
+           "The dataset graph over the user's own data, its paths executed by the shipped policy: docs/results/"
+           "shipped/<name>/ (studies/shipped-<name>.toml), OGBench's 5 test tasks, 50 episodes each, evaluation seed "
+           "0, beside the same method's runs in docs/results/manip-<name>/ (mean ± SE over training seeds). The "
+           "graph is refused over data of another identity than its rows'.", "",
+           *[policy_line(p) for p in policy_list]] if policy_list else [])])

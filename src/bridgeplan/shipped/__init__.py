@@ -1,11 +1,13 @@
-"""Shipped planners: trained weights that come with the package, so that a planner plans in Maze2D untrained.
+"""Shipped planners: trained weights that come with the package, so that a planner plans untrained.
 
-One small checkpoint per planner in this folder (``NAME.pt``: the EMA weights in float32, the config, the
-normalizer and the training step; no optimizer state) and ``manifest.json``, which names for each: its maze and
-method, the study file that trained and evaluated it, the run, the code version that trained it, the step and the
-file's sha256. The files and the manifest are made by ``bridgeplan planners export`` (``bridgeplan.studies.ship``)
-from a study's runs, never written by hand; their scores are the study's committed rows (``docs/results/shipped/``,
-reported in docs/results/shipped.md by ``bridgeplan study report shipped``).
+One small checkpoint per planner in this folder (``NAME.pt``: a planner's EMA weights in float32, the config, the
+normalizer and the training step, no optimizer state; or a GCBC/GCIQL run's policy alone, the low level of the
+dataset graph built over the user's own generated data, checked against the data it was scored on) and
+``manifest.json``, which names for each: its maze and method, the study file that trained and evaluated it, the run,
+the code version that trained it, the step and the file's sha256. The files and the manifest are made by
+``bridgeplan planners export`` (``bridgeplan.studies.ship``) from a study's runs, never written by hand; their scores
+are the study's committed rows (``docs/results/shipped/``, reported in docs/results/shipped.md by ``bridgeplan study
+report shipped``).
 
 A shipped planner's name goes wherever a run directory does (``bridgeplan eval medium``, ``bridgeplan render
 medium``, ``PlannerPolicy.from_run("medium")``): :func:`bridgeplan.runs.resolve_run` resolves it, checking the
@@ -40,7 +42,9 @@ class ShippedPlanner:
     method: str
     """The run's label (``DDPM``, ``flow (line)``)."""
     process: str
+    """The planner's process (``ddpm``, ``flow``), or the policy's agent (``gcbc``, ``gciql``)."""
     prior: str
+    """The planner's prior (empty for a policy)."""
     study: str
     """The study file that trained and evaluated it (relative to the repository root)."""
     rows: str
@@ -56,6 +60,11 @@ class ShippedPlanner:
     file: str
     bytes: int
     sha256: str
+    kind: str = "planner"
+    """``planner`` (a diffusion planner: ``bridgeplan eval NAME``) or ``policy`` (a GCBC/GCIQL policy: ``bridgeplan
+    graph --low NAME`` plans with the dataset graph over it, ``bridgeplan eval NAME`` scores it alone)."""
+    dataset_identity: str = ""
+    """A policy's: the identity of the data its rows' graph was built over (the user's data must be the same)."""
 
     @property
     def path(self) -> Path:

@@ -40,12 +40,15 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None,
     top = select(studies, [study_name], root)[0]
     if not top.uses:
         raise BridgeplanError(f"study {top.name} uses no studies: nothing to ship")
-    kept = _kept(out, [studies[u].dataset.maze for u in top.uses], only)
+    kept = _kept(out, [_name(studies[u]) for u in top.uses], only)
     entries = []
     for used in top.uses:
         study = studies[used]
-        if study.dataset.maze in kept:
-            entries.append(kept[study.dataset.maze])
+        if _name(study) in kept:
+            entries.append(kept[_name(study)])
+            continue
+        if study.runs:
+            entries.append(_ship_policy(study, root, out))
             continue
         runs = {r for i in range(len(study.experiments)) for r in build_experiment(study, i).runs()}
         if len(runs) != 1 or len(study.training.seeds) != 1:
@@ -60,10 +63,7 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None,
             raise BridgeplanError(f"study {study.name}: no snapshot at step {study.training.steps} in {run_dir} "
                                   f"(run `bridgeplan study run {study.file}` first)")
         state = load_checkpoint(path)
-        version = state.get("code_version", "")
-        if not version or version.endswith(".dirty"):
-            raise BridgeplanError(f"{path} was trained at code {version or 'unknown'}: ship only runs trained at a "
-                                  f"committed code version")
+        version = _committed_version(state, path)
         rows_csv = Path("docs") / "results" / study.data_dir / "results.csv"
         _check_rows(root / rows_csv, config.run_name(), state["step"])
         if any(s.multi_task for e in study.experiments for s in e.series):
@@ -90,6 +90,69 @@ def ship(root: Path, study_name: str = STUDY, out: Path | None = None,
         "made_by": f"bridgeplan planners export --study {top.name}",
         "planners": [asdict(e) for e in entries]}, indent=2) + "\n")
     return entries
+
+
+def _name(study) -> str:
+    """A shipped planner's name: its maze's (a grid study's), or its study's name after ``shipped-`` (a policy's:
+    ``shipped-cube-single`` ships ``cube-single``)."""
+    return study.name.removeprefix("shipped-") if study.runs else study.dataset.maze
+
+
+def _committed_version(state: dict, path: Path) -> str:
+    version = state.get("code_version", "")
+    if not version or version.endswith(".dirty"):
+        raise BridgeplanError(f"{path} was trained at code {version or 'unknown'}: ship only runs trained at a "
+                              f"committed code version")
+    return version
+
+
+def _ship_policy(study, root: Path, out: Path) -> ShippedPlanner:
+    """An evaluation study's one GCBC/GCIQL run (one training seed) as a shipped policy: its policy snapshot at the
+    study's last step, its config naming the dataset's file alone and the identity of the data its committed graph
+    rows were built over (which the user's own generated data must match). Refuses what :func:`ship` refuses."""
+    from bridgeplan.gcbc import KIND, load_policy
+    from bridgeplan.studies.jobs import jobs, run_dir
+
+    if len(study.runs) != 1 or study.runs[0].trainer != "gcbc" or len(study.training.seeds) != 1:
+        raise BridgeplanError(f"study {study.name} trains {len(study.runs)} runs x {len(study.training.seeds)} seeds: "
+                              f"a shipped policy's study trains one GCBC or GCIQL run at one seed")
+    run, seed = study.runs[0], study.training.seeds[0]
+    run_path = run_dir(results_dir(study, root, Scale()), run.name, seed)
+    path = snapshot_path(run_path, study.training.steps)
+    if not path.exists():
+        raise BridgeplanError(f"study {study.name}: no snapshot at step {study.training.steps} in {run_path} "
+                              f"(run `bridgeplan study run {study.file}` first)")
+    state = load_checkpoint(path)
+    if state["kind"] != KIND:
+        raise BridgeplanError(f"{path} is a {state['kind']} checkpoint, not a GCBC one")
+    version = _committed_version(state, path)
+    rows = [job.path for job in jobs(study, Path("results"), Path("docs") / "results", quick=False)]
+    missing = [str(r) for r in rows if not (root / r).exists()]
+    if missing:
+        raise BridgeplanError(f"study {study.name} has no committed rows {', '.join(missing)}: run the study and "
+                              f"export it (`bridgeplan study export {study.name}`) first")
+    read = [json.loads((root / r).read_text()) for r in rows]
+    scored = [r["low"] if "graph" in r else r for r in read]  # a graph row names its policy in "low"
+    if any((s.get("run"), s.get("step")) != (run_path.name, state["step"]) for s in scored):
+        raise BridgeplanError(f"{', '.join(map(str, rows))}: not all of {run_path.name} at step {state['step']}: the "
+                              f"file would ship unscored")
+    identities = {r["config"]["dataset_identity"] for r in read if "graph" in r}
+    if len(identities) != 1:
+        raise BridgeplanError(f"study {study.name}: its rows evaluate the dataset graph over {len(identities)} "
+                              f"datasets: a shipped policy's study evaluates the graph over its run's data")
+    name = _name(study)
+    config = dict(state["config"], dataset=Path(state["config"]["dataset"]).name)
+    file = out / f"{name}.pt"
+    save_checkpoint(file, {k: state[k] for k in ("kind", "obs_dim", "action_dim", "step", "elapsed_seconds",
+                                                 "code_version", "policy")}
+                    | {"config": config, "shipped": name, "dataset_identity": identities.pop()})
+    policy = load_policy(file)  # the file reads back as a policy
+    return ShippedPlanner(
+        name=name, maze=study.dataset.maze, method=f"the dataset graph over {policy.config.agent.upper()}",
+        process=policy.config.agent, prior="", study=str(study.file), rows=str(Path(rows[0]).parent),
+        run=run_path.name, seed=seed, step=int(state["step"]), code_version=version, dataset=config["dataset"],
+        parameters=sum(p.numel() for p in policy.net.parameters()), file=file.name, bytes=file.stat().st_size,
+        sha256=sha256(file), kind="policy", dataset_identity=policy.dataset_identity)
 
 
 def _kept(out: Path, names: list[str], only: tuple[str, ...]) -> dict[str, ShippedPlanner]:
