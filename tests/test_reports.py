@@ -505,3 +505,11 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
             "executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on: 85.0 ± 5.0% over 2 "
             "training seeds"
             ) in mc.block(tmp_path).splitlines()
+    # the goal table: the best planner (not GCBC, not GCIQL) per dataset against GCIQL here, published and the best
+    # reported, by its mean; its margins in points
+    goal = mc.render(tmp_path).splitlines()
+    assert ("| cube-double | graph-keep5-r1-gciql-ahead25: 85.0 ± 5.0 (2 seeds) | not trained here | 40 (+45.0) | "
+            "60 (+25.0) | `studies/manip-cube-double.toml` |") in goal
+    assert ("| puzzle-3x3 | graph-keep10-r1.5: 70.0 (one run) | 90.0 (-20.0) | 95 (-25.0) | 95 (-25.0) | "
+            "`studies/manip-puzzle-3x3.toml` |") in goal
+    assert goal.index("## Against the goal") < goal.index("## cube-single-play-v0")

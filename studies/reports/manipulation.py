@@ -27,6 +27,9 @@ PUBLISHED = {"cube-single": (6, 68), "cube-double": (1, 40), "scene": (5, 51), "
              "puzzle-4x4": (0, 26)}
 """OGBench's published success (%) of GCBC and GCIQL per play dataset (Park et al., ICLR 2025, Table 2), at
 :data:`BUDGET`."""
+BEST_REPORTED = {"cube-single": 89, "cube-double": 60, "scene": 90, "puzzle-3x3": 95, "puzzle-4x4": 84}
+"""The best success (%) reported by any method after OGBench's paper, about (secondary sources, as the issue quotes
+them): the moonshot."""
 BUDGET = "(8 seeds, 1 M steps)"
 PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
@@ -142,6 +145,49 @@ def block(root: Path) -> str:
     return "\n".join(lines) or "- no rows yet (`bridgeplan study run manipulation`)."
 
 
+def best_planner(found: list[dict]) -> tuple[str, list[float]] | None:
+    """The best of bridgeplan's planners (every method but the peers) on the test tasks, by mean success: its
+    method and its rates (one per training seed)."""
+    mine = {m: r for m, r in test_rates(found).items() if m not in PEERS}
+    if not mine:
+        return None
+    return max(mine.items(), key=lambda item: sum(item[1]) / len(item[1]))
+
+
+def _margin(mine: float, theirs: float) -> str:
+    return f"{mine - theirs:+.1f}"
+
+
+def goal_table(root: Path) -> list[str]:
+    """Per dataset with rows, the best planner against GCIQL measured here, GCIQL's published number and the best
+    reported: by how much it is above or below each (points of success); what limits it: its study file."""
+    body = []
+    for scene in SCENES:
+        found = rows(root, scene)
+        best = best_planner(found)
+        if best is None:
+            continue
+        method, rates = best
+        mean = sum(rates) / len(rates)
+        gciql = test_rates(found).get("gciql")
+        here = (f"{fmt_mean_se(gciql, one_seed='mean')} ({_margin(mean, sum(gciql) / len(gciql))})" if gciql
+                else "not trained here")
+        body.append([scene, f"{method}: {fmt_mean_se(rates, one_seed='mean')}"
+                     + (f" ({len(rates)} seeds)" if len(rates) > 1 else " (one run)"), here,
+                     f"{PUBLISHED[scene][1]} ({_margin(mean, PUBLISHED[scene][1])})",
+                     f"{BEST_REPORTED[scene]} ({_margin(mean, BEST_REPORTED[scene])})",
+                     f"`studies/{folder(scene)}.toml`"])
+    if not body:
+        return []
+    return ["## Against the goal", "",
+            "The best bridgeplan planner per dataset (every method but GCBC and GCIQL, by its mean test success) "
+            "against GCIQL measured here (20 k steps), GCIQL's published number (8 seeds, 1 M steps) and the best "
+            "any method has reported (about: later papers, secondary sources); in brackets the best planner's "
+            "margin in points of success. Its study file says what limits it.", "",
+            *table(["dataset", "best planner: success (%)", "GCIQL here (margin)", "GCIQL published (margin)",
+                    "best reported (margin)", "what limits it"], body)]
+
+
 def section(scene: str, found: list[dict]) -> list[str]:
     """Dataset ``scene``'s tables: every method at its last snapshot, then GCBC and GCIQL against training steps."""
     lines = [f"## {scene}-play-v0", "", f"Rows in docs/results/{folder(scene)}/ ({SCENES[scene].eval_steps} steps per "
@@ -183,4 +229,4 @@ def render(root: Path) -> str:
     if not sections:
         return "\n".join([*lines, "", "No rows yet: `bridgeplan study run manipulation`, then `bridgeplan study "
                                       "export manipulation`."])
-    return "\n".join(lines + [line for s in sections for line in ["", *s]])
+    return "\n".join(lines + ["", *goal_table(root)] + [line for s in sections for line in ["", *s]])
