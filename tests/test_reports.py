@@ -505,6 +505,17 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
             "executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on: 85.0 ± 5.0% over 2 "
             "training seeds"
             ) in mc.block(tmp_path).splitlines()
+    # a planner low level: named by its rows' settings
+    low = tmp_path / mc.folder("cube-double") / "graph-keep5-r1-bridge-k4-nfe1-s0" / "track-replan12-high48-seed0.json"
+    write(low, 0.3, step=20000, replan=12)
+    row = json.loads(low.read_text())
+    row["execution"]["replan_high_every"] = 48
+    row["low"] = {"method": "bridge (coarse)", "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": 1,
+                  "step": 20000, "config": {"preset": "cpu-small"}}
+    low.write_text(json.dumps(row))
+    assert ("- cube-double-play-v0, the dataset graph (every 5th state, radius 1, searched again every 48 steps), its "
+            "path's states every 12 steps the subgoals of a bridge (coarse) low level (cpu-small, 20 k steps, 16 "
+            "states 4 steps apart, NFE 1) replanned every 12 steps: 30.0% (one run)") in mc.block(tmp_path).splitlines()
     # the goal table: the best planner (not GCBC, not GCIQL) per dataset against GCIQL here, published and the best
     # reported, by its mean; its margins in points
     goal = mc.render(tmp_path).splitlines()

@@ -35,7 +35,8 @@ PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
-GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?(?:-(gcbc|gciql)-ahead(\d+))?")
+GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
+                          r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow)-k\d+-nfe\d+)?")
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -65,6 +66,14 @@ def label(method: str, found: list[dict]) -> str:
     every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
     apart = ", one graph per cube" if m[3] else ""
+    if m[6]:  # a planner low level: its settings are its rows'
+        row = next(r for r in found if r["method"] == method)
+        low, ex = row["low"], row["execution"]
+        return (f"the dataset graph (every {m[1]}th state, radius {m[2]}, searched again every "
+                f"{ex['replan_high_every']} steps), its path's states every {low['subgoal_every'] * low['stride']} "
+                f"steps the subgoals of a {low['method']} low level ({low['config']['preset']}, "
+                f"{low['step'] // 1000} k steps, {low['horizon']} states {low['stride']} steps apart, NFE "
+                f"{low['nfe']}) replanned every {ex['replan_every']} steps")
     if m[4]:  # a policy low level
         return (f"the dataset graph (every {m[1]}th state, radius {m[2]}{apart}{replan}), its paths executed by "
                 f"the policy of {LABELS[m[4]]} toward the path's state {m[5]} steps on")
