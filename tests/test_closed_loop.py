@@ -405,7 +405,7 @@ def test_readme_loop_runs_every_shipped_planner_to_the_episodes_end(name):
     from bridgeplan import shipped
 
     code = _readme_loop()
-    assert set(shipped.names()) == {"umaze", "medium", "large"}
+    assert {e.name for e in shipped.manifest().values() if e.kind == "planner"} == {"umaze", "medium", "large"}
     assert 'from_run("medium", ' in code and "device" not in code  # the device chosen as every command does
     for make in (PlannerPolicy.from_run, PlannerPolicy.from_hierarchy, PlannerPolicy.from_graph):
         assert inspect.signature(make).parameters["device"].default == "auto"

@@ -22,14 +22,19 @@ from tests.test_experiments import TINY_STUDY
 
 REPO = Path(__file__).resolve().parents[1]
 NAMES = ["umaze", "medium", "large"]
+"""The shipped planners; then the shipped policies."""
+POLICIES = ["cube-single"]
 
 
 def test_every_shipped_file_matches_its_manifest():
     planners = shipped.manifest()
-    assert list(planners) == NAMES
+    assert list(planners) == NAMES + POLICIES
+    assert [e.kind for e in planners.values()] == ["planner"] * len(NAMES) + ["policy"] * len(POLICIES)
     listed = {p.name for p in shipped.DIR.glob("*.pt")}
     assert listed == {e.file for e in planners.values()}  # no file the manifest does not name
     for e in planners.values():
+        if e.kind == "policy":
+            continue  # test_every_shipped_policy_matches_its_rows
         assert e.path.stat().st_size == e.bytes and e.bytes < 1_500_000
         assert shipped.sha256(e.path) == e.sha256
         assert (REPO / e.study).is_file() and (REPO / e.rows).is_file()
@@ -41,6 +46,37 @@ def test_every_shipped_file_matches_its_manifest():
         assert not {"model", "optimizer", "generator"} & set(state)  # inference only
         assert all(v.dtype == torch.float32 for v in state["ema"].values())
         assert state["step"] == e.step and state["config"]["maze"] == e.maze and "/" not in state["config"]["dataset"]
+
+
+def test_every_shipped_policy_matches_its_rows(tmp_path, monkeypatch, capsys):
+    """A shipped policy: the policy alone in float32 (no critics, no optimizer), its dataset named by its file, its
+    committed rows of that run at that step (the policy alone and the graph over it, whose data identity the manifest
+    keeps); it loads by name and acts, and `eval NAME` scores it by OGBench's protocol without the dataset."""
+    from bridgeplan.gcbc import load_policy
+
+    for name in POLICIES:
+        e = shipped.get(name)
+        assert e.path.stat().st_size == e.bytes < 3_000_000 and shipped.sha256(e.path) == e.sha256
+        assert e.code_version.startswith("0.1.0+") and not e.code_version.endswith(".dirty")
+        assert (REPO / e.study).is_file() and e.dataset == f"{e.maze}.npz"
+        rows = [json.loads(p.read_text()) for p in sorted((REPO / e.rows).rglob("*.json"))]
+        (alone,) = [r for r in rows if "graph" not in r]
+        (graph,) = [r for r in rows if "graph" in r]
+        assert (alone["run"], alone["step"]) == (e.run, e.step) == (graph["low"]["run"], graph["low"]["step"])
+        assert graph["config"]["dataset_identity"] == e.dataset_identity and graph["env_id"] == alone["env_id"]
+        state = torch.load(e.path, map_location="cpu", weights_only=False)
+        assert not {"agent", "optimizer", "rng"} & set(state) and state["shipped"] == name
+        assert all(v.dtype == torch.float32 for v in state["policy"].values())
+        assert state["step"] == e.step and "/" not in state["config"]["dataset"]
+        policy = load_policy(name)
+        assert policy.env == e.maze and policy.dataset_identity == e.dataset_identity
+        action = policy.act(np.zeros((2, policy.net.obs_dim)), np.zeros((2, policy.net.obs_dim)))
+        assert action.shape == (2, 5) and np.abs(action).max() <= 1
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", POLICIES[0], "--episodes", "1", "--tasks", "1", "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["run"] == POLICIES[0] and row["episodes"] == 1 and list(row["tasks"]) == ["1"]
+    assert list((tmp_path / "runs" / "shipped" / POLICIES[0] / "eval").glob("gcbc-*.json"))
 
 
 def test_pyproject_ships_the_files_as_package_data():
@@ -98,7 +134,7 @@ def test_an_unknown_name_is_one_error_line_listing_the_shipped(tmp_path, monkeyp
         assert main(command) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert err == ["error: no checkpoint or run directory 'tiny-maze', and no shipped planner of that name "
-                       "(shipped: umaze, medium, large; see `bridgeplan planners list`)"]
+                       "(shipped: umaze, medium, large, cube-single; see `bridgeplan planners list`)"]
     assert not (tmp_path / "runs").exists()
 
 
@@ -117,11 +153,14 @@ def test_a_damaged_shipped_file_is_refused(tmp_path, monkeypatch):
 def test_planners_list(capsys):
     assert main(["planners"]) == 0 and main(["planners", "list"]) == 0
     out = capsys.readouterr().out.strip().splitlines()
-    assert [line.split("\t")[0] for line in out[:3]] == NAMES == [line.split("\t")[0] for line in out[4:7]]
+    n = len(NAMES + POLICIES)
+    assert [line.split("\t")[0] for line in out[:n]] == NAMES + POLICIES == [
+        line.split("\t")[0] for line in out[n + 1:2 * n + 1]]
+    assert "(bridgeplan graph --low NAME)" in out[n - 1]
     e = shipped.get("large")
     assert f"sha256 {e.sha256}" in out[2] and f"code {e.code_version}" in out[2] and e.study in out[2]
     assert main(["planners", "list", "--json"]) == 0
-    assert [d["name"] for d in json.loads(capsys.readouterr().out)] == NAMES
+    assert [d["name"] for d in json.loads(capsys.readouterr().out)] == NAMES + POLICIES
 
 
 TINY = TINY_STUDY.replace("{steps}", "2").replace("{seeds}", "[0]").replace("episodes = 4", "episodes = 2") + """
@@ -346,6 +385,7 @@ def test_the_report_puts_a_shipped_policys_rows_beside_its_campaigns(tmp_path, m
     root = tmp_path / "results"
     shutil.copytree(REPO / "docs" / "results", root, ignore=shutil.ignore_patterns("*.png", "*.gif"))
     home = root / "shipped" / "cube-single"
+    shutil.rmtree(home, ignore_errors=True)  # the shipped rows replaced by the campaign's seed-0 rows
     shutil.copytree(root / "manip-cube-single" / "graph-keep5-r1-gciql-ahead25-s0",
                     home / "graph-keep5-r1-gciql-ahead25-s0")
     shutil.copy(root / "manip-cube-single" / "gciql-s0-step20000-seed0.json", home)
