@@ -225,3 +225,14 @@ def test_each_training_command_shows_its_own_configs_defaults(command, shown, ca
     assert shown in text
     if command != ["gcbc", "train"]:  # the horizon is the preset's for the maze: none shown
         assert "divisible by the U-Net's downsampling factor. --stride" in text
+
+
+def test_trains_help_names_every_process(capsys):
+    from bridgeplan.cli import main
+    from bridgeplan.processes import PROCESSES
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    process_help = text.rsplit("--process PROCESS ", 1)[1].split("--process-param", 1)[0]
+    assert all(name in process_help for name in PROCESSES), process_help
