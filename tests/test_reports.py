@@ -524,3 +524,36 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert ("| puzzle-3x3 | graph-keep10-r1.5: 70.0 (one run) | 90.0 (-20.0) | 95 (-25.0) | 95 (-25.0) | "
             "`studies/manip-puzzle-3x3.toml` |") in goal
     assert goal.index("## Against the goal") < goal.index("## cube-single-play-v0")
+
+
+def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_seed(tmp_path):
+    """The graph over planner low levels: one row per process and NFE (test tasks only), the difference with DDPM at
+    its largest NFE seed by seed (not the difference of the means), and a verdict only from 2 seeds on."""
+    mc = report("manipulation")
+    home = tmp_path / mc.folder("cube-single")
+
+    def write(process, name, nfe, seed, rate, tasks=(1, 2, 3, 4, 5)):
+        folder = home / f"graph-keep5-r1-{process}-k4-nfe{nfe}-s{seed}"
+        path = folder / f"track-replan12-high48-seed{1000 if min(tasks) > 5 else 0}.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({
+            "success_rate": rate, "step": 20000, "decision_ms_batch1": {"p50": 2.0 * nfe},
+            "execution": {"replan_every": 12, "replan_high_every": 48},
+            "low": {"method": name, "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": nfe, "step": 20000,
+                    "config": {"preset": "cpu-small"}},
+            "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
+
+    for seed, (ddpm, bridge) in enumerate(((0.10, 0.20), (0.30, 0.42), (0.50, 0.56))):
+        write("ddpm", "DDPM", 16, seed, ddpm)
+        write("ddpm", "DDPM", 1, seed, ddpm - 0.05)
+        write("bridge", "bridge (coarse)", 1, seed, bridge)
+    write("bridge", "bridge (coarse)", 1, 0, 0.9, tasks=(6, 7, 8, 9, 10))  # validation: not in this table
+    write("meanflow", "mean flow (coarse)", 1, 0, 0.25)
+    lines = mc.render(tmp_path).splitlines()
+    assert ("| low level | NFE | seeds | success (%) | minus DDPM at NFE 16 (paired) | verdict | "
+            "decision ms at batch 1 |") in lines
+    # per-seed differences 10, 12, 6 points: mean 9.3, SE 1.8, beyond 2 SE: better
+    assert "| bridge (coarse) | 1 | 3 | 39.3 ± 10.5 | +9.3 ± 1.8 (3) | better | 2.0 |" in lines
+    assert "| DDPM | 1 | 3 | 25.0 ± 11.5 | -5.0 ± 0.0 (3) | worse | 2.0 |" in lines
+    assert "| DDPM | 16 | 3 | 30.0 ± 11.5 | - | - | 32.0 |" in lines
+    assert "| mean flow (coarse) | 1 | 1 | 25.0 | +15.0 (1) | - | 2.0 |" in lines

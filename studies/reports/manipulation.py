@@ -18,7 +18,8 @@ import json
 import re
 from pathlib import Path
 
-from bridgeplan.analysis.tables import fmt_mean_se, table
+from bridgeplan.analysis.stats import compare, paired
+from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.envs.ogbench_manipulation.names import SCENES
 
 READS = ()
@@ -36,7 +37,7 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
 GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
-                          r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow)-k\d+-nfe\d+)?")
+                          r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)-k\d+-nfe\d+)?")
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -82,14 +83,16 @@ def label(method: str, found: list[dict]) -> str:
 
 def rows(root: Path, scene: str) -> list[dict]:
     """Every evaluation JSON under dataset ``scene``'s folder, with the method it is of (the file's or its folder's
-    stem before ``-s<seed>``) and whether it is on the validation tasks."""
+    stem before ``-s<seed>``), that training seed (None: no training) and whether it is on the validation tasks."""
     out = []
     home = Path(root) / folder(scene)
     for path in sorted(home.rglob("*.json")):
         d = json.loads(path.read_text())
         name = path.parent.name if path.parent != home else path.stem
         validation = any(int(t) > 5 for t in d["tasks"])
-        out.append({**d, "method": name.split("-s")[0], "validation": validation})
+        seed = re.search(r"-s(\d+)", name)
+        out.append({**d, "method": name.split("-s")[0], "validation": validation,
+                    "training_seed": int(seed[1]) if seed else None})
     return out
 
 
@@ -197,6 +200,44 @@ def goal_table(root: Path) -> list[str]:
                     "best reported (margin)", "what limits it"], body)]
 
 
+def low_levels(found: list[dict]) -> list[str]:
+    """The dataset graph over each planner low level side by side (the thesis's comparison where the graph is the high
+    level): each process at each NFE on the test tasks, mean ± SE over training seeds, and its difference with DDPM's
+    at its largest NFE paired by training seed, with the verdict at 2 standard errors (:func:`compare`)."""
+    by: dict[tuple[str, int], dict[int, float]] = {}
+    ms: dict[tuple[str, int], list[float]] = {}
+    names: dict[str, str] = {}
+    for r in final(found):
+        m = GRAPH_FOLDER.fullmatch(r["method"])
+        if m is None or not m[6] or r["validation"]:
+            continue
+        key = (m[6], r["low"]["nfe"])
+        names[m[6]] = r["low"]["method"]
+        by.setdefault(key, {})[r["training_seed"]] = 100 * r["success_rate"]
+        if "decision_ms_batch1" in r:
+            ms.setdefault(key, []).append(r["decision_ms_batch1"]["p50"])
+    if not by:
+        return []
+    ddpm = max((k for k in by if k[0] == "ddpm"), key=lambda k: k[1], default=None)
+    body = []
+    for key, rates in sorted(by.items()):
+        vs, verdict = "-", "-"
+        if ddpm is not None and key != ddpm:
+            d = paired(rates, by[ddpm], seeds="common")
+            vs = f"{fmt_diff(d)} ({d.n})" if d.n > 1 else f"{d.mean:+.1f} (1)"
+            verdict = compare(d) if d.n > 1 else "-"
+        body.append([names[key[0]], key[1], len(rates), fmt_mean_se(rates, one_seed="mean"), vs, verdict,
+                     f"{sum(ms[key]) / len(ms[key]):.1f}" if key in ms else "-"])
+    reference = f"DDPM at NFE {ddpm[1]}" if ddpm else "DDPM"
+    return ["", "The dataset graph over a diffusion planner low level (the graph's path the subgoals; the rows above "
+                "named graph-...-k4-nfeN), by the low level's process and NFE: test tasks, mean ± standard error over "
+                f"training seeds, the difference with {reference} paired by training seed (its verdict: better or "
+                "worse beyond 2 standard errors, else tie), and the median decision's milliseconds at batch 1 (high "
+                "and low level together, one CPU thread; mean over seeds):", "",
+            *table(["low level", "NFE", "seeds", "success (%)", f"minus {reference} (paired)", "verdict",
+                    "decision ms at batch 1"], body)]
+
+
 def section(scene: str, found: list[dict]) -> list[str]:
     """Dataset ``scene``'s tables: every method at its last snapshot, then GCBC and GCIQL against training steps."""
     lines = [f"## {scene}-play-v0", "", f"Rows in docs/results/{folder(scene)}/ ({SCENES[scene].eval_steps} steps per "
@@ -211,6 +252,7 @@ def section(scene: str, found: list[dict]) -> list[str]:
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
                              fmt_mean_se(rates, one_seed="mean"), beside])
     lines += table(["method", "tasks", "seeds", "success (%)", "published"], body)
+    lines += low_levels(found)
     found_curves = curves(found)
     if found_curves:
         steps = sorted({k for per_seed in found_curves.values() for by_step in per_seed.values() for k in by_step})
