@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.workers import run_spawned
+from bridgeplan.workers import doing, run_spawned
 
 PARENT = """
 import multiprocessing as mp, sys, time
@@ -69,3 +69,17 @@ def test_run_spawned_answers_in_order_and_raises_a_workers_error_after_the_other
     with pytest.raises(BridgeplanError, match="^refused -1$"):
         run_spawned(_square_or_refuse, [(-1, str(tmp_path)), (5, str(tmp_path))], 1, ["a", "b"])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["2.done", "3.done", "5.done"]  # the other call ran
+
+
+def test_run_spawned_says_what_each_worker_does_and_when_it_ends(tmp_path, capsys):
+    run_spawned(_say_and_square, [(3,), (2,)], 2, ["a", "b"], progress=True)
+    lines = capsys.readouterr().err.splitlines()
+    assert any(line.endswith("] a: squaring 3") for line in lines), lines
+    assert sum("ended)" in line for line in lines) == 2 and lines[-1].endswith("done (2 of 2 ended)")
+    run_spawned(_say_and_square, [(3,)], 1, ["a"])  # without progress: silent
+    assert capsys.readouterr().err == ""
+
+
+def _say_and_square(x: int) -> int:
+    doing(f"squaring {x}")
+    return x * x

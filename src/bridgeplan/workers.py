@@ -10,6 +10,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -67,12 +68,13 @@ def _worker(parent: Connection, call: Callable, args: tuple) -> None:
         parent.send(("raised", RuntimeError(f"{type(answer[1]).__name__}: {answer[1]} (unpicklable: {e})")))
 
 
-def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: list[str]) -> list:
+def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: list[str], progress: bool = False) -> list:
     """``call(*args)`` for each ``args`` of ``arguments``, each in a spawned process of its own, at most ``workers``
     at once; their results in order. A process per call rather than a pool: a pool whose worker is killed loses its
     task and waits for it forever. A call that raises: its exception raised here once the others have ended. A process
     that ends without answering (killed): :class:`WorkerDied` naming it (``names[i]``) and what it last said it was
-    doing (:func:`doing`), once the others have ended (what they finished is kept)."""
+    doing (:func:`doing`), once the others have ended (what they finished is kept). ``progress``: a line on stderr
+    whenever a worker says what it does and when it ends (the workers draw no bars: theirs would interleave)."""
     ctx = mp.get_context("spawn")
     waiting = list(range(len(arguments)))
     running: dict[Connection, tuple[int, BaseProcess]] = {}
@@ -80,6 +82,7 @@ def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: lis
     raised: list[BaseException] = []
     died: list[str] = []
     last: dict[int, str] = {}
+    ended = 0
     while waiting or running:
         while waiting and len(running) < workers:
             i = waiting.pop(0)
@@ -96,10 +99,13 @@ def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: lis
                 kind, value = "died", None
             if kind == "doing":
                 last[i] = value
+                _say(progress, f"{names[i]}: {value}")
                 continue
             del running[conn]
             conn.close()
             process.join()
+            ended += 1
+            _say(progress, f"{names[i]}: {'done' if kind == 'done' else 'failed'} ({ended} of {len(arguments)} ended)")
             if kind == "done":
                 results[i] = value
             elif kind == "raised":
@@ -112,6 +118,11 @@ def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: lis
     if raised:
         raise raised[0]
     return results
+
+
+def _say(progress: bool, line: str) -> None:
+    if progress:
+        print(f"[{time.strftime('%H:%M:%S')}] {line}", file=sys.stderr, flush=True)
 
 
 def _death(exitcode: int | None) -> str:

@@ -238,7 +238,7 @@ def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: 
     try:
         results = run_spawned(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads, False)
                                         for spec, seed in jobs], workers,
-                              [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs])
+                              [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs], progress)
     except WorkerDied as e:
         raise BridgeplanError(f"{e}; the rows stored are kept: the sweep again runs what is missing") from None
     return sum(len(r) for r in results)

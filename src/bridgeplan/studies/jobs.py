@@ -211,7 +211,7 @@ def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int,
         written = run_spawned(run_seed, [(study, results, dataset, unit, seed, False) for seed, unit in units],
                               min(workers, len(units)),
                               [f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})"
-                               for seed, unit in units])
+                               for seed, unit in units], progress)
     except WorkerDied as e:
         raise BridgeplanError(f"{e}; the JSONs written are kept: `study run` again runs what is missing") from None
     return sum(written)
