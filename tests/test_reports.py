@@ -467,12 +467,10 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines
     assert "| method | 10 k steps | 15 k steps | 20 k steps | OGBench's average (last 3) |" in lines
     assert "| gcbc | 10.0 (1) | 18.0 ± 2.0 (2) | 6.0 ± 2.0 (2) | 10.0 (1) |" in lines
-    # the README's lines: the test tasks only, readable names, the published number where there is one
-    assert mc.block(tmp_path).splitlines() == [
-        "- cube-single-play-v0, DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps): 50.0% (one run)",
-        "- cube-single-play-v0, GCBC (20 k steps): 6.0 ± 2.0% over 2 training seeds; OGBench published 6 (8 seeds, "
-        "1 M steps)",
-        "- cube-single-play-v0, OGBench published: GCIQL 68 (8 seeds, 1 M steps)"]  # the peer not trained here
+    # the README's table: per dataset its best planner (not a peer) on the test tasks, in words, beside GCIQL's
+    assert mc.block(tmp_path).splitlines()[2:] == [
+        "| cube-single-play-v0 | DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps) | 50.0 (one "
+        "run) | not trained here | 68 (8 seeds, 1 M steps) |"]
     # a second dataset: its own section, its own published numbers, the graph named by its folder and replanning
     write(tmp_path / mc.folder("puzzle-3x3") / "gciql-s0-step20000-seed0.json", 0.9)
     write(tmp_path / mc.folder("puzzle-3x3") / "graph-keep10-r1.5" / "track-replan50-seed0.json", 0.7, step=0,
@@ -483,28 +481,25 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
                                                                        "steps).")
     assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) |")
     assert mc.block(tmp_path).splitlines()[3:] == [
-        "- puzzle-3x3-play-v0, GCIQL (20 k steps): 90.0% (one run); OGBench published 95 (8 seeds, 1 M steps)",
-        "- puzzle-3x3-play-v0, the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps): "
-        "70.0% (one run)",
-        "- puzzle-3x3-play-v0, OGBench published: GCBC 2 (8 seeds, 1 M steps)"]
-    # a dataset without GCBC or GCIQL rows: their published numbers on a line of their own
+        "| puzzle-3x3-play-v0 | the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps) "
+        "| 70.0 (one run) | 90.0 (one run) | 95 (8 seeds, 1 M steps) |"]
+    # a dataset without GCIQL rows: its published number alone
     write(tmp_path / mc.folder("scene") / "graph-keep5-r1" / "track-replan50-seed0.json", 0.5, step=0, replan=50)
-    block = mc.block(tmp_path).splitlines()
-    assert "- scene-play-v0, OGBench published: GCBC 5, GCIQL 51 (8 seeds, 1 M steps)" in block
+    assert ("| scene-play-v0 | the dataset graph (no network: every 5th state, radius 1, replanned every 50 steps) | "
+            "50.0 (one run) | not trained here | 51 (8 seeds, 1 M steps) |") in mc.block(tmp_path).splitlines()
     # the objects apart: named so
     write(tmp_path / mc.folder("cube-double") / "graph-keep5-r1-objects" / "track-replan150-seed0.json", 0.2, step=0,
           replan=150)
-    assert ("- cube-double-play-v0, the dataset graph (no network: every 5th state, radius 1, one graph per cube, "
-            "replanned every 150 steps): 20.0% (one run)") in mc.block(tmp_path).splitlines()
+    assert ("| cube-double-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per cube, "
+            "replanned every 150 steps) | 20.0 (one run) |") in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /
               "track-replan50-seed0.json", rate, step=0, replan=50)
     assert "| graph-keep5-r1-gciql-ahead25 | test | 2 | 85.0 ± 5.0 | - |" in mc.render(tmp_path).splitlines()
-    assert ("- cube-double-play-v0, the dataset graph (every 5th state, radius 1, replanned every 50 steps), its paths "
-            "executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on: 85.0 ± 5.0% over 2 "
-            "training seeds"
-            ) in mc.block(tmp_path).splitlines()
+    assert ("| cube-double-play-v0 | the dataset graph (every 5th state, radius 1, replanned every 50 steps), its "
+            "paths executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on | 85.0 ± 5.0 (2 "
+            "seeds) |") in mc.block(tmp_path)
     # a planner low level: named by its rows' settings
     low = tmp_path / mc.folder("cube-double") / "graph-keep5-r1-bridge-k4-nfe1-s0" / "track-replan12-high48-seed0.json"
     write(low, 0.3, step=20000, replan=12)
@@ -513,9 +508,10 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     row["low"] = {"method": "bridge (coarse)", "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": 1,
                   "step": 20000, "config": {"preset": "cpu-small"}}
     low.write_text(json.dumps(row))
-    assert ("- cube-double-play-v0, the dataset graph (every 5th state, radius 1, searched again every 48 steps), its "
-            "path's states every 12 steps the subgoals of a bridge (coarse) low level (cpu-small, 20 k steps, 16 "
-            "states 4 steps apart, NFE 1) replanned every 12 steps: 30.0% (one run)") in mc.block(tmp_path).splitlines()
+    assert mc.label("graph-keep5-r1-bridge-k4-nfe1", mc.rows(tmp_path, "cube-double")) == (
+        "the dataset graph (every 5th state, radius 1, searched again every 48 steps), its path's states every 12 "
+        "steps the subgoals of a bridge (coarse) low level (cpu-small, 20 k steps, 16 states 4 steps apart, NFE 1) "
+        "replanned every 12 steps")
     # the goal table: the best planner (not GCBC, not GCIQL) per dataset against GCIQL here, published and the best
     # reported, by its mean; its margins in points
     goal = mc.render(tmp_path).splitlines()

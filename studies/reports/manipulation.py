@@ -139,24 +139,6 @@ def ogbench_average(per_seed: dict[int, dict[int, float]], final_step: int) -> l
     return out
 
 
-def block(root: Path) -> str:
-    """The README's lines: per dataset with rows, each method's success on its 5 test tasks, beside the published
-    number."""
-    lines = []
-    for scene in SCENES:
-        found = rows(root, scene)
-        rates = test_rates(found)
-        lines += [f"- {scene}-play-v0, {label(method, found)}: {fmt_mean_se(r, one_seed='mean')}% "
-                  + (f"over {len(r)} training seeds" if len(r) > 1 else "(one run)")
-                  + (f"; OGBench published {published(scene, method)}" if method in PEERS else "")
-                  for method, r in rates.items()]
-        unmeasured = [m for m in PEERS if m not in rates]  # a peer not trained here: its published number alone
-        if rates and unmeasured:
-            lines.append(f"- {scene}-play-v0, OGBench published: " + ", ".join(
-                f"{m.upper()} {PUBLISHED[scene][PEERS.index(m)]}" for m in unmeasured) + f" {BUDGET}")
-    return "\n".join(lines) or "- no rows yet (`bridgeplan study run manipulation`)."
-
-
 def best_planner(found: list[dict]) -> tuple[str, list[float]] | None:
     """The best of bridgeplan's planners (every method but the peers) on the test tasks, by mean success: its
     method and its rates (one per training seed)."""
@@ -170,22 +152,31 @@ def _margin(mine: float, theirs: float) -> str:
     return f"{mine - theirs:+.1f}"
 
 
+def bests(root: Path) -> list[tuple[str, list[dict], str, list[float], list[float] | None]]:
+    """Per dataset with a planner's rows: the dataset, its rows, its best planner (:func:`best_planner`) with its test
+    rates, and GCIQL's test rates here (None: not trained here)."""
+    out = []
+    for scene in SCENES:
+        found = rows(root, scene)
+        best = best_planner(found)
+        if best is not None:
+            out.append((scene, found, *best, test_rates(found).get("gciql")))
+    return out
+
+
+def _rates(rates: list[float]) -> str:
+    return fmt_mean_se(rates, one_seed="mean") + (f" ({len(rates)} seeds)" if len(rates) > 1 else " (one run)")
+
+
 def goal_table(root: Path) -> list[str]:
     """Per dataset with rows, the best planner against GCIQL measured here, GCIQL's published number and the best
     reported: by how much it is above or below each (points of success); what limits it: its study file."""
     body = []
-    for scene in SCENES:
-        found = rows(root, scene)
-        best = best_planner(found)
-        if best is None:
-            continue
-        method, rates = best
+    for scene, _, method, rates, gciql in bests(root):
         mean = sum(rates) / len(rates)
-        gciql = test_rates(found).get("gciql")
         here = (f"{fmt_mean_se(gciql, one_seed='mean')} ({_margin(mean, sum(gciql) / len(gciql))})" if gciql
                 else "not trained here")
-        body.append([scene, f"{method}: {fmt_mean_se(rates, one_seed='mean')}"
-                     + (f" ({len(rates)} seeds)" if len(rates) > 1 else " (one run)"), here,
+        body.append([scene, f"{method}: {_rates(rates)}", here,
                      f"{PUBLISHED[scene][1]} ({_margin(mean, PUBLISHED[scene][1])})",
                      f"{BEST_REPORTED[scene]} ({_margin(mean, BEST_REPORTED[scene])})",
                      f"`studies/{folder(scene)}.toml`"])
@@ -198,6 +189,18 @@ def goal_table(root: Path) -> list[str]:
             "margin in points of success. Its study file says what limits it.", "",
             *table(["dataset", "best planner: success (%)", "GCIQL here (margin)", "GCIQL published (margin)",
                     "best reported (margin)", "what limits it"], body)]
+
+
+def block(root: Path) -> str:
+    """The README's table: per dataset, its best planner (named in words) and its success on the 5 test tasks beside
+    GCIQL's here and published; every method's rows are the page's."""
+    body = [[f"{scene}-play-v0", label(method, found), _rates(rates),
+             _rates(gciql) if gciql else "not trained here", f"{PUBLISHED[scene][1]} {BUDGET}"]
+            for scene, found, method, rates, gciql in bests(root)]
+    if not body:
+        return "No rows yet (`bridgeplan study run manip-cube-single`)."
+    return "\n".join(table(["dataset", "best planner", "success (%)", "GCIQL here (20 k steps)", "GCIQL published"],
+                           body))
 
 
 def low_levels(found: list[dict]) -> list[str]:
