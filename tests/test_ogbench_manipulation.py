@@ -317,7 +317,7 @@ def test_the_warm_prior_in_state_space():
     state space from its last state toward the goal's columns (the others held at that state's)."""
 
     from bridgeplan.normalizer import Normalizer
-    from bridgeplan.priors import make_prior
+    from bridgeplan.priors import WarmPrior
 
     layout = FAMILY.layout("cube-single-play-v0")
     rng = np.random.default_rng(1)
@@ -325,7 +325,7 @@ def test_the_warm_prior_in_state_space():
     horizon, stride = 5, 2
     previous = rng.normal(size=(1, 9, layout.transition_dim))  # S = (H - 1) * stride + 1 steps
     start, goal = rng.normal(size=(1, 28)), rng.normal(size=(1, 28))
-    warm = make_prior("warm", normalizer, layout, stride=stride).with_previous(previous, [4])
+    warm = WarmPrior(normalizer, layout, previous, [4], stride=stride)
     conditions = _manipulation_conditions(layout, normalizer, start, goal, horizon)
     traj = normalizer.unnormalize(warm.sample(conditions, horizon, 1).double().numpy())[0]
     np.testing.assert_allclose(layout.states(traj[0]), start[0], atol=1e-6)  # the current state inpainted

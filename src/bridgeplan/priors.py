@@ -199,7 +199,7 @@ class WarmPrior:
 
     ``previous`` ``[B, S, D]`` are the previous plans as executed, in physical units (``layout``'s columns),
     one row per environment step (``S = (H - 1) * stride + 1``), and ``elapsed`` ``[B]`` the steps since each
-    was made (``with_previous``). The sample at planned index ``t`` is the previous plan at step
+    was made. The sample at planned index ``t`` is the previous plan at step
     ``t * stride + elapsed`` while that is inside it; after its end (the last ``elapsed`` steps) positions go
     in a straight line from the previous plan's last state to the goal condition at ``t = H - 1`` as
     :func:`line_between` draws it (in the plane: velocity clipped to ``MAX_SPEED``, actions the unit vector toward
@@ -221,10 +221,6 @@ class WarmPrior:
                                       f"layout), got {list(self.previous.shape)}")
             if self.elapsed is None or len(self.elapsed) != len(self.previous) or bool((self.elapsed < 0).any()):
                 raise BridgeplanError("the warm prior needs one elapsed step count >= 0 per previous plan")
-
-    def with_previous(self, previous, elapsed) -> WarmPrior:
-        """This prior starting from ``previous`` plans ``[B, S, D]`` made ``elapsed [B]`` steps ago."""
-        return WarmPrior(self.normalizer, self.layout, previous, elapsed, self.stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:
