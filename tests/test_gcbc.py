@@ -209,7 +209,7 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
              "--device", "cpu", "--no-progress"]
     assert main(train) == 0
     assert "step 4" in capsys.readouterr().out
-    assert main(["gcbc", "eval", str(run), "--steps", "all", "--episodes", "1", "--no-progress",
+    assert main(["gcbc", "eval", str(run), "--snapshots", "all", "--episodes", "1", "--no-progress",
                  "--json"]) == 0
     out = capsys.readouterr().out
     assert out.count('"env_id": "pointmaze-medium-v0"') == 1
@@ -223,5 +223,5 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
     assert capsys.readouterr().err.strip().splitlines() == ["error: lr must be a positive, finite number, got 0.0"]
     assert main(["gcbc", "train", data, "--run-dir", str(tmp_path / "r3"), "--maze", "large"]) == 2
     assert "not a pointmaze-large dataset" in capsys.readouterr().err
-    assert main(["gcbc", "eval", str(run), "--steps", "3"]) == 2
+    assert main(["gcbc", "eval", str(run), "--snapshots", "3"]) == 2
     assert "no snapshot at step 3" in capsys.readouterr().err

@@ -301,7 +301,7 @@ device = "cpu"
 [[evaluations]]
 command = "gcbc eval"
 runs = ["gciql"]
-args = {{ steps = 4, episodes = 1 }}
+args = {{ snapshots = 4, episodes = 1 }}
 out = "shipped/tiny/gciql-s{{seed}}.json"
 task_seed = 0
 

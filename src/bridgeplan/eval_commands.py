@@ -405,7 +405,8 @@ def oracle(o: OracleOptions) -> int:
 class GCBCEvalOptions:
     run: str = opt(help="a `gcbc train` run directory")
     environment: Environment = group(Environment)
-    steps: str | None = opt(None, "comma-separated snapshot steps, or 'all' (default: the latest checkpoint)")
+    snapshots: str | None = opt(None, "the snapshots to evaluate: their training steps, comma-separated, or 'all' "
+                                      "(default: the latest checkpoint)")
     episodes: int | None = shared(Tasks, "episodes")
     seed: int = shared(Tasks, "seed")
     output: Output = group(Output)
@@ -414,23 +415,24 @@ class GCBCEvalOptions:
 
 
 GCBC_EVAL_DESCRIPTION = ("--maze defaults to the environment the run was trained with; --out takes one snapshot's "
-                         "evaluation (--steps N).")
+                         "evaluation (--snapshots N).")
 
 
 def gcbc_eval(o: GCBCEvalOptions) -> int:
     from bridgeplan.gcbc import evaluate_gcbc, policy_snapshots
 
     steps = None
-    if o.steps == "all":
+    if o.snapshots == "all":
         steps = [s for s, _ in policy_snapshots(o.run)]
-    elif o.steps:
+    elif o.snapshots:
         try:
-            steps = [int(v) for v in o.steps.split(",")]
+            steps = [int(v) for v in o.snapshots.split(",")]
         except ValueError:
-            raise BridgeplanError(f"--steps takes comma-separated integers or 'all', got {o.steps!r}") from None
+            raise BridgeplanError(f"--snapshots takes comma-separated training steps or 'all', got "
+                                  f"{o.snapshots!r}") from None
     out = o.output.out
     if out and (steps is None or len(steps) != 1):
-        raise BridgeplanError("--out takes one evaluation: give one snapshot with --steps N")
+        raise BridgeplanError("--out takes one evaluation: give one snapshot with --snapshots N")
     if out:
         from bridgeplan.files import check_writable
 
