@@ -42,7 +42,7 @@ for nfe in 1 16 256; do
   bp eval "$work/run" --episodes "$episodes" --nfe "$nfe" --device "$device" --out "$out/eval-nfe$nfe.json" \
     || failed+=("eval-nfe$nfe")
 done
-bp eval "$work/run" --episodes 5 --batch-size 1 --nfe 256 --device "$device" --out "$out/eval-nfe256-batch1.json" \
+bp eval "$work/run" --episodes 5 --plan-batch 1 --nfe 256 --device "$device" --out "$out/eval-nfe256-batch1.json" \
   > /dev/null || failed+=(eval-batch1)
 
 step bench

@@ -51,7 +51,7 @@ def test_eval_is_reproducible(tiny_runs, tmp_path):
     (["--nfe", "0"], "nfe"),
     (["--nfe", "6"], "nfe"),
     (["--episodes", "0"], "episodes must be positive"),
-    (["--batch-size", "0"], "batch size must be positive"),
+    (["--plan-batch", "0"], "--plan-batch must be positive"),
 ])
 def test_eval_bad_input(tiny_runs, capsys, bad, message):
     assert main(["eval", str(tiny_runs["bridge"]), "--device", "cpu", *bad]) == 2

@@ -81,7 +81,8 @@ class EvalOptions:
     run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name (`bridgeplan "
                         "planners list`)")
     nfe: int | None = opt(None, "network calls per plan (default: the full count)")
-    batch_size: int | None = opt(None, "plans per batch (default: all episodes at once)")
+    plan_batch: int | None = opt(None, "episodes planned per network call (default: all live episodes at once; "
+                                       "--batch-size of the training commands is the gradient's)")
     snapshot: int | None = opt(None, "evaluate the EMA snapshot of this training step")
     sampler: str | None = opt(None, "a process with several samplers: ddpm ancestral (default; strided below N) or "
                                     "ddim; flow euler (default) or stochastic; bridge posterior (default) or mean (no "
@@ -115,12 +116,14 @@ def eval_run(o: EvalOptions) -> int:
 
     if is_gcbc_run(o.run):
         return _eval_gcbc(o)
+    if o.plan_batch is not None:
+        positive("--plan-batch", o.plan_batch)
     plan = execution(o.replanning, o.controller, o.plans)
     correction = parsed_correction(o.correction)
     folder = eval_dir(run_dir_of(Path(o.run)))
     check_result_path(o.output.out, folder)
     result = evaluate_run(Path(o.run), episodes=o.tasks.episodes, nfe=o.nfe, seed=o.tasks.seed,
-                          multi_task=o.tasks.multi_task, task_ids=o.tasks.ids, batch_size=o.batch_size,
+                          multi_task=o.tasks.multi_task, task_ids=o.tasks.ids, batch_size=o.plan_batch,
                           snapshot=o.snapshot, device=o.device.device, sampler=o.sampler, eta=o.eta,
                           compile=o.compile, execution=plan, correction=correction, floor=not o.no_floor)
     d = result.to_dict()
