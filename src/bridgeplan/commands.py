@@ -173,7 +173,8 @@ class TrainCommon:
 @dataclasses.dataclass(kw_only=True)
 class TrainOptions:
     common: TrainCommon = group(TrainCommon)
-    process: str | None = opt(None, "ddpm, bridge, flow, meanflow, shortcut or distill (default ddpm; bridgeplan.processes)")
+    process: str | None = opt(None, "ddpm, bridge, flow, meanflow, shortcut or distill (default ddpm; "
+                                    "bridgeplan.processes)")
     process_param: list[str] | None = opt(None, "any field of the process's dataclass, e.g. beta_max=0.3 "
                                                 "(repeatable)", action="append", metavar="FIELD=VALUE")
     prior: str | None = shared(og.PlanChoice, "prior")
