@@ -163,11 +163,14 @@ def check_study(study: Study) -> None:
             raise StudyError(study.file, "training", str(e)) from None
     for i in range(len(study.experiments)):
         build_experiment(study, i)
+    configs = {}
     for run in study.runs:
         try:
-            train_config(study, run, 0, Path("dataset"))
+            configs[run.name] = train_config(study, run, 0, Path("dataset"))
         except (BridgeplanError, TypeError, ValueError) as e:
             raise StudyError(study.file, f"runs.{run.name}", str(e)) from None
+    for i, e in enumerate(study.evaluations):
+        check_nfes(study, i, e, configs)
     written: dict[Path, int] = {}
     for i, e in enumerate(study.evaluations):
         for job in jobs(dataclasses.replace(study, evaluations=(e,)), Path("results"), Path("."), quick=False):
@@ -177,6 +180,25 @@ def check_study(study: Study) -> None:
                                  f"two training seeds or splits): name {{seed}} or {{eval_seed}} in it, or give an "
                                  f"evaluation of no run seeds = [0]")
             written[job.path] = i
+
+
+NFE_OF = {"run": "nfe", "low": "nfe_low", "high": "nfe_high"}
+"""The NFE option of the run each evaluation command's run option names."""
+
+
+def check_nfes(study: Study, i: int, e, configs: dict) -> None:
+    """Evaluation ``i``'s NFEs against the processes of the planners it samples (``configs``: the study's run configs
+    by name), refused before anything is trained: a bridge of N steps takes at most N - 1."""
+    from bridgeplan.eval_commands import STUDY_COMMANDS
+
+    args = dict(e.args)
+    for option, name in zip(STUDY_COMMANDS[e.command].runs, e.runs):
+        nfe, process = args.get(NFE_OF.get(option)), getattr(configs.get(name), "process", None)
+        if nfe is not None and process is not None:
+            try:
+                process.validate_nfe(nfe)
+            except BridgeplanError as err:
+                raise StudyError(study.file, f"evaluations[{i}].args.{NFE_OF[option]}", f"{name}: {err}") from None
 
 
 def trained_methods(study: Study) -> set:
