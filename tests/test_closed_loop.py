@@ -39,7 +39,7 @@ from bridgeplan.runs import load_planner
 from bridgeplan.trajectory import MAZE2D
 
 UMAZE = get_maze("umaze")
-README = Path(__file__).resolve().parents[1] / "README.md"
+USAGE = Path(__file__).resolve().parents[1] / "docs" / "usage.md"
 
 
 def closed_loop(tasks: MazeTasks, plan_fn, replan_every=None, tolerance=None, steps=None, controller="track"):
@@ -391,26 +391,27 @@ def test_candidates_through_the_cli(tiny_runs, tmp_path):
     assert saved["decision_ms_per_batch"]["mean_batch"] == 9
 
 
-# ---------------------------------------------------------------- the policy, as the README shows it
+# ------------------------------------------------------------ the policy, as docs/usage.md shows it
 
-def _readme_loop() -> str:
-    section = README.read_text().split("## In your own loop", 1)[1]
+def _usage_loop() -> str:
+    section = USAGE.read_text().split("## Closed loop, controllers and your own loop", 1)[1]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
 @pytest.mark.parametrize("name", ["umaze", "medium", "large"])
-def test_readme_loop_runs_every_shipped_planner_to_the_episodes_end(name):
-    """The README's loop, as written (one episode instead of twenty, the shipped planner's name substituted), in the
+def test_the_usage_loop_runs_every_shipped_planner_to_the_episodes_end(name):
+    """docs/usage.md's loop, as written (one episode instead of twenty, the shipped planner's name substituted), in the
     real environment: each episode runs to its time limit, success is read from ``info``, the return is scored."""
     from bridgeplan import shipped
 
-    code = _readme_loop()
+    code = _usage_loop()
     assert {e.name for e in shipped.manifest().values() if e.kind == "planner"} == {"umaze", "medium", "large"}
     assert 'from_run("medium", ' in code and "device" not in code  # the device chosen as every command does
     for make in (PlannerPolicy.from_run, PlannerPolicy.from_hierarchy, PlannerPolicy.from_graph):
         assert inspect.signature(make).parameters["device"].default == "auto"
     scope: dict = {}
-    exec(compile(code.replace('"medium"', f'"{name}"').replace("range(20)", "range(1)"), "README.md", "exec"), scope)
+    one = code.replace('"medium"', f'"{name}"').replace("range(20)", "range(1)")
+    exec(compile(one, "docs/usage.md", "exec"), scope)
     env, policy, returns, successes = scope["env"], scope["policy"], scope["returns"], scope["successes"]
     assert env.spec.id == policy.maze.gym_id and policy.maze.name == name
     assert policy.steps == env.spec.max_episode_steps == policy.maze.episode_steps  # to the episode's end
