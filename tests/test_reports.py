@@ -528,12 +528,12 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
     mc = report("manipulation")
     home = tmp_path / mc.folder("cube-single")
 
-    def write(process, name, nfe, seed, rate, tasks=(1, 2, 3, 4, 5)):
+    def write(process, name, nfe, seed, rate, tasks=(1, 2, 3, 4, 5), step=20000):
         folder = home / f"graph-keep5-r1-{process}-k4-nfe{nfe}-s{seed}"
-        path = folder / f"track-replan12-high48-seed{1000 if min(tasks) > 5 else 0}.json"
+        path = folder / f"track-replan12-high48-step{step}-seed{1000 if min(tasks) > 5 else 0}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({
-            "success_rate": rate, "step": 20000, "decision_ms_batch1": {"p50": 2.0 * nfe},
+            "success_rate": rate, "step": step, "decision_ms_batch1": {"p50": 2.0 * nfe},
             "execution": {"replan_every": 12, "replan_high_every": 48},
             "low": {"method": name, "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": nfe, "step": 20000,
                     "config": {"preset": "cpu-small"}},
@@ -553,3 +553,11 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
     assert "| DDPM | 1 | 3 | 25.0 ± 11.5 | -5.0 ± 0.0 (3) | worse | 2.0 |" in lines
     assert "| DDPM | 16 | 3 | 30.0 ± 11.5 | - | - | 32.0 |" in lines
     assert "| mean flow (coarse) | 1 | 1 | 25.0 | +15.0 (1) | - | 2.0 |" in lines
+    # an earlier snapshot of two seeds: a curve against training steps, the tables above still at the last snapshot
+    write("bridge", "bridge (coarse)", 1, 0, 0.02, step=10000)
+    write("bridge", "bridge (coarse)", 1, 1, 0.06, step=10000)
+    lines = mc.render(tmp_path).splitlines()
+    assert "| bridge (coarse) | 1 | 3 | 39.3 ± 10.5 | +9.3 ± 1.8 (3) | better | 2.0 |" in lines
+    assert "| method | 10 k steps | 20 k steps | OGBench's average (last 3) |" in lines
+    assert "| graph-keep5-r1-bridge-k4-nfe1 | 4.0 ± 2.0 (2) | 39.3 ± 10.5 (3) | - |" in lines
+    assert not any(line.startswith("| graph-keep5-r1-ddpm-k4-nfe16 | ") and "(3)" in line for line in lines)

@@ -120,12 +120,15 @@ def test_rates(found: list[dict]) -> dict[str, list[float]]:
 
 
 def curves(found: list[dict]) -> dict[str, dict[int, dict[int, float]]]:
-    """GCBC's and GCIQL's test success (%) by training seed and snapshot step: ``{method: {seed: {step: rate}}}``."""
+    """The test success (%) of GCBC, GCIQL and each other trained method evaluated at more than one snapshot (a
+    planner low level), by training seed and snapshot step: ``{method: {seed: {step: rate}}}``."""
     out: dict[str, dict[int, dict[int, float]]] = {}
     for r in found:
-        if r["method"] in PEERS and not r["validation"]:
-            out.setdefault(r["method"], {}).setdefault(r["train_seed"], {})[r["step"]] = 100 * r["success_rate"]
-    return out
+        seed = r["train_seed"] if r["method"] in PEERS else r["training_seed"]
+        if seed is not None and not r["validation"]:
+            out.setdefault(r["method"], {}).setdefault(seed, {})[r["step"]] = 100 * r["success_rate"]
+    return {m: per_seed for m, per_seed in out.items()
+            if m in PEERS or len({k for by_step in per_seed.values() for k in by_step}) > 1}
 
 
 def ogbench_average(per_seed: dict[int, dict[int, float]], final_step: int) -> list[float]:
@@ -259,14 +262,15 @@ def section(scene: str, found: list[dict]) -> list[str]:
     found_curves = curves(found)
     if found_curves:
         steps = sorted({k for per_seed in found_curves.values() for by_step in per_seed.values() for k in by_step})
-        lines += ["", f"GCBC and GCIQL against training steps (test tasks; mean ± standard error over the training "
-                      f"seeds evaluated at that step), and as OGBench averages (per seed the mean of its last {LAST} "
-                      "evaluations, then over seeds):", ""]
+        others = "" if set(found_curves) <= set(PEERS) else " and the planners evaluated at more than one snapshot"
+        lines += ["", f"GCBC and GCIQL{others} against training steps (test tasks; mean ± standard error over the "
+                      f"training seeds evaluated at that step), and as OGBench averages (per seed the mean of its last "
+                      f"{LAST} evaluations, then over seeds):", ""]
         curve_rows = []
         for method, per_seed in sorted(found_curves.items()):
             at = [[by_step[k] for by_step in per_seed.values() if k in by_step] for k in steps]
             average = ogbench_average(per_seed, last_steps(found)[method])
-            curve_rows.append([method, *(f"{fmt_mean_se(v, one_seed='mean')} ({len(v)})" for v in at),
+            curve_rows.append([method, *(f"{fmt_mean_se(v, one_seed='mean')} ({len(v)})" if v else "-" for v in at),
                                f"{fmt_mean_se(average, one_seed='mean')} ({len(average)})" if average else "-"])
         lines += table(["method", *(f"{k // 1000} k steps" for k in steps), f"OGBench's average (last {LAST})"],
                        curve_rows)
