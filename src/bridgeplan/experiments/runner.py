@@ -87,11 +87,16 @@ def _trained_step(run_dir: Path) -> int:
 def train_to(trainer, config, run_dir: Path, progress: bool) -> None:
     """Train (or resume) the run in ``run_dir`` to ``config.steps`` with ``trainer`` (``train.train``,
     ``train.train_prior``, ``gcbc.train_gcbc``); nothing when it is there. Another sweep or worker training the
-    same run holds its lock: wait for it, then see what is left."""
+    same run holds its lock: wait for it, then see what is left. A worker says which (:func:`doing`)."""
+    from bridgeplan.workers import doing
+
     with run_lock(run_dir):
         done = _trained_step(run_dir)
         if done < config.steps:
+            doing(f"training {run_dir}")
             trainer(config, run_dir, resume=done >= 0, progress=progress)
+        else:
+            doing(f"found {run_dir} trained")
 
 
 def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
@@ -118,7 +123,6 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     if config.process.distills:  # the teacher first (another job may be training it: train_to waits for it)
         teacher = _teacher_config(settings, spec, seed)
         train_to(train, teacher, Path(config.process.teacher), progress)
-    doing(f"training {run_dir}")
     train_to(train, config, run_dir, progress)
     if settings.train_only:
         return []

@@ -166,7 +166,6 @@ def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, pr
     one_line_warnings()  # as the CLI's, in a worker process too
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
-        doing(f"training {run_dir(results, name, seed)}")
         config = train_config(study, runs[name], seed, dataset, results)
         if runs[name].trainer == "gcbc":
             train_to(train_gcbc, config, run_dir(results, name, seed), progress)
