@@ -545,6 +545,8 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
         write("bridge", "bridge (coarse)", 1, seed, bridge)
     write("bridge", "bridge (coarse)", 1, 0, 0.9, tasks=(6, 7, 8, 9, 10))  # validation: not in this table
     write("meanflow", "mean flow (coarse)", 1, 0, 0.25)
+    for seed, rate in enumerate((0.04, 0.26, 0.50)):  # the bridge from another prior: a row of its own
+        write("bridge-line", "bridge (line)", 1, seed, rate)
     lines = mc.render(tmp_path).splitlines()
     assert ("| low level | NFE | seeds | success (%) | minus DDPM at NFE 16 (paired) | verdict | "
             "decision ms at batch 1 |") in lines
@@ -553,6 +555,10 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
     assert "| DDPM | 1 | 3 | 25.0 ± 11.5 | -5.0 ± 0.0 (3) | worse | 2.0 |" in lines
     assert "| DDPM | 16 | 3 | 30.0 ± 11.5 | - | - | 32.0 |" in lines
     assert "| mean flow (coarse) | 1 | 1 | 25.0 | +15.0 (1) | - | 2.0 |" in lines
+    # per-seed differences -6, -4, 0: mean -3.3, SE 1.8: a tie
+    assert "| bridge (line) | 1 | 3 | 26.7 ± 13.3 | -3.3 ± 1.8 (3) | tie | 2.0 |" in lines
+    assert lines.index("| bridge (coarse) | 1 | 3 | 39.3 ± 10.5 | +9.3 ± 1.8 (3) | better | 2.0 |") < lines.index(
+        "| bridge (line) | 1 | 3 | 26.7 ± 13.3 | -3.3 ± 1.8 (3) | tie | 2.0 |")
     # an earlier snapshot of two seeds: a curve against training steps, the tables above still at the last snapshot
     write("bridge", "bridge (coarse)", 1, 0, 0.02, step=10000)
     write("bridge", "bridge (coarse)", 1, 1, 0.06, step=10000)

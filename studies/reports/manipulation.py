@@ -37,7 +37,11 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
 GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
-                          r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)-k\d+-nfe\d+)?")
+                          r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)(?:-(line|learned|gaussian))?"
+                          r"-k\d+-nfe\d+)?")
+"""A graph row's folder: its graph (every Nth state, radius, one graph per cube), then its low level: a policy and its
+lookahead, or a planner's process, its prior where not the coarse path (the first low levels' folders name none), its
+stride and NFE."""
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -210,21 +214,21 @@ def low_levels(found: list[dict]) -> list[str]:
     """The dataset graph over each planner low level side by side (the thesis's comparison where the graph is the high
     level): each process at each NFE on the test tasks, mean ± SE over training seeds, and its difference with DDPM's
     at its largest NFE paired by training seed, with the verdict at 2 standard errors (:func:`compare`)."""
-    by: dict[tuple[str, int], dict[int, float]] = {}
-    ms: dict[tuple[str, int], list[float]] = {}
-    names: dict[str, str] = {}
+    by: dict[tuple[str, str, int], dict[int, float]] = {}  # (process, prior, NFE) -> training seed -> success
+    ms: dict[tuple[str, str, int], list[float]] = {}
+    names: dict[tuple[str, str], str] = {}
     for r in final(found):
         m = GRAPH_FOLDER.fullmatch(r["method"])
         if m is None or not m[6] or r["validation"]:
             continue
-        key = (m[6], r["low"]["nfe"])
-        names[m[6]] = r["low"]["method"]
+        key = (m[6], m[7] or "", r["low"]["nfe"])
+        names[key[:2]] = r["low"]["method"]
         by.setdefault(key, {})[r["training_seed"]] = 100 * r["success_rate"]
         if "decision_ms_batch1" in r:
             ms.setdefault(key, []).append(r["decision_ms_batch1"]["p50"])
     if not by:
         return []
-    ddpm = max((k for k in by if k[0] == "ddpm"), key=lambda k: k[1], default=None)
+    ddpm = max((k for k in by if k[0] == "ddpm"), key=lambda k: k[2], default=None)
     body = []
     for key, rates in sorted(by.items()):
         vs, verdict = "-", "-"
@@ -232,9 +236,9 @@ def low_levels(found: list[dict]) -> list[str]:
             d = paired(rates, by[ddpm], seeds="common")
             vs = f"{fmt_diff(d)} ({d.n})" if d.n > 1 else f"{d.mean:+.1f} (1)"
             verdict = compare(d) if d.n > 1 else "-"
-        body.append([names[key[0]], key[1], len(rates), fmt_mean_se(rates, one_seed="mean"), vs, verdict,
+        body.append([names[key[:2]], key[2], len(rates), fmt_mean_se(rates, one_seed="mean"), vs, verdict,
                      f"{sum(ms[key]) / len(ms[key]):.1f}" if key in ms else "-"])
-    reference = f"DDPM at NFE {ddpm[1]}" if ddpm else "DDPM"
+    reference = f"DDPM at NFE {ddpm[2]}" if ddpm else "DDPM"
     return ["", "The dataset graph over a diffusion planner low level (the graph's path the subgoals; the rows above "
                 "named graph-...-k4-nfeN), by the low level's process and NFE: test tasks, mean ± standard error over "
                 f"training seeds, the difference with {reference} paired by training seed (its verdict: better or "
