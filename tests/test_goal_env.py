@@ -164,8 +164,9 @@ def _eval(run: Path, *flags) -> dict:
 
 
 @pytest.mark.parametrize("process, prior, steps", [
-    ("ddpm", None, 400), ("bridge", "line", 200), ("flow", "line", 200),
-    pytest.param("bridge", "learned", 200, marks=pytest.mark.slow)])
+    ("bridge", "line", 200),  # the thesis's bridge in the default run; DDPM, flow and the learned prior in -m slow
+    *(pytest.param(*case, marks=pytest.mark.slow) for case in [("ddpm", None, 400), ("flow", "line", 200),
+                                                               ("bridge", "learned", 200)])])
 def test_train_plan_and_evaluate_on_your_own_environment(reach, tmp_path, process, prior, steps):
     """A few hundred steps of a small network (seconds) plan well enough to reach most goals, replanned every 8 steps,
     where the straight line alone, executed alike, reaches about half (its 31-step plans, replanned, slow down as they

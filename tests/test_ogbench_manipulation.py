@@ -708,6 +708,7 @@ def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, t
         PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, policy_ahead=3)
 
 
+@pytest.mark.slow
 def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
     """``bridgeplan graph --render --video`` on cube-single: the first episode executed again and drawn by ogbench's
     camera: a PNG of its start, middle and end side by side, and a GIF of every 4th of its 201 states (and the last),

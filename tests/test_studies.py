@@ -119,14 +119,14 @@ def test_study_report_check_fails_when_a_committed_number_is_edited(tmp_path, ca
     text = findings.read_text()
     number = next(w for w in text.split() if w[0].isdigit() and "." in w)
     findings.write_text(text.replace(number, "99.9", 1))
-    assert main(["study", "report", "--check", "--root", str(root)]) == 2
+    assert main(["study", "report", "findings", "--check", "--root", str(root)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: docs/results/findings.md differs from what findings generates "
                    "(run bridgeplan study report findings)"]
     assert findings.read_text() != text  # --check writes nothing
     assert main(["study", "report", "findings", "--root", str(root)]) == 0
     assert findings.read_text() == text
-    assert main(["study", "report", "--check", "--root", str(root)]) == 0
+    assert main(["study", "report", "findings", "--check", "--root", str(root)]) == 0
     # a bench's page is held to its JSON, as `bridgeplan bench` wrote both
     bench = root / "docs" / "results" / "bench.md"
     text = bench.read_text()

@@ -54,7 +54,7 @@ def _orphan_after_parent_killed(mode: str, wait_seconds: float) -> bool:
 @pytest.mark.skipif(sys.platform != "linux", reason="re-parenting of orphans as Linux does it")
 def test_a_worker_exits_when_its_parent_is_killed():
     assert not _orphan_after_parent_killed("watched", wait_seconds=10)
-    assert _orphan_after_parent_killed("unwatched", wait_seconds=3)  # what happened before: an orphan trains on
+    assert _orphan_after_parent_killed("unwatched", wait_seconds=1.5)  # what happened before: an orphan trains on
 
 
 def _square_or_refuse(x: int, folder: str) -> int:
