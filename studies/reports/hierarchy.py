@@ -1,7 +1,7 @@
 """Hierarchical planning on Maze2D (bridgeplan.hierarchy): a coarse plan refined by a low level, beside the same
 coarse plans executed alone, the best flat planner, the line alone and the expert.
 
-Rows: ``bridgeplan hierarchy eval`` (and ``graph-eval``) JSONs in docs/results/<section>-hierarchy/<setting>/ (a
+Rows: ``bridgeplan hierarchy eval`` (and ``graph --low``) JSONs in docs/results/<section>-hierarchy/<setting>/ (a
 section: :data:`SECTIONS`; one per training seed,
 task set and split; the test episodes are evaluation seed = training seed, the validation ones 1000 + it, as the
 study runner's). A setting is the two levels' methods and NFEs and the execution; per family (the levels' methods
@@ -77,7 +77,7 @@ def matching_high_alone(r: dict, alone_rows: list[dict]) -> str | None:
 
 
 def is_graph(high: dict) -> bool:
-    """Whether a row's high level is the dataset graph (``hierarchy graph-eval``), not a trained planner."""
+    """Whether a row's high level is the dataset graph (``bridgeplan graph --low``), not a trained planner."""
     return high.get("process") == "graph"
 
 
@@ -296,7 +296,7 @@ def render(root: Path) -> str:
              "docs/results/<section>-hierarchy/ (studies/large-hierarchy.toml and large-stitch-hierarchy.toml say how "
              "the runs were trained). The high "
              "level plans at a long stride once per episode (or again every K steps where the setting says so), or is "
-             "the dataset graph's cheapest path through the data's own states (`bridgeplan hierarchy graph-eval`); the "
+             "the dataset graph's cheapest path through the data's own states (`bridgeplan graph --low RUN`); the "
              "low level plans from the current state through the next coarse states every `replan` steps and is "
              "pursued. "
              "Minari score, mean ± standard error over training seeds; bold: the setting the validation episodes "
