@@ -633,6 +633,7 @@ def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypa
     assert row["graph"]["paths_found"] == 1.0 and row["plans_per_episode"]["mean"] == 4  # searched every 50 steps
     acted = sum(len(g) for g in goals)
     assert acted == 2 * row["tasks"]["1"]["steps"][0]  # at every step of the episode, and of the latency's again
+    assert row["execution"]["controller"] == "policy" and row["calls_per_episode"] == row["tasks"]["1"]["steps"][0]
     task_goal = goals[0][0]
     assert any(not np.allclose(g[0], task_goal) for g in goals[1:])  # toward the path, not the task's goal alone
     default = main([*graph, "--out", str(tmp_path / "default.json")])
