@@ -460,8 +460,10 @@ def test_training_rate_comes_from_the_committed_throughput_bench(tmp_path):
 
 
 def test_a_run_trained_here_sets_its_own_rate_in_the_dry_run(tmp_path):
-    """GCBC/GCIQL runs have no bench figure: their rate is what this study's training measured, the run's own where
-    it has begun, else its other training seeds' median; a run with none (or of another name) has no figure."""
+    """A run's rate is what this study's training measured (GCBC/GCIQL's metrics, a planner's checkpoint), the run's
+    own where it has begun, else its other training seeds' median; a run with none (or of another name) has no
+    figure."""
+    from bridgeplan.checkpoint import save_checkpoint
     from bridgeplan.studies.plan import measured_rate
 
     def metrics(run: str, *lines: tuple[int, float]) -> None:
@@ -478,6 +480,14 @@ def test_a_run_trained_here_sets_its_own_rate_in_the_dry_run(tmp_path):
     rate, source = measured_rate(tmp_path / "gciql-s2")  # begun: its own figure, the last line's
     assert rate == pytest.approx(2.0) and "this run's" in source
     assert measured_rate(tmp_path / "gcbc-s0") is None
+    # a planner's (or prior's) run: its checkpoint's steps over its elapsed seconds
+    (tmp_path / "low-bridge-s0").mkdir()
+    save_checkpoint(tmp_path / "low-bridge-s0" / "checkpoint.pt",
+                    {"kind": "planner", "config": {}, "step": 5000, "elapsed_seconds": 125.0})
+    assert measured_rate(tmp_path / "low-bridge-s1") == (40.0, "measured by 1 other training seed here")
+    (tmp_path / "low-bridge-s2").mkdir()
+    (tmp_path / "low-bridge-s2" / "checkpoint.pt").write_bytes(b"not a checkpoint")  # unreadable: no figure
+    assert measured_rate(tmp_path / "low-bridge-s2") == (40.0, "measured by 1 other training seed here")
 
 
 @pytest.mark.parametrize("name, folders", [("large-hierarchy", ["large-hierarchy/*", "large-hierarchy-flat/*"]),

@@ -333,19 +333,25 @@ def training_rate(root: Path, maze: str, config, cpu: str | None = None) -> tupl
 
 
 def measured_rate(run_dir: Path) -> tuple[float, str] | None:
-    """Steps per second of ``run_dir``'s run as this study's own training measured it (``gcbc train``'s
-    metrics.jsonl: its last line's steps over its elapsed seconds, the machine's load included): the run's own where
-    it has begun, else the median of its other training seeds' beside it (``NAME-sK``); None where none has a figure
-    (a planner run: :func:`training_rate`'s bench)."""
+    """Steps per second of ``run_dir``'s run as this study's own training measured it (its steps over its elapsed
+    seconds, the machine's load included: ``gcbc train``'s metrics.jsonl's last line, a planner's or prior's
+    checkpoint): the run's own where it has begun, else the median of its other training seeds' beside it
+    (``NAME-sK``); None where none has a figure (then :func:`training_rate`'s bench)."""
     import json
     import re
     import statistics
 
+    from bridgeplan.checkpoint import load_checkpoint
+    from bridgeplan.errors import BridgeplanError
+
     def rate(directory: Path) -> float | None:
         try:
-            last = json.loads((directory / "metrics.jsonl").read_text().strip().splitlines()[-1])
+            if (directory / "metrics.jsonl").exists():
+                last = json.loads((directory / "metrics.jsonl").read_text().strip().splitlines()[-1])
+            else:
+                last = load_checkpoint(directory) if directory.is_dir() else {}
             return last["step"] / last["elapsed_seconds"] if last["elapsed_seconds"] > 0 else None
-        except (OSError, ValueError, KeyError, IndexError, TypeError):
+        except (OSError, ValueError, KeyError, IndexError, TypeError, BridgeplanError):
             return None
 
     if (own := rate(run_dir)) is not None:
