@@ -534,7 +534,7 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({
             "success_rate": rate, "step": step, "decision_ms_batch1": {"p50": 2.0 * nfe},
-            "execution": {"replan_every": 12, "replan_high_every": 48},
+            "execution": {"replan_every": 12, "replan_high_every": 48}, "high_alone": {"success_rate": 0.24},
             "low": {"method": name, "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": nfe, "step": 20000,
                     "config": {"preset": "cpu-small"}},
             "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
@@ -555,6 +555,8 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
     assert "| DDPM | 1 | 3 | 25.0 ± 11.5 | -5.0 ± 0.0 (3) | worse | 2.0 |" in lines
     assert "| DDPM | 16 | 3 | 30.0 ± 11.5 | - | - | 32.0 |" in lines
     assert "| mean flow (coarse) | 1 | 1 | 25.0 | +15.0 (1) | - | 2.0 |" in lines
+    assert any(line.startswith("Without a network: ") and line.endswith(": 24.0 % of the test episodes.")
+               for line in lines)
     # per-seed differences -6, -4, 0: mean -3.3, SE 1.8: a tie
     assert "| bridge (line) | 1 | 3 | 26.7 ± 13.3 | -3.3 ± 1.8 (3) | tie | 2.0 |" in lines
     assert lines.index("| bridge (coarse) | 1 | 3 | 39.3 ± 10.5 | +9.3 ± 1.8 (3) | better | 2.0 |") < lines.index(

@@ -217,12 +217,15 @@ def low_levels(found: list[dict]) -> list[str]:
     by: dict[tuple[str, str, int], dict[int, float]] = {}  # (process, prior, NFE) -> training seed -> success
     ms: dict[tuple[str, str, int], list[float]] = {}
     names: dict[tuple[str, str], str] = {}
+    alone = set()  # the graph's first paths through the subgoals executed without a network (one per evaluation)
     for r in final(found):
         m = GRAPH_FOLDER.fullmatch(r["method"])
         if m is None or not m[6] or r["validation"]:
             continue
         key = (m[6], m[7] or "", r["low"]["nfe"])
         names[key[:2]] = r["low"]["method"]
+        if "high_alone" in r:
+            alone.add(round(100 * r["high_alone"]["success_rate"], 6))
         by.setdefault(key, {})[r["training_seed"]] = 100 * r["success_rate"]
         if "decision_ms_batch1" in r:
             ms.setdefault(key, []).append(r["decision_ms_batch1"]["p50"])
@@ -239,13 +242,18 @@ def low_levels(found: list[dict]) -> list[str]:
         body.append([names[key[:2]], key[2], len(rates), fmt_mean_se(rates, one_seed="mean"), vs, verdict,
                      f"{sum(ms[key]) / len(ms[key]):.1f}" if key in ms else "-"])
     reference = f"DDPM at NFE {ddpm[2]}" if ddpm else "DDPM"
+    floor = []
+    if alone:
+        floor = ["", "Without a network: the graph's first path through the same subgoals, a straight line between "
+                     "them, executed open loop by the same controller (each row's `high_alone`, what the low level "
+                     f"must add to): {' / '.join(f'{a:.1f}' for a in sorted(alone))} % of the test episodes."]
     return ["", "The dataset graph over a diffusion planner low level (the graph's path the subgoals; the rows above "
                 "named graph-...-k4-nfeN), by the low level's process and NFE: test tasks, mean ± standard error over "
                 f"training seeds, the difference with {reference} paired by training seed (its verdict: better or "
                 "worse beyond 2 standard errors, else tie), and the median decision's milliseconds at batch 1 (high "
                 "and low level together, one CPU thread; mean over seeds):", "",
             *table(["low level", "NFE", "seeds", "success (%)", f"minus {reference} (paired)", "verdict",
-                    "decision ms at batch 1"], body)]
+                    "decision ms at batch 1"], body), *floor]
 
 
 def section(scene: str, found: list[dict]) -> list[str]:
