@@ -557,6 +557,9 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
     assert "| mean flow (coarse) | 1 | 1 | 25.0 | +15.0 (1) | - | 2.0 |" in lines
     assert any(line.startswith("Without a network: ") and line.endswith(": 24.0 % of the test episodes.")
                for line in lines)
+    # the priors at NFE 1 against the plain line's, seed by seed: coarse minus line 16, 16, 6 points: mean 12.7, SE 3.3
+    assert any(line.startswith("The bridge's priors at NFE 1, each paired by training seed with bridge (line)'s")
+               and line.endswith(": bridge (coarse) +12.7 ± 3.3 (3 seeds, better).") for line in lines)
     # per-seed differences -6, -4, 0: mean -3.3, SE 1.8: a tie
     assert "| bridge (line) | 1 | 3 | 26.7 ± 13.3 | -3.3 ± 1.8 (3) | tie | 2.0 |" in lines
     assert lines.index("| bridge (coarse) | 1 | 3 | 39.3 ± 10.5 | +9.3 ± 1.8 (3) | better | 2.0 |") < lines.index(

@@ -242,6 +242,16 @@ def low_levels(found: list[dict]) -> list[str]:
         body.append([names[key[:2]], key[2], len(rates), fmt_mean_se(rates, one_seed="mean"), vs, verdict,
                      f"{sum(ms[key]) / len(ms[key]):.1f}" if key in ms else "-"])
     reference = f"DDPM at NFE {ddpm[2]}" if ddpm else "DDPM"
+    line = ("bridge", "line", 1)
+    priors = []  # the thesis's comparison of priors: each bridge at one network call against the plain line's
+    if line in by:
+        for key in sorted(k for k in by if k[0] == "bridge" and k[2] == 1 and k != line):
+            d = paired(by[key], by[line], seeds="common")
+            if d.n > 1:
+                priors.append(f"{names[key[:2]]} {fmt_diff(d)} ({d.n} seeds, {compare(d)})")
+    if priors:
+        priors = ["", f"The bridge's priors at NFE 1, each paired by training seed with {names[line[:2]]}'s (the "
+                      f"thesis's comparison of priors; verdict at 2 standard errors): {'; '.join(priors)}."]
     floor = []
     if alone:
         floor = ["", "Without a network: the graph's first path through the same subgoals, a straight line between "
@@ -253,7 +263,7 @@ def low_levels(found: list[dict]) -> list[str]:
                 "worse beyond 2 standard errors, else tie), and the median decision's milliseconds at batch 1 (high "
                 "and low level together, one CPU thread; mean over seeds):", "",
             *table(["low level", "NFE", "seeds", "success (%)", f"minus {reference} (paired)", "verdict",
-                    "decision ms at batch 1"], body), *floor]
+                    "decision ms at batch 1"], body), *priors, *floor]
 
 
 def section(scene: str, found: list[dict]) -> list[str]:
