@@ -307,8 +307,42 @@ def make_dying():
     dead = 1 if written == ["graph-seed0.json"] else 0
     assert lines[0].startswith(f"error: the worker of training seed {dead} (runs: none) was killed by SIGKILL (likely "
                                f"out of memory) while running `graph` for ")
-    assert lines[0].endswith(f"graph-seed{dead}.json; the JSONs written are kept: `study run` again runs what is "
+    assert lines[0].endswith(f"graph-seed{dead}.json; the JSONs written are kept: the same command again runs what is "
                              f"missing")
+
+
+@pytest.mark.slow
+def test_a_declared_study_runs_its_units_as_ray_tasks(reach, tmp_path):
+    """``--backend ray`` runs a study's declared evaluations as Ray tasks, as it runs a grid's runs (one executor
+    for both): each training seed's graph evaluation is made in a process other than the command's."""
+    import os
+
+    pytest.importorskip("ray")
+    pids = tmp_path / "pids"
+    (tmp_path / "noting_env.py").write_text(ENV_SOURCE + f"""
+import os
+
+
+class Noting(Reach):
+    def reset(self, seed=None, options=None):
+        with open({str(pids)!r}, "a") as f:
+            f.write(f"{{os.getpid()}}\\n")
+        return super().reset(seed=seed, options=options)
+
+
+def make_noting():
+    return Noting()
+""")
+    spec = tmp_path / "noting.toml"
+    spec.write_text(reach.read_text().replace('"reach_env.py:make_env"', '"noting_env.py:make_noting"').replace(
+        '"reach.npz"', f'"{reach.parent / "reach.npz"}"'))
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "graphs.toml").write_text(
+        DYING_STUDY.format(spec=spec, dataset=reach.parent / "reach.npz").replace("dying/", "graphs/"))
+    assert main(["study", "run", "graphs", "--backend", "ray", "--no-progress", "--root", str(tmp_path)]) == 0
+    written = sorted(p.name for p in (tmp_path / "results" / "graphs" / "graphs").iterdir())
+    assert written == ["graph-seed0.json", "graph-seed1.json"]
+    assert pids.exists() and str(os.getpid()) not in pids.read_text().split()
 
 
 def test_coarse_plans_without_a_wall_map():

@@ -44,7 +44,8 @@ class StudyRunOptions:
     dry_run: bool = opt(False, "list what would be trained and evaluated, and its cost")
     quick: bool = opt(False, "a smaller scale (2 seeds, a tenth of the steps, 20 episodes) into results/quick/NAME; "
                              "not the committed scale")
-    backend: str = opt("local", "local or ray")
+    backend: str = opt("local", "local (this machine) or ray (each unit a task of a Ray cluster, a grid's runs and "
+                                "an evaluation study's units alike)")
     workers: int | None = opt(None, "local backend: parallel jobs, a grid's runs or an evaluation study's units (a "
                                     "training seed and the runs its evaluations read; default: the study's)")
     ray_address: str | None = opt(None, "the ray cluster's address")

@@ -1,5 +1,7 @@
 """Worker processes of the local pools (a study's seeds, a sweep's jobs, a dataset's streams) end with their parent;
-:func:`run_spawned` runs calls in worker processes and names one that was killed instead of waiting for it.
+:func:`run_spawned` runs calls in worker processes and names one that was killed instead of waiting for it;
+:class:`Executor` runs a study's units of work (a grid's runs, declared evaluations' training seeds) one way for both:
+in this process, in worker processes, or as Ray tasks.
 
 A pool's workers are spawned processes of their own: when the command that started them is killed without the time
 to stop its pool (SIGTERM from a scheduler, SIGKILL), they would train on as orphans, holding their runs' locks and
@@ -13,11 +15,13 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
 
-from bridgeplan.errors import BridgeplanError
+from bridgeplan.errors import BridgeplanError, check_choice
 
 PARENT_POLL_SECONDS = 1.0
 
@@ -118,6 +122,97 @@ def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: lis
     if raised:
         raise raised[0]
     return results
+
+
+@dataclass(frozen=True)
+class Executor:
+    """How a study's units of work run: one after another in this process (``workers`` 1), ``workers`` at once in
+    spawned processes of their own (the cores divided among them), or as tasks of a Ray cluster (``ray``: the
+    connected module, :func:`connect_ray`; one CPU each, and ``gpus`` of a GPU)."""
+
+    workers: int = 1
+    ray: object = None
+    gpus: float = 0.0
+
+    def map(self, call: Callable, arguments: list[tuple], names: list[str], kept: str, progress: bool) -> list:
+        """``call(*args, threads, progress)`` for each ``args`` of ``arguments`` (its unit, named ``names[i]``): a
+        unit's torch threads (0: the run's own setting) and whether it draws progress bars; their results in order.
+        A worker that dies: one error naming it, and that ``kept`` (what the finished units wrote) is kept."""
+        if self.ray is not None:  # each task writes its own rows or JSONs: a cluster shares the results folder
+            task = self.ray.remote(num_cpus=1, num_gpus=self.gpus)(call)
+            return self.ray.get([task.remote(*args, 1, False) for args in arguments])
+        if self.workers == 1 or len(arguments) <= 1:
+            return [call(*args, 0, progress) for args in arguments]
+        threads = max(1, (os.cpu_count() or 1) // self.workers)
+        os.environ.setdefault("OMP_NUM_THREADS", str(threads))
+        try:  # one unit per process: a worker never holds two while another idles
+            return run_spawned(call, [(*args, threads, False) for args in arguments],
+                               min(self.workers, len(arguments)), names, progress)
+        except WorkerDied as e:
+            raise BridgeplanError(f"{e}; {kept} are kept: the same command again runs what is missing") from None
+
+
+BACKENDS = ("local", "ray")
+
+
+def check_backend(backend: str) -> None:
+    check_choice("backend", backend, BACKENDS)
+
+
+@contextmanager
+def executor(backend: str = "local", workers: int = 1, ray_address: str | None = None,
+             device: str = "auto") -> Iterator[Executor]:
+    """The :class:`Executor` of ``backend``: ``local`` with ``workers``, or ``ray`` connected to ``ray_address`` (a
+    local instance where None) for the while, its tasks each given a GPU where this machine has one and the runs'
+    ``device`` is not ``cpu``. A cluster that does not answer fails here, before any work."""
+    check_backend(backend)
+    if workers < 1:
+        raise BridgeplanError(f"workers must be >= 1, got {workers}")
+    if backend == "local":
+        yield Executor(workers)
+        return
+    import torch
+
+    ray = connect_ray(ray_address)
+    try:
+        yield Executor(workers, ray, 1.0 if device != "cpu" and torch.cuda.is_available() else 0.0)
+    finally:
+        ray.shutdown()
+
+
+def connect_ray(address: str | None):
+    """Join the Ray cluster at ``address``, or start a local instance; returns the ``ray`` module. Its tasks write
+    their rows into the shared results store (safe for concurrent writers) or their JSONs themselves, so on a cluster
+    the results folder must be on a shared filesystem."""
+    try:
+        import ray
+    except ImportError:
+        raise BridgeplanError("the ray backend needs the extra: pip install 'bridgeplan[ray]'") from None
+    if address:
+        _check_reachable(address)
+    try:
+        if address:
+            ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+        else:
+            ray.init(ignore_reinit_error=True, log_to_driver=False, include_dashboard=False)
+    except Exception as e:  # ray raises ConnectionError, RuntimeError, ValueError, its own types...
+        raise BridgeplanError(f"cannot connect to Ray at {address or 'a local instance'}: "
+                              f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}") from None
+    return ray
+
+
+def _check_reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail fast on a ``host:port`` that does not answer (``ray.init`` would retry for minutes)."""
+    import socket
+
+    target = address.removeprefix("ray://")
+    host, sep, port = target.rpartition(":")
+    if not sep or not port.isdigit():
+        return  # "auto" or another form ray resolves itself
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError as e:
+        raise BridgeplanError(f"the Ray cluster at {address} does not answer: {e}") from None
 
 
 def _say(progress: bool, line: str) -> None:

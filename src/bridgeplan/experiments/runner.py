@@ -2,25 +2,24 @@
 
 Work is split into jobs, one per trained run (train or resume it, then evaluate its snapshots for
 every series that uses it). The learned prior is trained first, since the runs from it need it.
-Backends: ``local`` runs jobs in this process, or in ``workers`` processes with the cores divided
-among them; ``ray`` submits each job as a Ray task with its CPU/GPU needs.
+The jobs run as units of a :class:`~bridgeplan.workers.Executor` (this process, worker processes
+or Ray tasks), as a study's declared evaluations do.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridgeplan import config as cfg
 from bridgeplan import paths
 from bridgeplan.checkpoint import load_checkpoint
-from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
 from bridgeplan.processes import DDPM
+from bridgeplan.workers import Executor
 
 
 @dataclass(frozen=True)
@@ -184,68 +183,25 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
     return dataclasses.replace(settings, dataset=str(path))
 
 
-BACKENDS = ("local", "ray")
-
-
-def check_backend(backend: str) -> None:
-    check_choice("backend", backend, BACKENDS)
-
-
-def run_sweep(experiments: list[Experiment], settings: SweepSettings, backend: str = "local",
-              workers: int = 1, ray_address: str | None = None, progress: bool = True) -> int:
-    """Run every job the experiments need; returns the number of new result rows."""
+def run_sweep(experiments: list[Experiment], settings: SweepSettings, executor: Executor = Executor(),
+              progress: bool = True) -> int:
+    """Run every job the experiments need, each job a unit of ``executor``; returns the number of new result rows."""
     for exp in experiments:
         exp.validate()
-    check_backend(backend)
     ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
-    if workers < 1:
-        raise BridgeplanError(f"workers must be >= 1, got {workers}")
-    ray = None
-    if backend == "ray":  # connect first: a cluster that does not answer fails before any work
-        from bridgeplan.experiments.ray_backend import connect
-
-        ray = connect(ray_address)
-    try:
-        settings = ensure_dataset(settings)
-        specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
-        planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
-        prior_runs = {}
-        for seed in settings.seeds:
-            if any(r.prior == "learned" and (settings.only_runs is None or _train_config(
-                    settings, r, seed, "").run_name() in settings.only_runs) for r in specs):
-                prior_runs[seed] = _ensure_prior(settings, seed, planner, progress)
-        jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
-        if ray is not None:
-            from bridgeplan.experiments.ray_backend import run_ray
-
-            gpus = 1.0 if settings.overrides.get("device", "auto") != "cpu" and _has_cuda() else 0.0
-            return run_ray(ray, run_job, jobs, experiments, settings, prior_runs, gpus_per_job=gpus)
-        return _run_local(jobs, experiments, settings, prior_runs, workers, progress)
-    finally:
-        if ray is not None:
-            ray.shutdown()
-
-
-def _has_cuda() -> bool:
-    import torch
-
-    return torch.cuda.is_available()
-
-
-def _run_local(jobs, experiments, settings, prior_runs, workers: int, progress: bool) -> int:
-    if workers == 1:
-        return sum(len(run_job(settings, experiments, spec, seed, prior_runs.get(seed, ""), 0, progress))
-                   for spec, seed in jobs)
-    from bridgeplan.workers import WorkerDied, run_spawned
-
-    threads = max(1, (os.cpu_count() or 1) // workers)
-    try:
-        results = run_spawned(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, ""), threads, False)
-                                        for spec, seed in jobs], workers,
-                              [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs], progress)
-    except WorkerDied as e:
-        raise BridgeplanError(f"{e}; the rows stored are kept: the sweep again runs what is missing") from None
-    return sum(len(r) for r in results)
+    settings = ensure_dataset(settings)
+    specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
+    planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
+    prior_runs = {}
+    for seed in settings.seeds:
+        if any(r.prior == "learned" and (settings.only_runs is None or _train_config(
+                settings, r, seed, "").run_name() in settings.only_runs) for r in specs):
+            prior_runs[seed] = _ensure_prior(settings, seed, planner, progress)
+    jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
+    rows = executor.map(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, "")) for spec, seed in jobs],
+                        [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs], "the rows stored",
+                        progress)
+    return sum(len(r) for r in rows)
 
 
 def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, progress: bool) -> str:

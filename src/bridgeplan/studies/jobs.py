@@ -32,15 +32,14 @@ draw.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridgeplan.errors import BridgeplanError, one_line_warnings
+from bridgeplan.errors import one_line_warnings
 from bridgeplan.eval_commands import STUDY_COMMANDS
 from bridgeplan.studies.spec import NamedRun, command_options
-from bridgeplan.workers import doing
+from bridgeplan.workers import Executor, doing
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
@@ -155,14 +154,16 @@ def needed_runs(study, results: Path, needed: set[tuple[str, int]] | None = None
     return [(name, steps, done) for name, (steps, done) in out.items()]
 
 
-def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, progress: bool) -> int:
-    """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands; the JSONs written."""
+def run_seed(study, results: Path, dataset: Path, todo: list[Job], seed: int, threads: int = 0,
+             progress: bool = True) -> int:
+    """Train (or finish) the runs ``todo`` needs for ``seed``, then run its commands (each at one torch thread, as
+    its options say); the JSONs written."""
     from bridgeplan.device import configure_threads
     from bridgeplan.experiments.runner import train_to
     from bridgeplan.gcbc import train_gcbc
     from bridgeplan.train import train, train_prior
 
-    configure_threads(1)
+    configure_threads(threads or 1)
     one_line_warnings()  # as the CLI's, in a worker process too
     runs = {r.name: r for r in study.runs}
     for name in dict.fromkeys(r for job in todo for r in job.runs):
@@ -197,20 +198,10 @@ def work_units(todo: list[Job]) -> list[tuple[int, list[Job]]]:
     return [(seed, unit) for (seed, _), unit in units.items()]
 
 
-def run_commands(study, results: Path, dataset: Path, quick: bool, workers: int, progress: bool) -> int:
-    """Run every missing JSON's command (after training what it needs), its work units (:func:`work_units`) on
-    ``workers`` processes; the JSONs written."""
+def run_commands(study, results: Path, dataset: Path, quick: bool, executor: Executor, progress: bool) -> int:
+    """Run every missing JSON's command (after training what it needs), each work unit (:func:`work_units`) a unit
+    of ``executor``; the JSONs written."""
     units = work_units([job for job in jobs(study, results, results, quick) if not job.path.exists()])
-    if workers <= 1 or len(units) <= 1:
-        return sum(run_seed(study, results, dataset, unit, seed, progress) for seed, unit in units)
-    from bridgeplan.workers import WorkerDied, run_spawned
-
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    try:  # one unit per process: a worker never holds two while the other idles
-        written = run_spawned(run_seed, [(study, results, dataset, unit, seed, False) for seed, unit in units],
-                              min(workers, len(units)),
-                              [f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})"
-                               for seed, unit in units], progress)
-    except WorkerDied as e:
-        raise BridgeplanError(f"{e}; the JSONs written are kept: `study run` again runs what is missing") from None
-    return sum(written)
+    return sum(executor.map(run_seed, [(study, results, dataset, unit, seed) for seed, unit in units],
+                            [f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})"
+                             for seed, unit in units], "the JSONs written", progress))

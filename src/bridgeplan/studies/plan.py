@@ -3,7 +3,8 @@
 Each ``[[experiments]]`` entry and split becomes one :class:`~bridgeplan.experiments.grids.Experiment` with its
 :class:`~bridgeplan.experiments.runner.SweepSettings`; ``study run`` hands them to
 :func:`~bridgeplan.experiments.runner.run_sweep` in order, so a study resumes as sweeps do (finished runs and
-evaluations are skipped; runs are locked while trained) and runs with ``--workers`` or the Ray backend.
+evaluations are skipped; runs are locked while trained); ``[[evaluations]]`` become the jobs of
+:mod:`bridgeplan.studies.jobs`. Both run as units of one executor (``--workers``, or the Ray backend).
 """
 
 from __future__ import annotations
@@ -605,8 +606,8 @@ def check_run(chain: list[Study], root: Path, scale: Scale, backend: str = "loca
     """What ``study run`` refuses before any work, for every study of ``chain`` (:func:`with_used`): an unknown
     backend, and (unless a dry run, which writes nothing) a results folder or a dataset's folder that cannot be
     written."""
-    from bridgeplan.experiments.runner import check_backend
     from bridgeplan.files import check_writable
+    from bridgeplan.workers import check_backend
 
     check_backend(backend)
     if dry_run:
@@ -621,10 +622,12 @@ def check_run(chain: list[Study], root: Path, scale: Scale, backend: str = "loca
 
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,
               ray_address: str | None = None, progress: bool = True, note=None) -> int:
-    """Train and evaluate what the study is missing, sweep by sweep (stages first); the number of new rows.
-    ``note(text)``, when given, hears first what of it is committed but not imported
+    """Train and evaluate what the study is missing, sweep by sweep (stages first), then its declared evaluations,
+    all as units of one executor (``backend``: :func:`bridgeplan.workers.executor`); the number of new rows and
+    JSONs. ``note(text)``, when given, hears first what of it is committed but not imported
     (:func:`committed_not_imported`)."""
     from bridgeplan.experiments.runner import run_sweep
+    from bridgeplan.workers import executor
 
     if not study.experiments and not study.evaluations:
         return 0
@@ -634,33 +637,31 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     if not (m.trains or m.evaluations or m.jsons or any(m.wanted.values())):
         return 0  # all stored (imported, say): no dataset to make either
     scaled = scale.apply(study)
-    dataset = ensure_dataset(scaled, root, progress)
-    workers = workers or study.evaluation.workers
-    added, only = 0, None
-    if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
-        from bridgeplan import paths
-        from bridgeplan.experiments.store import ResultsStore, stored_keys
+    with executor(backend, workers or study.evaluation.workers, ray_address,
+                  dict(study.training.overrides).get("device", "auto")) as run:
+        dataset = ensure_dataset(scaled, root, progress)
+        added, only = 0, None
+        if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
+            from bridgeplan import paths
+            from bridgeplan.experiments.store import ResultsStore, stored_keys
 
-        path = paths.store_path(results_dir(study, root, scale))
-        keys, _ = stored_keys(path)
-        links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
-        if links:
-            store = ResultsStore(path)
-            for key, name in links:
-                store.link(key, name)
-        only = tuple(sorted({run for run, _, _ in m.trains} | {key[0] for wanted in m.wanted.values() for key in wanted
-                                                                 if key not in keys}))
-    for sweep in sweeps(study, root, scale):
-        sweep = dataclasses.replace(sweep, settings=dataclasses.replace(sweep.settings, only_runs=only))
-        if scale.committed:
-            for steps, every in sweep.stages[:-1]:  # earlier passes: train only, as the committed runs were
-                early = dataclasses.replace(sweep.settings, train_steps=steps, checkpoint_every=every,
-                                            train_only=True)
-                run_sweep([sweep.experiment], early, backend=backend, workers=workers, ray_address=ray_address,
-                          progress=progress)
-        added += run_sweep([sweep.experiment], sweep.settings, backend=backend, workers=workers,
-                           ray_address=ray_address, progress=progress)
-    if study.evaluations:
-        added += run_commands(scaled, results_dir(study, root, scale), dataset,
-                              not scale.committed, workers, progress)
+            path = paths.store_path(results_dir(study, root, scale))
+            keys, _ = stored_keys(path)
+            links = [(key, name) for name, wanted in m.wanted.items() for key in wanted if key in keys]
+            if links:
+                store = ResultsStore(path)
+                for key, name in links:
+                    store.link(key, name)
+            only = tuple(sorted({run for run, _, _ in m.trains} | {key[0] for wanted in m.wanted.values()
+                                                                     for key in wanted if key not in keys}))
+        for sweep in sweeps(study, root, scale):
+            settings = dataclasses.replace(sweep.settings, only_runs=only)
+            if scale.committed:
+                for steps, every in sweep.stages[:-1]:  # earlier passes: train only, as the committed runs were
+                    run_sweep([sweep.experiment], dataclasses.replace(settings, train_steps=steps,
+                                                                      checkpoint_every=every, train_only=True),
+                              run, progress)
+            added += run_sweep([sweep.experiment], settings, run, progress)
+        if study.evaluations:
+            added += run_commands(scaled, results_dir(study, root, scale), dataset, not scale.committed, run, progress)
     return added
