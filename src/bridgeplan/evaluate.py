@@ -123,10 +123,12 @@ class Episodes:
     executor: PlanExecutor
 
     def cost(self, candidates: int = 1) -> dict:
-        """Plans and network calls per episode, milliseconds per plan, every decision's latency in its batch."""
+        """Plans and network calls per episode (the decisions' and the controllers'), milliseconds per plan, every
+        decision's latency in its batch."""
         ex = self.executor
         made = ex.plans_made
-        calls = sum(int(np.sum(getattr(s, "calls", 0))) for s in ex.sources)
+        calls = (sum(int(np.sum(getattr(s, "calls", 0))) for s in ex.sources)
+                 + sum(int(np.sum(c)) for c in ex.follower_calls))
         sampled = sum(getattr(s, "plans_sampled", 0) for s in ex.sources)
         seconds = sum(getattr(s, "plan_seconds", 0.0) for s in ex.sources)
         per_batch = percentiles_ms(ex.decision_seconds)
@@ -261,8 +263,9 @@ def evaluate(decisions: Decisions, family: Family, tasks: Tasks, execution: Exec
         after_run(episodes)
     latency = batch1_latency(decisions, family, tasks, execution, follower)
     cost = {**episodes.cost(candidates), "decision_ms_batch1": latency}
-    result = EvalResult(family, tasks, entries, family.score(tasks, episodes.outcome), floors or {},
-                        execution.to_dict(entries.get("prior") or ""), cost, environment_of(decisions.device))
+    described = {**execution.to_dict(entries.get("prior") or ""), **episodes.executor.follower.described()}
+    result = EvalResult(family, tasks, entries, family.score(tasks, episodes.outcome), floors or {}, described, cost,
+                        environment_of(decisions.device))
     return result, episodes
 
 

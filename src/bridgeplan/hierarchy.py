@@ -585,10 +585,6 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
         if policy is not None:
             result.extra["low"] = {"run": Path(low_run).name, "agent": policy.config.agent, "step": policy.step,
                                    "ahead": agent.ahead}
-            # the policy acts, one network call at every step; the family's controller and the graph call none
-            steps = [s for task in result.to_dict()["tasks"].values() for s in task["steps"]]
-            result.execution = {**result.execution, "controller": "policy", "lookahead": None}
-            result.cost = {**result.cost, "calls_per_episode": float(np.mean(steps))}
             result.config["low"] = {**dataclasses.asdict(policy.config),
                                     "dataset": Path(policy.config.dataset).stem}  # named, no path of this machine
         if picture is not None:

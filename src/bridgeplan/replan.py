@@ -357,7 +357,8 @@ class PlanExecutor:
 
     ``warm_up(states, goals, episodes, t)``, when given, is called once before the very first decision, untimed
     (a compile, or a decision that is thrown away). Counted: the plans made per episode (:attr:`plans_made`, in episode
-    order over the batches), every decision's wall time and how many episodes it planned for, every step's.
+    order over the batches), the controllers' network calls per episode (a policy's, :attr:`follower_calls`), every
+    decision's wall time and how many episodes it planned for, every step's.
     """
 
     def __init__(self, decisions: Callable[[int], DecisionSource], follower: Callable[[int], Follower],
@@ -367,6 +368,7 @@ class PlanExecutor:
         self.replan_every, self.tolerance, self.warm_up = replan_every, tolerance, warm_up
         self.sources: list = []
         self.made: list[np.ndarray] = []
+        self.follower_calls: list[np.ndarray] = []
         self.decision_seconds: list[float] = []
         self.decision_batch: list[int] = []
         self.step_seconds: list[float] = []
@@ -391,6 +393,7 @@ class PlanExecutor:
         self.plans: np.ndarray | None = None
         self.made_at = np.zeros(self.n, dtype=np.int64)
         self.made.append(np.zeros(self.n, dtype=np.int64))
+        self.follower_calls.append(np.zeros(self.n, dtype=np.int64))
         self.active = np.ones(self.n, dtype=bool)
         self.t = 0
 
@@ -439,6 +442,7 @@ class PlanExecutor:
             self.forced[idx] = False
             self.follower.new_plans(idx)
         actions = self.follower.actions(states, self.plans, self.t - self.made_at)
+        self.follower_calls[-1] += self.follower.network_calls * self.active
         self.t += 1
         self.step_seconds.append(time.perf_counter() - t0)
         return actions

@@ -79,7 +79,10 @@ class Follower:
     """A batch of ``n`` controllers of one kind (:data:`CONTROLLERS`) steering ``body``, each executing the newest
     plan of its episode: :meth:`new_plans` when episodes get a plan; :meth:`actions` at every step, with ``age [n]``
     the steps since each plan was made; :meth:`drift`, how far each episode is from its plan (``track``: from where
-    the plan put it now; ``pursuit``: from the nearest point of the plan's path)."""
+    the plan put it now; ``pursuit``: from the nearest point of the plan's path). ``network_calls``: the network calls
+    each episode's controller makes at a step (a family's none; a policy's one)."""
+
+    network_calls = 0
 
     def __init__(self, n: int, body: Body, kind: str = "track", lookahead: float | None = None):
         check_controller(kind, lookahead)
@@ -89,6 +92,11 @@ class Follower:
 
     def new_plans(self, episodes: np.ndarray) -> None:
         self.passed[episodes] = 0
+
+    def described(self) -> dict:
+        """What its rows' ``execution`` says other than the execution's own entries (a family's controllers: none,
+        the execution names them)."""
+        return {}
 
     def actions(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
         states, layout = np.asarray(states, np.float64), self.body.layout
@@ -137,11 +145,16 @@ class PolicyFollower(Follower):
     reaches a state a few steps away far more surely than a task's goal (``bridgeplan graph --low`` a GCBC run).
     Drift is ``track``'s."""
 
+    network_calls = 1
+
     def __init__(self, n: int, body: Body, act: Callable[[np.ndarray, np.ndarray], np.ndarray], ahead: int):
         super().__init__(n, body, "track")
         if ahead < 1:
             raise BridgeplanError(f"a policy's goal must be at least 1 step ahead on the plan, got {ahead}")
         self.act, self.ahead = act, int(ahead)
+
+    def described(self) -> dict:
+        return {"controller": "policy", "lookahead": None}
 
     def actions(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
         plans, layout = np.asarray(plans, np.float64), self.body.layout

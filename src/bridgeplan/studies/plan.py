@@ -10,6 +10,7 @@ evaluations are skipped; runs are locked while trained); ``[[evaluations]]`` bec
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -339,7 +340,6 @@ def measured_rate(run_dir: Path) -> tuple[float, str] | None:
     checkpoint): the run's own where it has begun, else the median of its other training seeds' beside it
     (``NAME-sK``); None where none has a figure (then :func:`training_rate`'s bench)."""
     import json
-    import re
     import statistics
 
     from bridgeplan.checkpoint import load_checkpoint
@@ -477,14 +477,20 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
 
     rate, source = training_rate(root, study.dataset.maze, cfg.preset_config(
         study.dataset.maze, study.training.preset, **dict(study.training.overrides)))
-    train_s, guessed = 0.0, 0
+    policies = {r.name for r in study.runs if r.trainer == "gcbc"}  # no bench figure: the planners' is not theirs
+    train_s, guessed, unknown = 0.0, 0, 0
     for run, n, done in m.trains:
         left = n - max(done, 0)
         measured = measured_rate(results_dir(study, root, scale) / "runs" / run)
+        line = f"  train {run}: {left} steps ({max(done, 0)} of {n} done)"
+        if measured is None and re.sub(r"-s\d+$", "", run) in policies:
+            unknown += 1
+            lines.append(f"{line}, not estimated (a GCBC/GCIQL run: no figure until one of its seeds trains here)")
+            continue
         train_s += left / (measured[0] if measured else rate)
         guessed += measured is None
-        lines.append(f"  train {run}: {left} steps ({max(done, 0)} of {n} done)" + (
-            f", {_hours(left / measured[0])} at {measured[0]:.2f} steps/s ({measured[1]})" if measured else ""))
+        lines.append(line + (f", {_hours(left / measured[0])} at {measured[0]:.2f} steps/s ({measured[1]})"
+                             if measured else ""))
     for name, count in m.evaluations.items():
         lines.append(f"  evaluate {name}: {count} evaluations x {m.episodes} episodes")
         by_correction = sorted((tag, n) for (exp, tag), n in m.corrections.items() if exp == name)
@@ -503,10 +509,13 @@ def describe_missing(study: Study, root: Path, scale: Scale = Scale()) -> list[s
     if shared:
         lines.append(f"  link {shared} evaluations to more experiments: stored already, or named by an earlier "
                      f"experiment above (computed once)")
-    at = (f" at {rate:.1f} steps/s per run ({source})" if guessed == len(m.trains) else
+    policies_note = f" (the {unknown} GCBC/GCIQL run{'s' * (unknown > 1)} not estimated)" if unknown else ""
+    at = (f" at {rate:.1f} steps/s per run ({source})" if guessed and guessed == len(m.trains) - unknown else
           f" ({guessed} runs at {rate:.1f} steps/s: {source})" if guessed else "")
     lines.append(f"  total: {len(m.trains)} runs to train, {sum(m.evaluations.values()) + len(m.jsons)} evaluations; "
-                 f"estimated {_hours(train_s)} of training{at} and {_hours(m.eval_seconds(per_json))} "
+                 f"estimated {_hours(train_s)} of training{at}"
+                 f"{policies_note} and "
+                 f"{_hours(m.eval_seconds(per_json))} "
                  f"of evaluation (at {EVAL_SECONDS_PER_EPISODE} s per episode, assumed, where no committed JSON of "
                  f"its command says; one CPU core per job: divide by --workers)")
     return lines
