@@ -307,8 +307,8 @@ def make_dying():
     dead = 1 if written == ["graph-seed0.json"] else 0
     assert lines[0].startswith(f"error: the worker of training seed {dead} (runs: none) was killed by SIGKILL (likely "
                                f"out of memory) while running `graph` for ")
-    assert lines[0].endswith(f"graph-seed{dead}.json; the JSONs written are kept: the same command again runs what is "
-                             f"missing")
+    assert lines[0].endswith(f"graph-seed{dead}.json; what the others wrote is kept: the same command again runs "
+                             f"what is missing")
 
 
 @pytest.mark.slow

@@ -517,7 +517,7 @@ def test_a_command_study_declares_exactly_its_committed_jsons(name, folders, tmp
     note = f"{len(declared)} of the {len(declared)} evaluation JSONs to make are committed in docs/results"
     assert any(note in line for line in describe_missing(study, root))  # the dry run says so, and how to reuse them
     monkeypatch.setattr("bridgeplan.studies.plan.ensure_dataset", lambda *a, **k: None)  # the run: its note, not
-    monkeypatch.setattr("bridgeplan.studies.plan.run_commands", lambda *a, **k: 0)  # its work
+    monkeypatch.setattr("bridgeplan.studies.plan.evaluation_units", lambda *a, **k: [])  # its work
     assert main(["study", "run", name, "--root", str(root)]) == 0
     assert f"note: {name}: {note}" in capsys.readouterr().err
     assert main(["study", "import", name, "--root", str(root)]) == 0
@@ -893,3 +893,45 @@ def test_every_committed_evaluation_reads_the_same_through_the_cli():
             assert options == job.options(Path("data.npz"), progress=True), (study.name, job.path)
             checked[job.command] += 1
     assert set(checked) == set(STUDY_COMMANDS) and sum(checked.values()) > 500, checked
+
+
+def test_a_run_that_two_experiments_and_both_splits_show_is_one_unit_trained_in_the_stages(tiny_dataset, tmp_path,
+                                                                                          capsys):
+    """One unit of work per trained run: two experiments (one in both splits) that show the same DDPM run make one
+    unit, which trains it in [training]'s stages (a first pass of 2 steps snapshotted at each, then on to 4 every 2,
+    as the committed runs were) and then evaluates it for every experiment and split."""
+    from bridgeplan.experiments.runner import grid_units
+    from bridgeplan.paths import snapshot_steps
+    from bridgeplan.studies.plan import sweeps
+
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    (root / "studies" / "tiny.toml").write_text(
+        TINY_STUDY.replace("{steps}", "4").replace("{seeds}", "[0]").replace(
+            "checkpoint_every = 1", "checkpoint_every = 2\nstages = [[2, 1]]").format(dataset=tiny_dataset) + """
+[methods.ddpm]
+process = "ddpm"
+
+[[experiments]]
+name = "a"
+series = [{ method = "ddpm", nfe = [1] }]
+splits = ["test", "validation"]
+
+[[experiments]]
+name = "b"
+series = [{ method = "ddpm", nfe = [6] }]
+last_snapshot_only = true
+""")
+    study = parse_study(root / "studies" / "tiny.toml")
+    plan = sweeps(study, root)
+    (unit,) = grid_units([(sweep.settings, [sweep.experiment]) for sweep in plan], plan[0].stages[:-1], False)
+    work, _, seed, _, stages = unit.args
+    assert len(work) == 3 and seed == 0 and stages == ((2, 1),)
+    assert main(["study", "run", "tiny", "--no-progress", "--root", str(root)]) == 0
+    assert "tiny: 5 new results" in capsys.readouterr().out
+    run = root / "results" / "tiny" / "runs" / "umaze-ddpm-N6-H32-cpu-small-s0"
+    assert snapshot_steps(run) == [1, 2, 4]  # every step of the first pass, then every 2
+    rows = ResultsStore(root / "results" / "tiny" / "results.sqlite").rows()
+    shown = sorted((r["split"], r["nfe"], r["step"]) for r in rows)
+    # a: every snapshot on the test episodes, the last on the validation ones; b: the last snapshot
+    assert shown == [("test", 1, 1), ("test", 1, 2), ("test", 1, 4), ("test", 6, 4), ("validation", 1, 4)]

@@ -125,31 +125,47 @@ def run_spawned(call: Callable, arguments: list[tuple], workers: int, names: lis
 
 
 @dataclass(frozen=True)
+class Unit:
+    """A unit of a study's work: ``call(*args, threads, progress)`` (``threads``: its torch threads, 0 the run's own
+    setting; ``progress``: whether it draws bars), named for the error that says it died. Its answer is how many rows
+    or JSONs it wrote."""
+
+    call: Callable
+    args: tuple
+    name: str
+
+
+def _run_unit(unit: Unit, threads: int, progress: bool):
+    return unit.call(*unit.args, threads, progress)
+
+
+@dataclass(frozen=True)
 class Executor:
-    """How a study's units of work run: one after another in this process (``workers`` 1), ``workers`` at once in
-    spawned processes of their own (the cores divided among them), or as tasks of a Ray cluster (``ray``: the
-    connected module, :func:`connect_ray`; one CPU each, and ``gpus`` of a GPU)."""
+    """How a study's units of work run (:class:`Unit`: a grid's trained run and its evaluations, a declared
+    evaluation's training seed): one after another in this process (``workers`` 1), ``workers`` at once in spawned
+    processes of their own (the cores divided among them), or as tasks of a Ray cluster (``ray``: the connected
+    module, :func:`connect_ray`; one CPU each, and ``gpus`` of a GPU)."""
 
     workers: int = 1
     ray: object = None
     gpus: float = 0.0
 
-    def map(self, call: Callable, arguments: list[tuple], names: list[str], kept: str, progress: bool) -> list:
-        """``call(*args, threads, progress)`` for each ``args`` of ``arguments`` (its unit, named ``names[i]``): a
-        unit's torch threads (0: the run's own setting) and whether it draws progress bars; their results in order.
-        A worker that dies: one error naming it, and that ``kept`` (what the finished units wrote) is kept."""
+    def map(self, units: list[Unit], progress: bool) -> list:
+        """Every unit's answer, in order. A worker that dies: one error naming it, and that what the finished units
+        wrote is kept."""
         if self.ray is not None:  # each task writes its own rows or JSONs: a cluster shares the results folder
-            task = self.ray.remote(num_cpus=1, num_gpus=self.gpus)(call)
-            return self.ray.get([task.remote(*args, 1, False) for args in arguments])
-        if self.workers == 1 or len(arguments) <= 1:
-            return [call(*args, 0, progress) for args in arguments]
+            task = self.ray.remote(num_cpus=1, num_gpus=self.gpus)(_run_unit)
+            return self.ray.get([task.remote(unit, 1, False) for unit in units])
+        if self.workers == 1 or len(units) <= 1:
+            return [_run_unit(unit, 0, progress) for unit in units]
         threads = max(1, (os.cpu_count() or 1) // self.workers)
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
         try:  # one unit per process: a worker never holds two while another idles
-            return run_spawned(call, [(*args, threads, False) for args in arguments],
-                               min(self.workers, len(arguments)), names, progress)
+            return run_spawned(_run_unit, [(unit, threads, False) for unit in units], min(self.workers, len(units)),
+                               [unit.name for unit in units], progress)
         except WorkerDied as e:
-            raise BridgeplanError(f"{e}; {kept} are kept: the same command again runs what is missing") from None
+            raise BridgeplanError(f"{e}; what the others wrote is kept: the same command again runs what is "
+                                  f"missing") from None
 
 
 BACKENDS = ("local", "ray")

@@ -1,9 +1,9 @@
 """Running a sweep: train what is missing, evaluate what is not in the store yet.
 
-Work is split into jobs, one per trained run (train or resume it, then evaluate its snapshots for
-every series that uses it). The learned prior is trained first, since the runs from it need it.
-The jobs run as units of a :class:`~bridgeplan.workers.Executor` (this process, worker processes
-or Ray tasks), as a study's declared evaluations do.
+Work is split into units, one per trained run (train or resume it, in a study's stages first, then evaluate its
+snapshots for every series of every experiment and split that shows it: :func:`grid_units`). The learned prior is
+trained first, since the runs from it need it. The units run in a :class:`~bridgeplan.workers.Executor` (this
+process, worker processes or Ray tasks), beside a study's declared evaluations.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from bridgeplan.experiments.grids import Experiment, RunSpec
 from bridgeplan.experiments.store import VALIDATION_SUFFIX, ResultsStore, row_from_eval_json
 from bridgeplan.locks import run_lock
 from bridgeplan.processes import DDPM
-from bridgeplan.workers import Executor
+from bridgeplan.workers import Executor, Unit
 
 
 @dataclass(frozen=True)
@@ -47,9 +47,6 @@ class SweepSettings:
     """Evaluate on validation episodes (task seed + ``evaluate.VALIDATION_SEED_OFFSET``), each run's final
     snapshot only, into the experiment ``<name>-validation``: where settings (NFE, sampler) are chosen, to be
     reported on the test episodes of ``<name>``."""
-    train_only: bool = False
-    """Train (or resume) the runs to ``train_steps`` and evaluate nothing: an earlier stage of a study whose runs
-    were trained in passes (``studies``)."""
     only_runs: tuple[str, ...] | None = None
     """Train and evaluate only these runs (and the learned priors they need): a study's plan names those it has
     evaluations to compute for, so that rows imported into its store are not made again; None: every run."""
@@ -98,33 +95,48 @@ def train_to(trainer, config, run_dir: Path, progress: bool) -> None:
             doing(f"found {run_dir} trained")
 
 
-def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
-            prior_run: str, threads: int = 0, progress: bool = True) -> list[dict]:
-    """Train (or finish) one run and evaluate every (snapshot, series) its experiments need; returns new rows.
+def _train(settings: SweepSettings, spec: RunSpec, seed: int, prior_run: str, progress: bool) -> cfg.TrainConfig:
+    """Train (or finish) ``spec``'s run of ``seed`` to ``settings.train_steps``, a distilling run's teacher first
+    (another unit may be training it: :func:`train_to` waits for it); its config."""
+    from bridgeplan.train import train
 
-    Each snapshot is loaded once and evaluated for every series (NFE, sampler, correction, execution, task set)
-    whose evaluation is missing from the store (its ``store.KEY``, with ``Series.sampling_tag`` as the row writes
-    it); an evaluation stored already, for another experiment, is only linked to this one. The floors are computed
-    once per task set and controller for the job.
+    config = _train_config(settings, spec, seed, prior_run)
+    if config.process.distills:
+        train_to(train, _teacher_config(settings, spec, seed), Path(config.process.teacher), progress)
+    train_to(train, config, paths.runs_dir(settings.results_dir) / config.run_name(), progress)
+    return config
+
+
+def run_job(work: list[tuple[SweepSettings, list[Experiment]]], spec: RunSpec, seed: int, prior_run: str,
+            stages: tuple[tuple[int, int], ...] = (), threads: int = 0, progress: bool = True) -> int:
+    """Train (or finish) one run, in ``stages`` first ((steps, checkpoint interval) of earlier passes, as a study's
+    committed runs were trained), then evaluate every (snapshot, series) that each of ``work``'s sweeps (its
+    settings, its experiments: the splits and experiments that show this run) needs of it; returns the new rows.
+
+    Each snapshot is loaded once per sweep and evaluated for every series (NFE, sampler, correction, execution, task
+    set) whose evaluation is missing from the store (its ``store.KEY``, with ``Series.sampling_tag`` as the row
+    writes it); an evaluation stored already, for another experiment, is only linked to this one. The floors are
+    computed once per task set and controller for the sweep.
     """
     from bridgeplan.device import configure_threads
+
+    first = work[0][0]
+    configure_threads(threads or _train_config(first, spec, seed, prior_run).threads)
+    for steps, every in stages:
+        _train(dataclasses.replace(first, train_steps=steps, checkpoint_every=every), spec, seed, prior_run, progress)
+    config = _train(first, spec, seed, prior_run, progress)
+    return sum(_evaluate(settings, experiments, spec, seed, config) for settings, experiments in work)
+
+
+def _evaluate(settings: SweepSettings, experiments: list[Experiment], spec: RunSpec, seed: int,
+              config: cfg.TrainConfig) -> int:
+    """:func:`run_job`'s evaluations for one sweep; the rows added."""
     from bridgeplan.envs import family_of
     from bridgeplan.evaluate import VALIDATION_SEED_OFFSET, evaluate_planner, floors, make_tasks
     from bridgeplan.runs import load_planner
-    from bridgeplan.train import train
     from bridgeplan.workers import doing
 
-    config = _train_config(settings, spec, seed, prior_run)
-    if settings.only_runs is not None and config.run_name() not in settings.only_runs:
-        return []
-    configure_threads(threads or config.threads)
     run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
-    if config.process.distills:  # the teacher first (another job may be training it: train_to waits for it)
-        teacher = _teacher_config(settings, spec, seed)
-        train_to(train, teacher, Path(config.process.teacher), progress)
-    train_to(train, config, run_dir, progress)
-    if settings.train_only:
-        return []
     store = ResultsStore(paths.store_path(settings.results_dir))
     suffix = VALIDATION_SUFFIX if settings.validation else ""
     split = "validation" if settings.validation else "test"
@@ -132,8 +144,8 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
     last_only = {exp.name + suffix for exp in experiments if exp.last_snapshot_only or settings.validation}
     task_seed = seed + VALIDATION_SEED_OFFSET if settings.validation else seed
     tasks = {multi: make_tasks(settings.maze, settings.episodes, task_seed, multi) for multi in (False, True)}
-    job_floors = {}  # per task set and controller, once for the job (same prior, same tasks at every snapshot)
-    rows = []
+    sweep_floors = {}  # per task set and controller, once for the sweep (same prior, same tasks at every snapshot)
+    added = 0
     steps = [s for s in paths.snapshot_steps(run_dir) if s <= config.steps]
     for step in steps:
         todo = []
@@ -151,28 +163,25 @@ def run_job(settings: SweepSettings, experiments: list[Experiment], spec: RunSpe
         doing(f"evaluating {run_dir} at step {step}")
         planner, info = load_planner(run_dir, snapshot=step, device=config.device)
         for name, series, key in todo:
-            if store.has(key):  # another experiment of this job named the same evaluation
+            if store.has(key):  # another experiment of this sweep named the same evaluation
                 store.link(key, name)
                 continue
             task_set = tasks[series.multi_task]
             family = family_of(settings.maze)
             ex = series.execution.resolved(family, settings.maze)
             floors_key = (series.multi_task, ex.controller, ex.lookahead)
-            if floors_key not in job_floors:
-                job_floors[floors_key] = floors(planner, family, task_set, ex)
+            if floors_key not in sweep_floors:
+                sweep_floors[floors_key] = floors(planner, family, task_set, ex)
             sampled = planner if series.sampler is None else planner.with_sampler(series.sampler)
             sampled = sampled.with_correction(series.correction)
             row = row_from_eval_json(evaluate_planner(sampled, task_set, series.nfe, run=info, execution=ex,
-                                                      precomputed_floors=job_floors[floors_key]).to_dict(), split)
-            if store.add(row, [name]):  # a concurrent sweep may have added it meanwhile
-                rows.append(row)
-    return rows
+                                                      precomputed_floors=sweep_floors[floors_key]).to_dict(), split)
+            added += store.add(row, [name])  # a concurrent sweep may have added it meanwhile
+    return added
 
 
 def ensure_dataset(settings: SweepSettings) -> SweepSettings:
     """Generate the sweep's dataset once if none was given."""
-    import dataclasses
-
     if settings.dataset:
         return settings
     from bridgeplan.envs import family_of
@@ -183,25 +192,35 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
     return dataclasses.replace(settings, dataset=str(path))
 
 
-def run_sweep(experiments: list[Experiment], settings: SweepSettings, executor: Executor = Executor(),
-              progress: bool = True) -> int:
-    """Run every job the experiments need, each job a unit of ``executor``; returns the number of new result rows."""
-    for exp in experiments:
-        exp.validate()
-    ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
-    settings = ensure_dataset(settings)
-    specs = list(dict.fromkeys(r for e in experiments for r in e.runs()))
-    planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
-    prior_runs = {}
-    for seed in settings.seeds:
-        if any(r.prior == "learned" and (settings.only_runs is None or _train_config(
-                settings, r, seed, "").run_name() in settings.only_runs) for r in specs):
-            prior_runs[seed] = _ensure_prior(settings, seed, planner, progress)
-    jobs = [(spec, seed) for seed in settings.seeds for spec in specs]
-    rows = executor.map(run_job, [(settings, experiments, spec, seed, prior_runs.get(seed, "")) for spec, seed in jobs],
-                        [f"the worker of run {spec.label()} seed {seed}" for spec, seed in jobs], "the rows stored",
-                        progress)
-    return sum(len(r) for r in rows)
+def grid_units(sweeps: list[tuple[SweepSettings, list[Experiment]]], stages: tuple[tuple[int, int], ...] = (),
+               progress: bool = True) -> list[Unit]:
+    """The units of work of ``sweeps`` (each its settings and experiments): one per trained run, whichever
+    experiments and splits show it (:func:`run_job`, in ``stages`` first), for an :class:`Executor`. The learned
+    priors the runs sample from are trained here first (the units need them); each sweep's dataset is made where
+    none was given."""
+    units: dict[str, tuple[RunSpec, int, str, list]] = {}
+    for settings, experiments in sweeps:
+        for exp in experiments:
+            exp.validate()
+        ResultsStore(paths.store_path(settings.results_dir))  # refuse a newer schema before any work
+        settings = ensure_dataset(settings)
+        planner = cfg.preset_config(settings.maze, settings.preset, **settings.overrides)
+        for seed in settings.seeds:
+            for spec in dict.fromkeys(r for e in experiments for r in e.runs()):
+                name = _train_config(settings, spec, seed, "").run_name()
+                if settings.only_runs is not None and name not in settings.only_runs:
+                    continue
+                if name not in units:
+                    prior = _ensure_prior(settings, seed, planner, progress) if spec.prior == "learned" else ""
+                    units[name] = (spec, seed, prior, [])
+                units[name][3].append((settings, experiments))
+    return [Unit(run_job, (work, spec, seed, prior, tuple(stages)), f"the worker of run {spec.label()} seed {seed}")
+            for spec, seed, prior, work in units.values()]
+
+
+def run_sweep(experiments: list[Experiment], settings: SweepSettings, progress: bool = True) -> int:
+    """Run every unit the experiments need in this process (``bridgeplan demo``); returns the number of new rows."""
+    return sum(Executor().map(grid_units([(settings, experiments)], progress=progress), progress))
 
 
 def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, progress: bool) -> str:

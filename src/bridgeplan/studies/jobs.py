@@ -39,7 +39,7 @@ from typing import Any
 from bridgeplan.errors import one_line_warnings
 from bridgeplan.eval_commands import STUDY_COMMANDS
 from bridgeplan.studies.spec import NamedRun, command_options
-from bridgeplan.workers import Executor, doing
+from bridgeplan.workers import Unit, doing
 
 # --- planning and running (the file format: bridgeplan.studies.spec) ---------------------------------------------
 
@@ -198,10 +198,10 @@ def work_units(todo: list[Job]) -> list[tuple[int, list[Job]]]:
     return [(seed, unit) for (seed, _), unit in units.items()]
 
 
-def run_commands(study, results: Path, dataset: Path, quick: bool, executor: Executor, progress: bool) -> int:
-    """Run every missing JSON's command (after training what it needs), each work unit (:func:`work_units`) a unit
-    of ``executor``; the JSONs written."""
+def evaluation_units(study, results: Path, dataset: Path, quick: bool) -> list[Unit]:
+    """Every missing JSON's work (after training what it needs), one unit per work unit (:func:`work_units`), for an
+    :class:`Executor`."""
     units = work_units([job for job in jobs(study, results, results, quick) if not job.path.exists()])
-    return sum(executor.map(run_seed, [(study, results, dataset, unit, seed) for seed, unit in units],
-                            [f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})"
-                             for seed, unit in units], "the JSONs written", progress))
+    return [Unit(run_seed, (study, results, dataset, unit, seed),
+                 f"the worker of training seed {seed} (runs: {', '.join(unit[0].runs) or 'none'})")
+            for seed, unit in units]

@@ -1,10 +1,10 @@
 """From a study to the experiments runner: the sweeps it runs, what is missing from its store, its cost.
 
 Each ``[[experiments]]`` entry and split becomes one :class:`~bridgeplan.experiments.grids.Experiment` with its
-:class:`~bridgeplan.experiments.runner.SweepSettings`; ``study run`` hands them to
-:func:`~bridgeplan.experiments.runner.run_sweep` in order, so a study resumes as sweeps do (finished runs and
-evaluations are skipped; runs are locked while trained); ``[[evaluations]]`` become the jobs of
-:mod:`bridgeplan.studies.jobs`. Both run as units of one executor (``--workers``, or the Ray backend).
+:class:`~bridgeplan.experiments.runner.SweepSettings`, whose trained runs are units of work
+(:func:`~bridgeplan.experiments.runner.grid_units`: finished runs and evaluations are skipped, runs are locked while
+trained); ``[[evaluations]]`` become the jobs of :mod:`bridgeplan.studies.jobs`, a unit per training seed and the runs
+it reads. ``study run`` runs them all in one executor (``--workers``, or the Ray backend).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.studies.jobs import jobs, needed_runs, run_commands, train_config
+from bridgeplan.studies.jobs import evaluation_units, jobs, needed_runs, train_config
 from bridgeplan.studies.spec import ExperimentSpec, Study, StudyError, committed_csv
 
 TRAIN_STEPS_PER_SECOND = 18.6
@@ -631,11 +631,12 @@ def check_run(chain: list[Study], root: Path, scale: Scale, backend: str = "loca
 
 def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "local", workers: int | None = None,
               ray_address: str | None = None, progress: bool = True, note=None) -> int:
-    """Train and evaluate what the study is missing, sweep by sweep (stages first), then its declared evaluations,
-    all as units of one executor (``backend``: :func:`bridgeplan.workers.executor`); the number of new rows and
-    JSONs. ``note(text)``, when given, hears first what of it is committed but not imported
+    """Train and evaluate what the study is missing: its grids' runs (each trained in the study's stages, then
+    evaluated for every experiment and split that shows it) and its declared evaluations' training seeds, all units
+    of one executor (``backend``: :func:`bridgeplan.workers.executor`); the number of new rows and JSONs.
+    ``note(text)``, when given, hears first what of it is committed but not imported
     (:func:`committed_not_imported`)."""
-    from bridgeplan.experiments.runner import run_sweep
+    from bridgeplan.experiments.runner import grid_units
     from bridgeplan.workers import executor
 
     if not study.experiments and not study.evaluations:
@@ -649,7 +650,7 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
     with executor(backend, workers or study.evaluation.workers, ray_address,
                   dict(study.training.overrides).get("device", "auto")) as run:
         dataset = ensure_dataset(scaled, root, progress)
-        added, only = 0, None
+        units = []
         if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
             from bridgeplan import paths
             from bridgeplan.experiments.store import ResultsStore, stored_keys
@@ -663,14 +664,10 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
                     store.link(key, name)
             only = tuple(sorted({run for run, _, _ in m.trains} | {key[0] for wanted in m.wanted.values()
                                                                      for key in wanted if key not in keys}))
-        for sweep in sweeps(study, root, scale):
-            settings = dataclasses.replace(sweep.settings, only_runs=only)
-            if scale.committed:
-                for steps, every in sweep.stages[:-1]:  # earlier passes: train only, as the committed runs were
-                    run_sweep([sweep.experiment], dataclasses.replace(settings, train_steps=steps,
-                                                                      checkpoint_every=every, train_only=True),
-                              run, progress)
-            added += run_sweep([sweep.experiment], settings, run, progress)
+            plan = sweeps(study, root, scale)
+            units += grid_units([(dataclasses.replace(sweep.settings, only_runs=only), [sweep.experiment])
+                                 for sweep in plan],  # earlier passes first where the committed runs had them
+                                plan[0].stages[:-1] if scale.committed else (), progress)
         if study.evaluations:
-            added += run_commands(scaled, results_dir(study, root, scale), dataset, not scale.committed, run, progress)
-    return added
+            units += evaluation_units(scaled, results_dir(study, root, scale), dataset, not scale.committed)
+        return sum(run.map(units, progress))
