@@ -249,7 +249,7 @@ def test_a_study_of_your_own_environment(reach, tmp_path, monkeypatch):
     assert planner["success_rate"] >= 0.8 and graph["success_rate"] >= 0.9 and graph["method"] == "dataset graph"
 
 
-DYING_STUDY = """
+GRAPH_STUDY = """
 [dataset]
 maze = "{spec}"
 path = "{dataset}"
@@ -263,8 +263,29 @@ episodes = 2
 [[evaluations]]
 command = "graph"
 runs = []
-out = "dying/graph-seed{{eval_seed}}.json"
+out = "{name}/graph-seed{{eval_seed}}.json"
 """
+
+
+def graph_study_of(reach, root: Path, name: str, reset_source: str) -> None:
+    """``root/studies/NAME.toml``: :data:`GRAPH_STUDY` (two training seeds' graph evaluations, into NAME/) on the
+    reach environment whose ``reset`` is ``reset_source`` (a method's source; ``os`` and ``signal`` imported)."""
+    (root / f"{name}_env.py").write_text(ENV_SOURCE + f"""
+import os, signal
+
+
+class Changed(Reach):
+{reset_source}
+
+def make_changed():
+    return Changed()
+""")
+    spec = root / f"{name}.toml"
+    spec.write_text(reach.read_text().replace('"reach_env.py:make_env"', f'"{name}_env.py:make_changed"').replace(
+        '"reach.npz"', f'"{reach.parent / "reach.npz"}"'))
+    (root / "studies").mkdir()
+    (root / "studies" / f"{name}.toml").write_text(GRAPH_STUDY.format(spec=spec, dataset=reach.parent / "reach.npz",
+                                                                      name=name))
 
 
 def test_a_study_worker_killed_ends_the_study_with_one_error(reach, tmp_path):
@@ -276,27 +297,14 @@ def test_a_study_worker_killed_ends_the_study_with_one_error(reach, tmp_path):
     import sys
 
     claimed = tmp_path / "claimed"
-    (tmp_path / "dying_env.py").write_text(ENV_SOURCE + f"""
-import os, signal
-
-
-class Dying(Reach):
+    graph_study_of(reach, tmp_path, "dying", f"""
     def reset(self, seed=None, options=None):
         try:
             os.close(os.open({str(claimed)!r}, os.O_CREAT | os.O_EXCL))
         except FileExistsError:
             return super().reset(seed=seed, options=options)
         os.kill(os.getpid(), signal.SIGKILL)
-
-
-def make_dying():
-    return Dying()
 """)
-    spec = tmp_path / "dying.toml"
-    spec.write_text(reach.read_text().replace('"reach_env.py:make_env"', '"dying_env.py:make_dying"').replace(
-        '"reach.npz"', f'"{reach.parent / "reach.npz"}"'))
-    (tmp_path / "studies").mkdir()
-    (tmp_path / "studies" / "dying.toml").write_text(DYING_STUDY.format(spec=spec, dataset=reach.parent / "reach.npz"))
     r = subprocess.run([sys.executable, "-m", "bridgeplan.cli", "study", "run", "dying", "--workers", "2",
                         "--no-progress", "--root", str(tmp_path)], capture_output=True, text=True, timeout=120,
                        env={**os.environ, "OMP_NUM_THREADS": "1"})
@@ -319,26 +327,12 @@ def test_a_declared_study_runs_its_units_as_ray_tasks(reach, tmp_path):
 
     pytest.importorskip("ray")
     pids = tmp_path / "pids"
-    (tmp_path / "noting_env.py").write_text(ENV_SOURCE + f"""
-import os
-
-
-class Noting(Reach):
+    graph_study_of(reach, tmp_path, "graphs", f"""
     def reset(self, seed=None, options=None):
         with open({str(pids)!r}, "a") as f:
             f.write(f"{{os.getpid()}}\\n")
         return super().reset(seed=seed, options=options)
-
-
-def make_noting():
-    return Noting()
 """)
-    spec = tmp_path / "noting.toml"
-    spec.write_text(reach.read_text().replace('"reach_env.py:make_env"', '"noting_env.py:make_noting"').replace(
-        '"reach.npz"', f'"{reach.parent / "reach.npz"}"'))
-    (tmp_path / "studies").mkdir()
-    (tmp_path / "studies" / "graphs.toml").write_text(
-        DYING_STUDY.format(spec=spec, dataset=reach.parent / "reach.npz").replace("dying/", "graphs/"))
     assert main(["study", "run", "graphs", "--backend", "ray", "--no-progress", "--root", str(tmp_path)]) == 0
     written = sorted(p.name for p in (tmp_path / "results" / "graphs" / "graphs").iterdir())
     assert written == ["graph-seed0.json", "graph-seed1.json"]
