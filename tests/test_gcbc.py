@@ -146,6 +146,27 @@ def test_resume_is_exact(tmp_path):
     assert (straight / "config.json").exists()
 
 
+def test_a_non_finite_loss_stops_training_at_its_step_and_keeps_the_last_checkpoint(tmp_path, monkeypatch):
+    """GCBC trains in the planners' loop (``train.run_steps``): the step whose loss is not finite stops training,
+    named, and is never saved; the last checkpoint before it stays."""
+    import bridgeplan.gcbc
+
+    real = bridgeplan.gcbc._GCBCStep.loss
+    calls = []
+
+    def loss(self, obs, actions, rng):
+        value, logged = real(self, obs, actions, rng)
+        calls.append(1)
+        return (value * float("nan") if len(calls) == 13 else value), logged
+
+    monkeypatch.setattr(bridgeplan.gcbc._GCBCStep, "loss", loss)
+    config = GCBCConfig(dataset=str(line_dataset(tmp_path / "d.npz", trajectories=4)), steps=30, **TINY)
+    with pytest.raises(BridgeplanError, match=r"loss became nan at step 13; stopped\. The last good checkpoint "
+                                              r"\(step 10\)"):
+        train_gcbc(config, tmp_path / "run", progress=False)
+    assert states(tmp_path / "run")[2] == 10 and [s for s, _ in policy_snapshots(tmp_path / "run")] == [10]
+
+
 def test_run_directory_mistakes(tmp_path):
     config = GCBCConfig(dataset=str(line_dataset(tmp_path / "d.npz", trajectories=4)), steps=2, **TINY)
     with pytest.raises(BridgeplanError, match="does not exist"):

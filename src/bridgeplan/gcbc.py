@@ -1,5 +1,6 @@
 """Goal-conditioned behaviour cloning (GCBC) on OGBench datasets: the calibration baseline (pointmaze, manipulation);
-its training loop also trains GCIQL (``GCBCConfig.agent``, :mod:`bridgeplan.gciql`), whose actor is the same policy.
+its training (``train_gcbc``, on the one loop of every trained model, ``train.run_steps``) also trains GCIQL
+(``GCBCConfig.agent``, :mod:`bridgeplan.gciql`), whose actor is the same policy.
 
 What OGBench does (``impls/agents/gcbc.py``, ``impls/utils/datasets.py`` ``GCDataset``, ``impls/main.py``),
 re-implemented in PyTorch:
@@ -32,7 +33,6 @@ import copy
 import hashlib
 import json
 import math
-import time
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +52,7 @@ from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import run_lock
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
 from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
-from bridgeplan.train import make_optimizer
+from bridgeplan.train import make_optimizer, run_steps
 
 KIND = "gcbc"
 AGENTS = ("gcbc", "gciql")
@@ -460,60 +460,43 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
     obs = torch.as_tensor(data.observations, device=device)
     actions = torch.as_tensor(data.actions, device=device)
 
-    def snapshot_state() -> dict:
+    def snapshot_state(at: int, seconds: float) -> dict:
         return {"kind": KIND, "config": config_dict, "dataset": fingerprint, "obs_dim": data.obs_dim,
-                "action_dim": data.action_dim, "step": step, "elapsed_seconds": elapsed,
+                "action_dim": data.action_dim, "step": at, "elapsed_seconds": seconds,
                 "code_version": code_version(), "policy": learner.policy.state_dict()}
 
-    def save() -> None:
+    def save(at: int, seconds: float) -> None:
         # the snapshot first: killed between the writes, the resumed run rewrites it (identically)
-        save_checkpoint(snapshot_path(run_dir, step), snapshot_state())
+        save_checkpoint(snapshot_path(run_dir, at), snapshot_state(at, seconds))
         agent = {"agent": net.state_dict()} if net is not learner.policy else {}  # the critics too, to resume
-        save_checkpoint(ckpt, snapshot_state() | agent | {"optimizer": optimizer.state_dict(),
-                                                  "rng": rng.bit_generator.state, "log_sums": sums.cpu(),
-                                                  "log_from": log_from})
+        save_checkpoint(ckpt, snapshot_state(at, seconds) | agent | {
+            "optimizer": optimizer.state_dict(), "rng": rng.bit_generator.state, "log_sums": sums.cpu(),
+            "log_from": log_from})
 
-    budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {config.agent}", unit="step",
-               dynamic_ncols=True)
-    nonfinite = torch.zeros((), dtype=torch.bool, device=device)  # read only at logs and saves (a GPU sync)
-    last_saved, t_start = step, time.perf_counter()
-    t_log, step_rate, elapsed0 = t_start, step, elapsed
+    def one_step(_new_step: int) -> torch.Tensor:
+        loss, logged = learner.loss(obs, actions, rng)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        learner.after_step()
+        with torch.no_grad():
+            sums.add_(logged)
+        return loss
+
+    def log(at: int, rate: float, _loss: float, seconds: float) -> dict:
+        nonlocal log_from
+        means = dict(zip(learner.columns, (sums / (at - log_from)).tolist()))
+        log_from = at
+        sums.zero_()
+        metrics.write({"step": at, **means, "steps_per_s": rate, "elapsed_seconds": seconds})
+        return {"loss": f"{means['loss']:.4f}", "mse": f"{means['mse']:.4f}"}
+
     net.train()
     try:
-        while step < config.steps and elapsed < budget:
-            loss, logged = learner.loss(obs, actions, rng)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            learner.after_step()
-            step += 1
-            elapsed = elapsed0 + time.perf_counter() - t_start
-            bar.update(1)
-            with torch.no_grad():
-                nonfinite |= ~torch.isfinite(loss)
-                sums += logged
-            log_due, save_due = step % config.log_every == 0, step % config.checkpoint_every == 0
-            if (log_due or save_due) and bool(nonfinite):
-                raise BridgeplanError(f"loss became non-finite before step {step}; stopped"
-                                      + (f" (last good checkpoint: step {last_saved})" if last_saved else ""))
-            if log_due:
-                now = time.perf_counter()
-                rate = (step - step_rate) / max(now - t_log, 1e-9)
-                means = dict(zip(learner.columns, (sums / (step - log_from)).tolist()))
-                t_log, step_rate, log_from = now, step, step
-                sums.zero_()
-                bar.set_postfix(loss=f"{means['loss']:.4f}", mse=f"{means['mse']:.4f}", steps_per_s=f"{rate:.1f}")
-                metrics.write({"step": step, **means, "steps_per_s": rate, "elapsed_seconds": elapsed})
-            if save_due:
-                save()
-                last_saved = step
-        if bool(nonfinite):
-            raise BridgeplanError(f"loss became non-finite before step {step}; stopped")
-        if step != last_saved:
-            save()
+        run_steps(step, elapsed, config, one_step, log, save, ckpt, device,
+                  tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {config.agent}",
+                       unit="step", dynamic_ncols=True))
     finally:
-        bar.close()
         metrics.close()
     return run_dir
 

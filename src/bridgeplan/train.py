@@ -1,10 +1,11 @@
-"""Training: the planner (DDPM or bridge) and the learned prior, with EMA and exact resume.
+"""Training: the planner (DDPM or bridge) and the learned prior, with EMA and exact resume; and the one training
+loop (:func:`run_steps`: the step budget and time budget, NaN detection, progress, the log and checkpoint cadence)
+that they and GCBC/GCIQL (:mod:`bridgeplan.gcbc`) share.
 
-One loop (:func:`_fit`) serves both: it owns the optimizer, the EMA copy, the RNG, the time budget,
-NaN detection, TensorBoard scalars and checkpoints; :class:`TrainJob` does one optimizer step (the
-benchmark times that same step). Everything needed to resume lives in one file,
-``RUN/checkpoint.pt``; EMA snapshots ``RUN/snapshots/step_*.pt`` are what the experiments evaluate
-across training steps.
+:func:`_fit` serves the planner and the prior: it owns the optimizer, the EMA copy, the RNG, TensorBoard scalars and
+checkpoints; :class:`TrainJob` does one optimizer step (the benchmark times that same step). Everything needed to
+resume lives in one file, ``RUN/checkpoint.pt``; EMA snapshots ``RUN/snapshots/step_*.pt`` are what the experiments
+evaluate across training steps.
 """
 
 from __future__ import annotations
@@ -281,32 +282,62 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
     write_config(run_dir, {"kind": job.kind, "config": config_dict, "dataset": dataset, "code_version": code_version(),
                            "cpu": cpu_model()})
 
-    def snapshot_state() -> dict:
+    def snapshot_state(at: int, seconds: float) -> dict:
         return {"kind": job.kind, "config": config_dict, "normalizer": job.normalizer_dict, "dataset": dataset,
-                "step": step, "elapsed_seconds": elapsed, "code_version": code_version()}
+                "step": at, "elapsed_seconds": seconds, "code_version": code_version()}
 
-    def save_snapshot() -> None:
+    def save_snapshot(at: int, seconds: float) -> None:
         weights = (ema if ema is not None else model).state_dict()
-        save_checkpoint(snapshot_path(run_dir, step), snapshot_state() | {"ema": weights})
+        save_checkpoint(snapshot_path(run_dir, at), snapshot_state(at, seconds) | {"ema": weights})
 
-    def save() -> None:
+    def save(at: int, seconds: float) -> None:
         # The snapshot first: killed between the two writes, the run resumes from the previous
         # checkpoint and writes this snapshot again (the same weights: resume is exact). In the
         # other order, resume would start after this step and its snapshot would be lost for good.
-        save_snapshot()
-        save_checkpoint(ckpt_path, snapshot_state() | {
+        save_snapshot(at, seconds)
+        save_checkpoint(ckpt_path, snapshot_state(at, seconds) | {
             "model": model.state_dict(), "optimizer": optimizer.state_dict(),
             "ema": ema.state_dict() if ema is not None else None,
             "generator": gen.get_state(), "torch_rng": torch.get_rng_state()})
 
     if resume and not snapshot_path(run_dir, step).exists():
-        save_snapshot()  # a run written before that order was fixed may lack its checkpoint's snapshot
+        save_snapshot(step, elapsed)  # a run written before that order was fixed may lack its checkpoint's snapshot
 
     writer = _tensorboard(run_dir)
-    budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {run_dir.name}",
-               unit="step", dynamic_ncols=True)
+
+    def one_step(new_step: int) -> torch.Tensor:
+        loss = job.accumulate_gradients(windows, gen, device)
+        job.apply_gradients(optimizer, ema, new_step)
+        return loss
+
+    def log(at: int, rate: float, loss: float, _elapsed: float) -> dict:
+        if writer is not None:
+            writer.add_scalar("loss", loss, at)
+            writer.add_scalar("steps_per_s", rate, at)
+        return {"loss": f"{loss:.4f}"}
+
     model.train()
+    try:
+        run_steps(step, elapsed, config, one_step, log, save, ckpt_path, device,
+                  tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {run_dir.name}",
+                       unit="step", dynamic_ncols=True))
+    finally:
+        if writer is not None:
+            writer.close()
+    return run_dir
+
+
+def run_steps(step: int, elapsed: float, config, one_step: Callable[[int], torch.Tensor],
+              log: Callable[[int, float, float, float], dict], save: Callable[[int, float], None], ckpt_path: Path,
+              device: torch.device, bar) -> None:
+    """The one training loop of every trained model (a planner, the learned prior, GCBC and GCIQL), from ``step``
+    and ``elapsed`` seconds to ``config.steps``, or ``config.minutes`` of training in all: ``one_step(n)`` makes
+    the optimizer step that brings the count to ``n`` and returns its loss, unread (reading it makes a GPU's host
+    wait: the losses are read every few steps, :func:`loss_check_every`, and before every checkpoint, so that a
+    non-finite step is never saved); every ``config.log_every`` steps ``log(step, steps per second, loss,
+    elapsed)`` gives the progress bar's fields; every ``config.checkpoint_every`` steps, and at the end,
+    ``save(step, elapsed)``. ``bar`` is closed at the end."""
+    budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
     last_saved = step
     check_every = loss_check_every(device, config.log_every)
     unchecked: list[torch.Tensor] = []
@@ -327,9 +358,8 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
     elapsed0 = elapsed
     try:
         while step < config.steps and elapsed < budget:
-            unchecked.append(job.accumulate_gradients(windows, gen, device))
+            unchecked.append(one_step(step + 1).detach())
             step += 1
-            job.apply_gradients(optimizer, ema, step)
             elapsed = elapsed0 + time.perf_counter() - t_start
             bar.update(1)
             log_due, save_due = step % config.log_every == 0, step % config.checkpoint_every == 0
@@ -339,22 +369,16 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
                 now = time.perf_counter()
                 rate = (step - step_log) / max(now - t_log, 1e-9)
                 t_log, step_log = now, step
-                bar.set_postfix(loss=f"{loss:.4f}", steps_per_s=f"{rate:.1f}")
-                if writer is not None:
-                    writer.add_scalar("loss", loss, step)
-                    writer.add_scalar("steps_per_s", rate, step)
+                bar.set_postfix(**log(step, rate, loss, elapsed), steps_per_s=f"{rate:.1f}")
             if save_due:
-                save()
+                save(step, elapsed)
                 last_saved = step
         if unchecked:
             check_losses()
         if step != last_saved:
-            save()
+            save(step, elapsed)
     finally:
         bar.close()
-        if writer is not None:
-            writer.close()
-    return run_dir
 
 
 def _tensorboard(run_dir: Path):
