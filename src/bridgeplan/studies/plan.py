@@ -648,7 +648,7 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
         return 0  # all stored (imported, say): no dataset to make either
     scaled = scale.apply(study)
     with executor(backend, workers or study.evaluation.workers, ray_address,
-                  dict(study.training.overrides).get("device", "auto")) as run:
+                  dict(study.training.overrides).get("device", "auto")) as pool:
         dataset = ensure_dataset(scaled, root, progress)
         units = []
         if study.experiments:  # link what is stored already; train and evaluate only the runs something is missing of
@@ -670,4 +670,4 @@ def run_study(study: Study, root: Path, scale: Scale = Scale(), backend: str = "
                                 plan[0].stages[:-1] if scale.committed else (), progress)
         if study.evaluations:
             units += evaluation_units(scaled, results_dir(study, root, scale), dataset, not scale.committed)
-        return sum(run.map(units, progress))
+        return sum(pool.map(units, progress))
