@@ -160,11 +160,11 @@ def test_cli_warns_in_one_line_for_more_threads_than_cores(tiny_runs, tmp_path):
 
 
 def test_a_run_saved_by_bridgeplan_0_1_can_be_resumed():
-    from bridgeplan.train import _check_resumable
+    from bridgeplan.train import check_resumable
 
     config = cfg.preset_config("umaze", "cpu-small", dataset="d")
     saved = json.loads(json.dumps(cfg.to_dict(config)))
     saved["process"] = {"name": "ddpm", "steps": 16, "beta_max": 1.0, "ot_ode": False}  # 0.1's ProcessConfig
-    _check_resumable(saved, cfg.to_dict(config), "checkpoint.pt", cfg.TrainConfig)
+    check_resumable(saved, cfg.to_dict(config), "checkpoint.pt", cfg.TrainConfig)
     with pytest.raises(BridgeplanError, match="different config"):
-        _check_resumable(dict(saved, lr=0.5), cfg.to_dict(config), "checkpoint.pt", cfg.TrainConfig)
+        check_resumable(dict(saved, lr=0.5), cfg.to_dict(config), "checkpoint.pt", cfg.TrainConfig)

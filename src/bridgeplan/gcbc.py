@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import load_checkpoint, save_checkpoint, write_config
@@ -48,19 +47,17 @@ from bridgeplan.device import configure_threads, cpu_model, resolve_device
 from bridgeplan.envs import family_of
 from bridgeplan.envs.ogbench_pointmaze.names import dataset_env as environment
 from bridgeplan.errors import BridgeplanError, check_choice
-from bridgeplan.files import check_writable, code_version
-from bridgeplan.locks import run_lock
+from bridgeplan.files import code_version
 from bridgeplan.nets.policy import GoalPolicy, unit_gaussian_nll
 from bridgeplan.paths import checkpoint_path, snapshot_path, snapshot_steps
-from bridgeplan.train import make_optimizer, run_steps
+from bridgeplan.train import check_resumable, check_run_dir, make_optimizer, run_directory, run_steps
 
 KIND = "gcbc"
 AGENTS = ("gcbc", "gciql")
 METRICS_NAME = "metrics.jsonl"
-# Fields a resumed run may change: they do not change what is trained, only how long and where. The dataset's
-# path may change too (a moved file): its content is checked instead, by fingerprint.
-_RESUMABLE_FIELDS = frozenset({"steps", "minutes", "device", "threads", "log_every", "checkpoint_every",
-                               "dataset"})
+MOVABLE = frozenset({"dataset"})
+"""What a resumed run may change beyond a planner's (``train._RESUMABLE_FIELDS``): the dataset's path (a moved
+file); its content is checked instead, by fingerprint."""
 
 
 @dataclass(frozen=True)
@@ -401,26 +398,17 @@ def policy_snapshots(run_dir: str | Path) -> list[tuple[int, Path]]:
     return [(s, snapshot_path(run_dir, s)) for s in snapshot_steps(run_dir)]
 
 
-def _comparable(config_dict: dict) -> dict:
-    return {k: v for k, v in json.loads(json.dumps(config_dict)).items() if k not in _RESUMABLE_FIELDS}
-
-
 def train_gcbc(config: GCBCConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> Path:
-    """Train GCBC into ``run_dir`` (a fresh directory, or a run to continue with ``resume``); returns it.
+    """Train GCBC into ``run_dir`` (a fresh directory, or a run to continue with ``resume``: refused as a planner's
+    run is, ``train.run_directory``); returns it.
 
     A resumed run continues exactly: N steps in one go and N/2 + N/2 across a resume give the same weights.
     """
     run_dir = Path(run_dir)
-    ckpt = checkpoint_path(run_dir)
-    # refused before anything is created or read
-    if ckpt.exists() and not resume:
-        raise BridgeplanError(f"run directory {run_dir} already has a checkpoint; pass --resume to continue it")
-    if resume and not ckpt.exists():
-        raise BridgeplanError(f"--resume given but {ckpt} does not exist")
-    check_writable(run_dir, "run directory", folder=True)
+    check_run_dir(run_dir, resume, KIND, config)  # before the data is read
     device = resolve_device(config.device)
     data = GoalDataset.for_config(config)
-    with run_lock(run_dir):  # one trainer per run directory
+    with run_directory(run_dir, resume, KIND, config):
         configure_threads(config.threads, device)
         return _train_locked(config, data, run_dir, resume, device, progress)
 
@@ -442,10 +430,7 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
         state = load_checkpoint(ckpt)
         if state["kind"] != KIND:
             raise BridgeplanError(f"{ckpt} is a {state['kind']} checkpoint, not a GCBC one")
-        saved = _comparable(cfg.to_dict(cfg.from_dict(GCBCConfig, state["config"])))  # fields added since: defaults
-        if saved != _comparable(config_dict):
-            diff = sorted(k for k in _comparable(config_dict) if saved.get(k) != _comparable(config_dict)[k])
-            raise BridgeplanError(f"{ckpt} was trained with a different config ({', '.join(diff)} differ)")
+        check_resumable(state["config"], config_dict, ckpt, GCBCConfig, also=MOVABLE)
         if state["dataset"] != fingerprint:
             raise BridgeplanError(f"{ckpt} was trained on different data than {config.dataset}")
         net.load_state_dict(state.get("agent", state["policy"]))
@@ -493,9 +478,7 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
 
     net.train()
     try:
-        run_steps(step, elapsed, config, one_step, log, save, ckpt, device,
-                  tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {config.agent}",
-                       unit="step", dynamic_ncols=True))
+        run_steps(step, elapsed, config, one_step, log, save, ckpt, device, f"train {config.agent}", progress)
     finally:
         metrics.close()
     return run_dir

@@ -14,6 +14,8 @@ import copy
 import json
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -101,7 +103,7 @@ def make_ema(model: torch.nn.Module) -> torch.nn.Module:
 
 def train(config: cfg.TrainConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
     """Train a planner; returns the run directory. See :class:`bridgeplan.config.TrainConfig`."""
-    _check_run_dir(run_dir, resume, "planner", config)  # before the data is read
+    check_run_dir(run_dir, resume, "planner", config)  # before the data is read
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     return _fit(planner_job(config, normalizer, device), windows.to(device), run_dir, resume, device, progress)
@@ -134,7 +136,7 @@ def planner_job(config: cfg.TrainConfig, normalizer, device: torch.device) -> Tr
 def train_prior(config: cfg.PriorTrainConfig, run_dir: Path, resume: bool = False,
                 progress: bool = True) -> Path:
     """Train the learned prior (the thesis's MLP on start and goal) on the same windows and loss."""
-    _check_run_dir(run_dir, resume, "prior", config)  # before the data is read
+    check_run_dir(run_dir, resume, "prior", config)  # before the data is read
     device = _setup(config)
     windows, normalizer = load_windows(config.dataset, config.maze, config.horizon, config.stride)
     net = build_prior_net(config.layout, config.horizon).to(device)
@@ -189,32 +191,41 @@ def check_compiler(device: torch.device) -> None:
                                   ) from None
 
 
-def _check_resumable(saved: dict, current: dict, path: Path, config_type) -> None:
+def check_resumable(saved: dict, current: dict, path: Path, config_type, also: frozenset = frozenset()) -> None:
+    """``path`` was trained with ``current`` (a config dict), the fields a resume may change aside (those of
+    :data:`_RESUMABLE_FIELDS` and ``also``)."""
     def canonical(d: dict) -> dict:  # today's form (a run saved by an older bridgeplan too), as JSON has it
         return json.loads(json.dumps(cfg.to_dict(cfg.from_dict(config_type, d))))
 
     saved, current = canonical(saved), canonical(current)
     diff = sorted(k for k in set(saved) | set(current)
-                  if k not in _RESUMABLE_FIELDS and saved.get(k) != current.get(k))
+                  if k not in _RESUMABLE_FIELDS | also and saved.get(k) != current.get(k))
     if diff:
         detail = ", ".join(f"{k}: {saved.get(k)!r} -> {current.get(k)!r}" for k in diff)
         raise BridgeplanError(f"checkpoint {path} was trained with a different config ({detail})")
 
 
 def _fit(job: TrainJob, windows, run_dir: Path, resume: bool, device: torch.device, progress: bool) -> Path:
+    with run_directory(run_dir, resume, job.kind, job.config):
+        return _fit_locked(job, windows, Path(run_dir), resume, device, progress)
+
+
+@contextmanager
+def run_directory(run_dir: Path, resume: bool, kind: str, config) -> Iterator[None]:
+    """Hold ``run_dir`` for one trainer of a ``kind`` run of ``config`` (a second one waits for the lock): a mistake
+    (:func:`check_run_dir`) refused before the lock creates the directory, so it leaves nothing behind, and again
+    once held (another process may have trained it meanwhile); what a killed writer left half-written removed."""
     run_dir = Path(run_dir)
-    # refuse a mistake before the lock creates run_dir, so it leaves nothing behind
-    _check_run_dir(run_dir, resume, job.kind, job.config)
-    with run_lock(run_dir):  # one trainer per run directory; a second one waits here
-        # again: another process may have trained it meanwhile
-        _check_run_dir(run_dir, resume, job.kind, job.config)
+    check_run_dir(run_dir, resume, kind, config)
+    with run_lock(run_dir):
+        check_run_dir(run_dir, resume, kind, config)
         # whoever wrote these was killed mid-write (a live writer would hold the lock)
         for tmp in [*run_dir.glob(".*.tmp"), *(run_dir / "snapshots").glob(".*.tmp")]:
             tmp.unlink()
-        return _fit_locked(job, windows, run_dir, resume, device, progress)
+        yield
 
 
-def _check_run_dir(run_dir: Path, resume: bool, kind: str, config) -> None:
+def check_run_dir(run_dir: Path, resume: bool, kind: str, config) -> None:
     """The run directory can be written; --resume needs a checkpoint and snapshots that read whole; a fresh start
     needs an empty directory, or the same run killed before its first checkpoint (nothing to continue; what it left
     is rewritten identically)."""
@@ -247,7 +258,7 @@ def _same_run(config_json: Path, kind: str, config) -> bool:
     current = json.loads(json.dumps(cfg.to_dict(config)))  # tuples as JSON has them: lists
     try:
         saved = json.loads(config_json.read_text())
-        _check_resumable(saved["config"], current, config_json, type(config))
+        check_resumable(saved["config"], current, config_json, type(config))
         return saved["kind"] == kind
     except (OSError, ValueError, LookupError, TypeError, AttributeError, BridgeplanError):  # not this run
         return False
@@ -268,7 +279,7 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
         state = load_checkpoint(ckpt_path)
         if state["kind"] != job.kind:
             raise BridgeplanError(f"{ckpt_path} is a {state['kind']} checkpoint, not a {job.kind} one")
-        _check_resumable(state["config"], config_dict, ckpt_path, type(config))
+        check_resumable(state["config"], config_dict, ckpt_path, type(config))
         if state["normalizer"] != job.normalizer_dict:
             raise BridgeplanError(f"{ckpt_path} was trained on a different dataset (normalizer differs)")
         model.load_state_dict(state["model"])
@@ -318,9 +329,7 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
 
     model.train()
     try:
-        run_steps(step, elapsed, config, one_step, log, save, ckpt_path, device,
-                  tqdm(total=config.steps, initial=step, disable=not progress, desc=f"train {run_dir.name}",
-                       unit="step", dynamic_ncols=True))
+        run_steps(step, elapsed, config, one_step, log, save, ckpt_path, device, f"train {run_dir.name}", progress)
     finally:
         if writer is not None:
             writer.close()
@@ -329,14 +338,15 @@ def _fit_locked(job: TrainJob, windows, run_dir: Path, resume: bool, device: tor
 
 def run_steps(step: int, elapsed: float, config, one_step: Callable[[int], torch.Tensor],
               log: Callable[[int, float, float, float], dict], save: Callable[[int, float], None], ckpt_path: Path,
-              device: torch.device, bar) -> None:
+              device: torch.device, desc: str, progress: bool) -> None:
     """The one training loop of every trained model (a planner, the learned prior, GCBC and GCIQL), from ``step``
     and ``elapsed`` seconds to ``config.steps``, or ``config.minutes`` of training in all: ``one_step(n)`` makes
     the optimizer step that brings the count to ``n`` and returns its loss, unread (reading it makes a GPU's host
     wait: the losses are read every few steps, :func:`loss_check_every`, and before every checkpoint, so that a
     non-finite step is never saved); every ``config.log_every`` steps ``log(step, steps per second, loss,
     elapsed)`` gives the progress bar's fields; every ``config.checkpoint_every`` steps, and at the end,
-    ``save(step, elapsed)``. ``bar`` is closed at the end."""
+    ``save(step, elapsed)``. A progress bar named ``desc`` where ``progress``."""
+    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=desc, unit="step", dynamic_ncols=True)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
     last_saved = step
     check_every = loss_check_every(device, config.log_every)
