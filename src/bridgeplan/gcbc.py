@@ -36,7 +36,7 @@ import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -55,15 +55,16 @@ from bridgeplan.train import check_resumable, check_run_dir, make_optimizer, run
 KIND = "gcbc"
 AGENTS = ("gcbc", "gciql")
 METRICS_NAME = "metrics.jsonl"
-MOVABLE = frozenset({"dataset"})
-"""What a resumed run may change beyond a planner's (``train._RESUMABLE_FIELDS``): the dataset's path (a moved
-file); its content is checked instead, by fingerprint."""
 
 
 @dataclass(frozen=True)
 class GCBCConfig:
     """One GCBC training run. Defaults are OGBench's for pointmaze (``impls/agents/gcbc.py``,
     ``impls/main.py``; ``impls/hyperparameters.sh`` passes no GCBC overrides for pointmaze)."""
+
+    resumable_too: ClassVar[frozenset] = frozenset({"dataset"})
+    """What a resumed run may change beyond a planner's (``train.check_resumable``): the dataset's path (a moved
+    file); its content is checked instead, by fingerprint."""
 
     dataset: str = ""
     """Path to the training npz in OGBench's format (``observations``, ``actions``, ``terminals``)."""
@@ -430,7 +431,7 @@ def _train_locked(config: GCBCConfig, data: GoalDataset, run_dir: Path, resume: 
         state = load_checkpoint(ckpt)
         if state["kind"] != KIND:
             raise BridgeplanError(f"{ckpt} is a {state['kind']} checkpoint, not a GCBC one")
-        check_resumable(state["config"], config_dict, ckpt, GCBCConfig, also=MOVABLE)
+        check_resumable(state["config"], config_dict, ckpt, GCBCConfig)
         if state["dataset"] != fingerprint:
             raise BridgeplanError(f"{ckpt} was trained on different data than {config.dataset}")
         net.load_state_dict(state.get("agent", state["policy"]))

@@ -191,15 +191,18 @@ def check_compiler(device: torch.device) -> None:
                                   ) from None
 
 
-def check_resumable(saved: dict, current: dict, path: Path, config_type, also: frozenset = frozenset()) -> None:
+def check_resumable(saved: dict, current: dict, path: Path, config_type) -> None:
     """``path`` was trained with ``current`` (a config dict), the fields a resume may change aside (those of
-    :data:`_RESUMABLE_FIELDS` and ``also``)."""
+    :data:`_RESUMABLE_FIELDS` and the config type's own ``resumable_too``, wherever a run is checked: on resume and
+    for a run killed before its first checkpoint)."""
+    resumable = _RESUMABLE_FIELDS | getattr(config_type, "resumable_too", frozenset())
+
     def canonical(d: dict) -> dict:  # today's form (a run saved by an older bridgeplan too), as JSON has it
         return json.loads(json.dumps(cfg.to_dict(cfg.from_dict(config_type, d))))
 
     saved, current = canonical(saved), canonical(current)
     diff = sorted(k for k in set(saved) | set(current)
-                  if k not in _RESUMABLE_FIELDS | also and saved.get(k) != current.get(k))
+                  if k not in resumable and saved.get(k) != current.get(k))
     if diff:
         detail = ", ".join(f"{k}: {saved.get(k)!r} -> {current.get(k)!r}" for k in diff)
         raise BridgeplanError(f"checkpoint {path} was trained with a different config ({detail})")
