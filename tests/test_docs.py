@@ -42,12 +42,13 @@ def problems(parser: argparse.ArgumentParser, command: str) -> list[str]:
 
 def test_the_checker_finds_a_gone_subcommand_and_a_gone_flag():
     parser = build_parser()
-    text = ("Run `bridgeplan ogbench eval RUN`, then\n\n```bash\nbridgeplan gcbc eval RUN \\\n    --steps all  # old\n"
-            "bridgeplan eval RUN --plan-batch 8 --json | head\n```\n")
-    assert commands(text) == ["bridgeplan gcbc eval RUN --steps all", "bridgeplan eval RUN --plan-batch 8 --json",
+    text = ("Run `bridgeplan ogbench eval RUN`, then\n\n```bash\nbridgeplan gcbc train DATA \\\n"
+            "    --snapshots all  # old\nbridgeplan eval RUN --plan-batch 8 --json | head\n```\n")
+    assert commands(text) == ["bridgeplan gcbc train DATA --snapshots all",
+                              "bridgeplan eval RUN --plan-batch 8 --json",
                               "bridgeplan ogbench eval RUN"]
     assert [problems(parser, c) for c in commands(text)] == [
-        ["`bridgeplan gcbc eval` has no --steps"], [], ["no subcommand 'ogbench'"]]
+        ["`bridgeplan gcbc train` has no --snapshots"], [], ["no subcommand 'ogbench'"]]
 
 
 DOCS = sorted(p.relative_to(ROOT).as_posix() for p in [ROOT / "README.md", *(ROOT / "docs").rglob("*.md")]

@@ -214,9 +214,10 @@ def test_bad_dataset_files(tmp_path):
     assert not (tmp_path / "run").exists()  # refused before anything is written
 
 
-def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
-    """Through ``bridgeplan ogbench``: a tiny generated medium dataset, training, the protocol on the snapshot
-    (one: each evaluation runs 5 episodes of up to 1000 steps)."""
+def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys, monkeypatch):
+    """Through the CLI: a tiny generated medium dataset, training, the protocol on the snapshot (one: each
+    evaluation runs 5 episodes of up to 1000 steps) through the one evaluation, the policy acting at every step on
+    the states and goals the environment gives."""
     import json
 
     from bridgeplan.cli import main
@@ -230,13 +231,14 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
              "--device", "cpu", "--no-progress"]
     assert main(train) == 0
     assert "step 4" in capsys.readouterr().out
-    assert main(["gcbc", "eval", str(run), "--snapshots", "all", "--episodes", "1", "--no-progress",
-                 "--json"]) == 0
-    out = capsys.readouterr().out
-    assert out.count('"env_id": "pointmaze-medium-v0"') == 1
+    assert main(["eval", str(run), "--episodes", "1", "--no-progress", "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
     saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0.json").read_text())
+    assert saved == row and row["env_id"] == "pointmaze-medium-v0" and row["method"] == "gcbc"
     assert saved["step"] == 4 and saved["episodes"] == 5 and set(saved["tasks"]) == {"1", "2", "3", "4", "5"}
-    assert saved["cpu"] == cpu_model() and json.loads((run / "config.json").read_text())["cpu"] == cpu_model()
+    assert saved["execution"]["controller"] == "policy" and saved["train_seed"] == 0
+    assert saved["calls_per_episode"] == np.mean([t["steps"] for t in saved["tasks"].values()])  # one per step
+    assert saved["environment"]["cpu"] == cpu_model() == json.loads((run / "config.json").read_text())["cpu"]
     # mistakes: one error line, exit 2
     assert main(train) == 2
     assert "pass --resume" in capsys.readouterr().err
@@ -244,5 +246,18 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys):
     assert capsys.readouterr().err.strip().splitlines() == ["error: lr must be a positive, finite number, got 0.0"]
     assert main(["gcbc", "train", data, "--run-dir", str(tmp_path / "r3"), "--maze", "large"]) == 2
     assert "not a pointmaze-large dataset" in capsys.readouterr().err
-    assert main(["gcbc", "eval", str(run), "--snapshots", "3"]) == 2
+    assert main(["eval", str(run), "--snapshot", "3"]) == 2
     assert "no snapshot at step 3" in capsys.readouterr().err
+    # the policy acts at every step on the environment's states and goals (the goal is the decision it follows)
+    from bridgeplan.gcbc import GCBCPolicy, evaluate_policy
+    from bridgeplan.replan import PlanExecutor
+
+    given, seen = [], []
+    executor_act, policy_act = PlanExecutor.act, GCBCPolicy.act
+    monkeypatch.setattr(PlanExecutor, "act", lambda self, s, g: given.append((s, g)) or executor_act(self, s, g))
+    monkeypatch.setattr(GCBCPolicy, "act", lambda self, s, g: seen.append((s, g)) or policy_act(self, s, g))
+    evaluate_policy(run, episodes=1, task_ids=(2,))
+    assert len(seen) == len(given) > 1
+    for (s, g), (ps, pg) in zip(given, seen):
+        np.testing.assert_array_equal(ps, s)
+        np.testing.assert_array_equal(pg, g)

@@ -504,7 +504,7 @@ def test_the_dataset_graph_plans_alone_and_as_a_high_level(tiny_data, tmp_path, 
 
 def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     """GCBC through its one trainer and the family's evaluation: a tiny generated cube-single dataset, 4 steps, then
-    ``bridgeplan eval RUN`` (``gcbc eval``'s function) on a test task and a validation task, one episode each; the
+    ``bridgeplan eval RUN`` on a test task and a validation task, one episode each; the
     mistakes are one error line each and write nothing."""
     data = tiny_data
     run = tmp_path / "run"
@@ -519,7 +519,7 @@ def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
     assert set(row["tasks"]) == {"1", "6"} and row["episodes"] == 2
     assert row["tasks"]["1"]["steps"] == [200]  # an untrained policy does not end the episode early
     assert row["tasks"]["6"]["task_name"] == "validation_task6"
-    saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0-tasks1_6.json").read_text())
+    saved = json.loads((run / "eval" / "gcbc-step4-ep1-seed0-tasks16.json").read_text())
     assert saved == row
     # mistakes
     before = sorted(p.name for p in (run / "eval").iterdir())
@@ -527,7 +527,8 @@ def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
         "error: task ids must be in 1..5")
     assert _error(capsys, ["eval", str(run), "--nfe", "4"]) == (
         f"error: {run} is a GCBC run (a policy, no plans): --nfe do not apply")
-    assert _error(capsys, ["gcbc", "eval", str(run), "--maze", "puzzle-3x3-play-v0", "--no-progress"]) == (
+    assert _error(capsys, ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(data), "--low", str(run),
+                           "--no-progress"]) == (
         f"error: {run} was trained on 28-D observations, puzzle-3x3-play-v0's are 55-D")
     assert sorted(p.name for p in (run / "eval").iterdir()) == before
     assert _error(capsys, ["gcbc", "train", str(data), "--run-dir", str(tmp_path / "r2"), "--maze",

@@ -6,6 +6,8 @@ from __future__ import annotations
 import csv
 import json
 
+import pytest
+
 from bridgeplan.processes import make_process
 from tests.reports import GENERATORS, report
 
@@ -306,19 +308,31 @@ def test_ogbench_planners_reads_stitch_folders_and_the_graph_as_one_graph(tmp_pa
                                "training seeds")
 
 
-def test_the_reports_read_the_oracles_rows_as_the_committed_files(tmp_path):
+def test_the_reports_read_every_evaluation_json_in_one_form(tmp_path):
     """The expert and the oracle rows of ``bridgeplan oracle`` (their score under ``score``, one JSON of ``rows``)
-    read as the committed files (``reference expert-on-tasks``'s flat rows, ``ogbench evaluate-oracle``'s JSON)."""
-    import json
+    read as the committed files (``reference expert-on-tasks``'s flat rows); every command's evaluation JSON (an
+    EvalResult's, an oracle file's one row, an earlier flat ``gcbc eval`` row) reads with its code version on top."""
+    from bridgeplan.analysis.load import read_evaluation
+    from bridgeplan.errors import BridgeplanError
 
-    headline, calibration = report("headline"), report("ogbench-calibration")
+    headline = report("headline")
     (tmp_path / headline.EXPERT).write_text(json.dumps({"rows": [
         {"maze": "umaze", "multi_task": False, "seed": 0, "score_minari": 97.0},
         {"maze": "umaze", "multi_task": False, "seed": 1, "score": {"minari": {"mean": 99.0, "se": 1.0}}}]}))
     assert headline.expert_scores(tmp_path) == {("umaze", False): [97.0, 99.0]}
     row = {"maze": "medium", "env_id": "pointmaze-medium-v0", "success_rate": 0.9}
-    assert calibration.oracle_row({**row, "code_version": "v"}) == {**row, "code_version": "v"}
-    assert calibration.oracle_row({"code_version": "v", "rows": [row]}) == {**row, "code_version": "v"}
+    files = {"flat": {**row, "code_version": "v"}, "oracle": {"code_version": "v", "rows": [row]},
+             "result": {**row, "environment": {"code_version": "v", "cpu": "c"}},
+             "two": {"code_version": "v", "rows": [row, row]}}
+    for name, d in files.items():
+        (tmp_path / f"{name}.json").write_text(json.dumps(d))
+    assert read_evaluation(tmp_path / "flat.json") == read_evaluation(tmp_path / "oracle.json") == {
+        **row, "code_version": "v"}
+    assert read_evaluation(tmp_path / "result.json") == {**files["result"], "code_version": "v"}
+    with pytest.raises(BridgeplanError, match="2 oracle rows"):
+        read_evaluation(tmp_path / "two.json")
+
+
 def _bench(device, latency, throughput, limits=None):
     machine = {"device": device, "torch": "2", "code_version": "0.1.0+test", "processor": "x86_64", "cpu": "CPU",
                "cpu_count": 2} | ({"gpu": "GPU X"} if device == "cuda" else {})

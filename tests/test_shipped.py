@@ -76,7 +76,9 @@ def test_every_shipped_policy_matches_its_rows(tmp_path, monkeypatch, capsys):
     assert main(["eval", POLICIES[0], "--episodes", "1", "--tasks", "1", "--no-progress", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["run"] == POLICIES[0] and row["episodes"] == 1 and list(row["tasks"]) == ["1"]
-    assert list((tmp_path / "runs" / "shipped" / POLICIES[0] / "eval").glob("gcbc-*.json"))
+    assert row["method"] == "gciql" and row["train_seconds"] > 0  # the shipped snapshot's training time
+    saved = tmp_path / "runs" / "shipped" / POLICIES[0] / "eval" / f"gciql-step{row['step']}-ep1-seed0-tasks1.json"
+    assert json.loads(saved.read_text()) == row
 
 
 def test_pyproject_ships_the_files_as_package_data():
@@ -299,9 +301,9 @@ log_every = 2
 device = "cpu"
 
 [[evaluations]]
-command = "gcbc eval"
+command = "eval"
 runs = ["gciql"]
-args = {{ snapshots = 4, episodes = 1 }}
+args = {{ snapshot = 4, episodes = 1 }}
 out = "shipped/tiny/gciql-s{{seed}}.json"
 task_seed = 0
 

@@ -1,8 +1,9 @@
-"""The evaluation commands a study runs (``eval``, ``hierarchy eval``, ``graph``, ``oracle``, ``gcbc eval``): each an
-options dataclass (:mod:`bridgeplan.options`) and a function of it. The CLI (:mod:`bridgeplan.commands`) parses its
-flags into the dataclass and calls the function; the study runner (:mod:`bridgeplan.studies.jobs`) fills the same
-dataclass from a study's ``args`` table and calls the function (:data:`STUDY_COMMANDS`). Their options are declared in
-:mod:`bridgeplan.option_groups` where other commands share them. torch is imported only when a command runs."""
+"""The evaluation commands a study runs (``eval``, of a planner's run or a GCBC/GCIQL policy's, ``hierarchy eval``,
+``graph``, ``oracle``): each an options dataclass (:mod:`bridgeplan.options`) and a function of it. The CLI
+(:mod:`bridgeplan.commands`) parses its flags into the dataclass and calls the function; the study runner
+(:mod:`bridgeplan.studies.jobs`) fills the same dataclass from a study's ``args`` table and calls the function
+(:data:`STUDY_COMMANDS`). Their options are declared in :mod:`bridgeplan.option_groups` where other commands share
+them. torch is imported only when a command runs."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ from bridgeplan.option_groups import (
     Threads,
     task_ids,
 )
-from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared
+from bridgeplan.options import group, int_tuple, opt, positive, shared
 
 
 def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None, env: str | None = None):
@@ -115,7 +116,7 @@ def eval_run(o: EvalOptions) -> int:
     from bridgeplan.runs import run_dir_of
 
     if is_gcbc_run(o.run):
-        return _eval_gcbc(o)
+        return _eval_policy(o)
     if o.plan_batch is not None:
         positive("--plan-batch", o.plan_batch)
     plan = execution(o.replanning, o.controller, o.plans)
@@ -139,27 +140,26 @@ def _out(output: Output, tasks: Tasks, folder: Path, name: str) -> Path:
     return Path(output.out) if output.out else folder / f"{name}{tasks.file_tag()}.json"
 
 
-def _eval_gcbc(o: EvalOptions) -> int:
-    """``eval`` of a GCBC run: its policy (``--snapshot``: that step's) on its environment's tasks; the flags about
-    plans do not apply and are refused."""
-    from bridgeplan.files import atomic_write_text, check_writable
-    from bridgeplan.gcbc import evaluate_gcbc
+def _eval_policy(o: EvalOptions) -> int:
+    """``eval`` of a GCBC/GCIQL run: its policy (``--snapshot``: that step's) on its environment's tasks, its JSON
+    every evaluation's; the flags about plans do not apply and are refused."""
+    from bridgeplan.evaluate import check_result_path
+    from bridgeplan.gcbc import evaluate_policy
+    from bridgeplan.paths import eval_dir
+    from bridgeplan.runs import run_dir_of
 
-    given = {"nfe": o.nfe, "sampler": o.sampler, "replan_every": o.replanning.replan_every,
-             "replan_tolerance": o.replanning.replan_tolerance}
+    given = {"nfe": o.nfe, "plan_batch": o.plan_batch, "sampler": o.sampler, "correction": o.correction.correction,
+             "replan_every": o.replanning.replan_every, "replan_tolerance": o.replanning.replan_tolerance}
     planning = [f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None] + (
-        ["--multi-task"] if o.tasks.multi_task else [])
+        ["--compile"] if o.compile else [])
     if planning:
         raise BridgeplanError(f"{o.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
-    if o.output.out:
-        check_writable(o.output.out, "evaluation JSON")
-    row = evaluate_gcbc(o.run, steps=None if o.snapshot is None else [o.snapshot], episodes=o.tasks.episodes or 0,
-                        seed=o.tasks.seed, progress=not o.progress.no_progress, task_ids=o.tasks.ids)[0]
-    text = row.pop("text")
-    if o.output.out:
-        atomic_write_text(Path(o.output.out), json.dumps(row, indent=2) + "\n")
-    print(json.dumps(row, indent=2) if o.output.json else text)
-    return 0
+    folder = eval_dir(run_dir_of(Path(o.run)))
+    check_result_path(o.output.out, folder)
+    result = evaluate_policy(o.run, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids, o.snapshot,
+                             o.device.device, progress=not o.progress.no_progress)
+    name = f"{result.entries['method']}-step{result.entries['step']}"
+    return _show(result, o.output, _out(o.output, o.tasks, folder, name))
 
 
 # --- hierarchy eval and graph -------------------------------------------------------------------------------------
@@ -352,7 +352,7 @@ def _graph_drawing(o: GraphOptions, env: str):
     return draw
 
 
-# --- oracle and gcbc eval -----------------------------------------------------------------------------------------
+# --- oracle ---------------------------------------------------------------------------------------------------------
 
 @dataclass(kw_only=True)
 class OracleOptions:
@@ -404,58 +404,6 @@ def oracle(o: OracleOptions) -> int:
 
 
 
-@dataclass(kw_only=True)
-class GCBCEvalOptions:
-    run: str = opt(help="a `gcbc train` run directory")
-    environment: Environment = group(Environment)
-    snapshots: str | None = opt(None, "the snapshots to evaluate: their training steps, comma-separated, or 'all' "
-                                      "(default: the latest checkpoint)")
-    episodes: int | None = shared(Tasks, "episodes")
-    seed: int = shared(Tasks, "seed")
-    output: Output = group(Output)
-    progress: Progress = group(Progress)
-    threads: Threads = group(Threads)
-
-
-GCBC_EVAL_DESCRIPTION = ("--maze defaults to the environment the run was trained with; --out takes one snapshot's "
-                         "evaluation (--snapshots N).")
-
-
-def gcbc_eval(o: GCBCEvalOptions) -> int:
-    from bridgeplan.gcbc import evaluate_gcbc, policy_snapshots
-
-    steps = None
-    if o.snapshots == "all":
-        steps = [s for s, _ in policy_snapshots(o.run)]
-    elif o.snapshots:
-        try:
-            steps = [int(v) for v in o.snapshots.split(",")]
-        except ValueError:
-            raise BridgeplanError(f"--snapshots takes comma-separated training steps or 'all', got "
-                                  f"{o.snapshots!r}") from None
-    out = o.output.out
-    if out and (steps is None or len(steps) != 1):
-        raise BridgeplanError("--out takes one evaluation: give one snapshot with --snapshots N")
-    if out:
-        from bridgeplan.files import check_writable
-
-        check_writable(out, "JSON file")
-    if o.threads.threads is not None:
-        from bridgeplan.device import configure_threads
-
-        configure_threads(o.threads.threads)
-    rows = evaluate_gcbc(o.run, o.environment.maze or "", steps, o.episodes or 0, o.seed,
-                         progress=not o.progress.no_progress)
-    for row in rows:
-        text = row.pop("text")
-        print(json.dumps(row, indent=2) if o.output.json else f"step {row['step']}: {text}")
-    if out:
-        from bridgeplan.files import atomic_write_text
-
-        atomic_write_text(Path(out), json.dumps(rows[0], indent=2) + "\n")
-        print(f"wrote {out}")
-    return 0
-
 
 # --- what a study runs ----------------------------------------------------------------------------------------------
 
@@ -474,16 +422,10 @@ class StudyCommand:
     seed: str = "seed"
     """The option the runner's evaluation seed fills."""
 
-    @property
-    def takes_tasks(self) -> bool:
-        """It takes ``tasks`` (so a validation split can give it a family's validation tasks)."""
-        return any(leaf.name == "tasks" for leaf in leaves(self.options))
-
 
 STUDY_COMMANDS = {
     "eval": StudyCommand(EvalOptions, eval_run, ("run",)),
     "hierarchy eval": StudyCommand(HierarchyEvalOptions, hierarchy_eval, ("high", "low")),
     "graph": StudyCommand(GraphOptions, graph_eval, ("low",), optional_runs=True, reads_dataset=True),
     "oracle": StudyCommand(OracleOptions, oracle, (), seed="seeds"),
-    "gcbc eval": StudyCommand(GCBCEvalOptions, gcbc_eval, ("run",)),
 }

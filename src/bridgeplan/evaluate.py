@@ -395,7 +395,8 @@ def format_table(r: dict) -> str:
     how += ", open loop" if ex.get("replan_every") is None else f", replan every {ex['replan_every']} steps"
     tasks = (f"{r['episodes_per_task']} episodes per task" if "episodes_per_task" in r
              else f"{r['episodes']} episodes" + (", multi-task" if r.get("multi_task") else ""))
-    lines = [f"{r.get('run')} (step {r.get('step')}): {r.get('method')}, NFE {r.get('nfe')}, {how}",
+    nfe = "" if r.get("nfe") is None else f", NFE {r['nfe']}"  # a policy's: one call per step, no plans
+    lines = [f"{r.get('run')} (step {r.get('step')}): {r.get('method')}{nfe}, {how}",
              f"  {tasks}, seed {r['seed']}"]
     if isinstance(r.get("score"), dict):
         s = r["score"]

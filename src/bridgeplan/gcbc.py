@@ -30,6 +30,7 @@ evaluation loads), ``RUN/metrics.jsonl`` one line per ``log_every`` steps (loss,
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import json
 import math
@@ -297,8 +298,10 @@ class GCBCPolicy:
     """A trained GCBC policy behind the batched interface evaluation uses: numpy in, numpy out."""
 
     def __init__(self, net: GoalPolicy, step: int, config: GCBCConfig, device: torch.device,
-                 dataset_identity: str = ""):
+                 dataset_identity: str = "", elapsed_seconds: float | None = None):
         self.net, self.step, self.config, self.device = net.eval(), step, config, device
+        self.elapsed_seconds = elapsed_seconds
+        """Wall-clock seconds the run had trained at this step (None in a shipped policy's file)."""
         self.dataset_identity = dataset_identity
         """A shipped policy's: the identity of the data its scores' graph was built over (else empty)."""
 
@@ -333,7 +336,8 @@ def load_policy(path: str | Path, device: str = "cpu") -> GCBCPolicy:
     dev = resolve_device(device)
     net = build_policy(config, state["obs_dim"], state["action_dim"]).to(dev)
     net.load_state_dict(state["policy"])
-    return GCBCPolicy(net, state["step"], config, dev, state.get("dataset_identity", ""))
+    return GCBCPolicy(net, state["step"], config, dev, state.get("dataset_identity", ""),
+                      state.get("elapsed_seconds"))
 
 
 def trained_env(maze: str) -> str | None:
@@ -510,64 +514,49 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
 
 
 
-class PolicyAgent:
-    """A policy as an agent of a family's episodes (:meth:`~bridgeplan.envs.family.Family.run`): it keeps no state."""
+@dataclass
+class GoalDecisions:
+    """A goal-conditioned policy's decisions: each episode's goal, a plan of one state made when the episode starts
+    (and again when its goal moves), which :class:`~bridgeplan.envs.controllers.PolicyFollower` pursues with the
+    policy at every step (its network calls counted there)."""
 
-    def __init__(self, policy: GCBCPolicy):
-        self.policy = policy
+    device: torch.device
 
-    def begin(self, n: int) -> None:
-        pass
-
-    def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        return self.policy.act(states, goals)
-
-    def end(self, rows: np.ndarray) -> None:
-        pass
+    def source(self, n: int, generator: torch.Generator | None = None):
+        return lambda states, goals, episodes, t: np.asarray(goals, np.float64)[:, None, :]
 
 
-def format_score(row: dict) -> str:
-    """One evaluation's success per task and overall, from its family's score fields."""
-    lines = [f"  task {i} {t.get('task_name', '')}: {t['success_rate']:6.1%} ({t['successes']}/{t['episodes']})"
-             for i, t in row["tasks"].items()]
-    return "\n".join([f"{row['env_id']}: {row['episodes_per_task']} episodes per task, seed {row['seed']}", *lines,
-                      f"  overall: {row['success_rate']:.1%} ({row['successes']}/{row['episodes']})"])
+def run_policy(run: str | Path, snapshot: int | None = None, device: str = "cpu", env: str | None = None) -> GCBCPolicy:
+    """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) for ``env``
+    (default: the run's own), whose observations must be the policy's."""
+    policy = load_policy(policy_path(run, snapshot), device)
+    env = env or policy.env
+    if env is None:
+        raise BridgeplanError(f"{run} was trained without --maze: say which environment to evaluate in")
+    obs_dim = family_of(env).layout(env).obs_dim
+    if policy.net.obs_dim != obs_dim:
+        raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, {env}'s are {obs_dim}-D")
+    return policy
 
 
-def evaluate_gcbc(run_dir: str | Path, maze: str = "", steps: list[int] | None = None, episodes: int = 0,
-                  seed: int = 0, progress: bool = False, task_ids: tuple[int, ...] | None = None) -> list[dict]:
-    """The environment family's evaluation (:meth:`~bridgeplan.envs.family.Family.tasks`, ``run``, ``score``: OGBench's
-    5 tasks, 50 episodes each by default; ``task_ids`` 6-10: its validation tasks) for a run's policy snapshots at
-    ``steps`` (default: its latest checkpoint). Each result is also written to
-    ``RUN/eval/gcbc-step<N>-ep<E>-seed<S>[-tasks...].json``; returns them in order."""
-    from bridgeplan.files import atomic_write_text
-    from bridgeplan.paths import eval_dir
-    from bridgeplan.runs import run_dir_of
+def evaluate_policy(run: str | Path, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
+                    task_ids: tuple[int, ...] | None = None, snapshot: int | None = None, device: str = "cpu",
+                    progress: bool = False):
+    """A GCBC/GCIQL run's policy (its ``snapshot``, default its latest checkpoint) on its environment's tasks, as
+    every evaluation (:func:`bridgeplan.evaluate.evaluate`): the goal its decision, the policy its controller. The
+    row names the run, its dataset (by name: no path of this machine), its training seed and time."""
+    from bridgeplan.envs.controllers import PolicyFollower
+    from bridgeplan.evaluate import evaluate, make_tasks
+    from bridgeplan.replan import Execution
 
-    run_dir = Path(run_dir)
-    paths = [policy_path(run_dir)] if steps is None else [policy_path(run_dir, s) for s in steps]
-    folder = eval_dir(run_dir_of(run_dir))  # a shipped policy's: runs/shipped/NAME/eval
-    results = []
-    for path in paths:
-        policy = load_policy(path)
-        on = maze or policy.config.maze
-        if not on:
-            raise BridgeplanError(f"{run_dir} was trained without --maze: say which environment to evaluate in")
-        env = environment(on)
-        family = family_of(env)
-        tasks = family.tasks(env, episodes or None, seed, task_ids=task_ids)
-        if policy.net.obs_dim != family.layout(env).obs_dim:
-            raise BridgeplanError(f"{run_dir} was trained on {policy.net.obs_dim}-D observations, {env}'s are "
-                                  f"{family.layout(env).obs_dim}-D")
-        outcome = family.run(tasks, PolicyAgent(policy), progress)
-        # the run and its dataset named by what they are (no path of this machine); the training seed beside
-        # the protocol's evaluation seed, so that rows over several training seeds can be averaged as OGBench does
-        row = {"run": run_dir.name, "dataset": Path(policy.config.dataset).stem, "train_seed": policy.config.seed,
-               "step": policy.step, "code_version": code_version(), "cpu": cpu_model(), **tasks.fields(),
-               **family.score(tasks, outcome)}
-        row = json.loads(json.dumps(row))  # as written: task ids as strings
-        which = "" if task_ids is None else "-tasks" + "_".join(map(str, task_ids))
-        atomic_write_text(folder / f"gcbc-step{policy.step}-ep{row['episodes_per_task']}-seed{seed}"
-                          f"{which}.json", json.dumps(row, indent=2) + "\n")
-        results.append(row | {"text": format_score(row)})
-    return results
+    policy = run_policy(run, snapshot, device)
+    env, family = policy.env, family_of(policy.env)
+    tasks = make_tasks(env, episodes, seed, multi_task, task_ids)
+    dataset = Path(policy.config.dataset).stem
+    entries = {"run": Path(run).name, "dataset": dataset, "train_seed": policy.config.seed, "step": policy.step,
+               "train_seconds": policy.elapsed_seconds, "method": policy.config.agent, "nfe": None}
+    result, _ = evaluate(GoalDecisions(policy.device), family, tasks, Execution().resolved(family, env), entries,
+                         progress=progress,
+                         follower=lambda n: PolicyFollower(n, family.body(env), policy.act, ahead=1))
+    result.config = {**dataclasses.asdict(policy.config), "dataset": dataset}
+    return result

@@ -1,11 +1,11 @@
-"""The ``bridgeplan gcbc train`` and ``gcbc eval`` commands (torch is imported only when one runs)."""
+"""The ``bridgeplan gcbc train`` command (torch is imported only when it runs); ``bridgeplan eval RUN`` evaluates its
+runs as any other."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-from bridgeplan.eval_commands import GCBC_EVAL_DESCRIPTION, GCBCEvalOptions, gcbc_eval
 from bridgeplan.option_groups import Device, Environment, Progress, RunDir, Threads, Training
 from bridgeplan.options import REQUIRED, add_command, config_fields, from_config, group, int_tuple, opt
 
@@ -34,7 +34,7 @@ class GCBCTrainOptions:
 
 
 def add_gcbc_commands(sub) -> None:
-    """The ``bridgeplan gcbc`` group: ``train`` and ``eval``."""
+    """The ``bridgeplan gcbc`` group: ``train``."""
     p = sub.add_parser("gcbc", help="OGBench's goal-conditioned baselines on its own data: GCBC and GCIQL")
     og = p.add_subparsers(dest="gcbc_command", required=True)
     add_command(og, "train", GCBCTrainOptions, _cmd_gcbc_train, GCBC_CONFIG,
@@ -42,9 +42,6 @@ def add_gcbc_commands(sub) -> None:
                 description="Defaults (shown): OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py). "
                             "--maze: the OGBench dataset the data is of (pointmaze-medium-navigate-v0, "
                             "cube-single-play-v0, or a bare pointmaze maze; checked; evaluation's default).")
-    add_command(og, "eval", GCBCEvalOptions, gcbc_eval, description=GCBC_EVAL_DESCRIPTION,
-                help="a GCBC run's snapshots on OGBench's 5-task evaluation protocol (one snapshot on any tasks, "
-                     "validation's too: `bridgeplan eval RUN --tasks 6,7,8,9,10`)")
 
 
 def _cmd_gcbc_train(o: GCBCTrainOptions) -> int:

@@ -479,22 +479,6 @@ def check_graph_low(low_run, policy_low: bool, nfe_low: int | None, replan_high_
         raise BridgeplanError("--policy-ahead is a policy low level's: give --low a GCBC or GCIQL run")
 
 
-def graph_policy(run: Path, snapshot: int | None, device: str, env: str | None = None):
-    """The policy of GCBC/GCIQL run ``run`` (its ``snapshot`` step, default its latest checkpoint) as a graph's low
-    level in ``env`` (default: the run's own), whose states must be the policy's."""
-    from bridgeplan.gcbc import load_policy, policy_path
-
-    policy = load_policy(policy_path(run, snapshot), device)
-    env = env or policy.env
-    if env is None:
-        raise BridgeplanError(f"{run} names no environment: give it (--maze NAME)")
-    obs_dim = family_of(env).layout(env).obs_dim
-    if policy.net.obs_dim != obs_dim:
-        raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, the environment's are "
-                              f"{obs_dim}-D")
-    return policy
-
-
 @dataclass
 class GraphAgent:
     """The dataset graph's decisions and, over a policy, the follower that executes them (:func:`graph_agent`)."""
@@ -516,9 +500,10 @@ class GraphAgent:
 def graph_agent(env: str, dataset: str, length: int, settings: dict | None = None, policy=None, objects: bool = False,
                 ahead: int | None = None) -> GraphAgent:
     """The dataset graph over ``dataset`` (of ``env``; :func:`bridgeplan.graph.for_stream`, ``objects``: one per
-    object), its paths ``length`` states long, executed by ``policy`` (a GCBC or GCIQL run's, :func:`graph_policy`;
-    its goal the path's state ``ahead`` steps on, default :data:`POLICY_AHEAD`) or, without one, by the execution's
-    controller: what ``bridgeplan graph`` evaluates and ``PlannerPolicy.from_graph`` acts by."""
+    object), its paths ``length`` states long, executed by ``policy`` (a GCBC or GCIQL run's,
+    :func:`bridgeplan.gcbc.run_policy`; its goal the path's state ``ahead`` steps on, default :data:`POLICY_AHEAD`)
+    or, without one, by the execution's controller: what ``bridgeplan graph`` evaluates and
+    ``PlannerPolicy.from_graph`` acts by."""
     from bridgeplan.envs.controllers import PolicyFollower
     from bridgeplan.graph import GraphDecisions, for_stream
 
@@ -561,12 +546,12 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution, follower)`` (the graph alone
     or over a policy) hears the graph's decisions after the evaluation (``bridgeplan graph --render``).
     ``objects``: the graph alone or over a policy, one per object (:class:`bridgeplan.graph.ObjectGraphs`)."""
-    from bridgeplan.gcbc import is_gcbc_run
+    from bridgeplan.gcbc import is_gcbc_run, run_policy
 
     env, family = tasks.env, family_of(tasks.env)
     policy_low = low_run is not None and is_gcbc_run(low_run)
     check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
-    policy = graph_policy(low_run, low_snapshot, device, env) if policy_low else None
+    policy = run_policy(low_run, low_snapshot, device, env) if policy_low else None
     if low_run is None or policy is not None:
         agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead)
         graph, settings = agent.decisions.graph, agent.settings

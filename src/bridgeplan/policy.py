@@ -114,8 +114,8 @@ class PlannerPolicy:
 
         Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
         goal); ``objects``: one graph per object (``--objects``)."""
-        from bridgeplan.gcbc import is_gcbc_run
-        from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy, graph_policy
+        from bridgeplan.gcbc import is_gcbc_run, run_policy
+        from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy
 
         policy_low = low_run is not None and is_gcbc_run(low_run)
         check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
@@ -127,7 +127,7 @@ class PlannerPolicy:
             return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
                 replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
                 controller=controller or "pursuit", lookahead=lookahead), seed, replan_high_every)
-        policy = None if low_run is None else graph_policy(Path(low_run), low_snapshot, device, env)
+        policy = None if low_run is None else run_policy(Path(low_run), low_snapshot, device, env)
         if policy is not None:
             env, dataset = env or policy.env, dataset or policy.dataset
         if env is None or dataset is None:

@@ -1,10 +1,10 @@
 """OGBench manipulation: GCBC, GCIQL, planners and the dataset graph by OGBench's protocol on each play dataset
 generated here, beside the published numbers with their budget.
 
-Rows: the evaluation JSONs in docs/results/manip-SCENE/ (one folder per dataset, ``manip-cube-single``; ``gcbc eval``
-for GCBC and GCIQL, one per training seed and snapshot; ``eval`` for a planner and ``graph`` for the graph (no
-training: one row; with a policy low level, one per training seed of the policy), each its test split and its
-validation split on tasks 6-10). Success is OGBench's
+Rows: the evaluation JSONs in docs/results/manip-SCENE/ (one folder per dataset, ``manip-cube-single``; ``eval``
+(earlier ``gcbc eval``) for GCBC and GCIQL, one per training seed and snapshot; ``eval`` for a planner and ``graph``
+for the graph (no training: one row; with a policy low level, one per training seed of the policy), each its test
+split and its validation split on tasks 6-10). Success is OGBench's
 ``overall_success``: the mean over the tasks of each task's rate; mean ± standard error over training seeds. The main
 table is at each method's last snapshot (the largest step its rows have); GCBC and GCIQL also as OGBench averages
 them (per training seed, the mean of its last :data:`LAST` evaluations) and against training steps.
@@ -14,10 +14,10 @@ Made by `bridgeplan study report manipulation` (the studies studies/manip-*.toml
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
+from bridgeplan.analysis.load import read_evaluation
 from bridgeplan.analysis.stats import compare, paired
 from bridgeplan.analysis.tables import fmt_diff, fmt_mean_se, table
 from bridgeplan.envs.ogbench_manipulation.names import SCENES
@@ -91,7 +91,7 @@ def rows(root: Path, scene: str) -> list[dict]:
     out = []
     home = Path(root) / folder(scene)
     for path in sorted(home.rglob("*.json")):
-        d = json.loads(path.read_text())
+        d = read_evaluation(path)
         name = path.parent.name if path.parent != home else path.stem
         validation = any(int(t) > 5 for t in d["tasks"])
         seed = re.search(r"-s(\d+)", name)

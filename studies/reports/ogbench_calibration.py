@@ -1,9 +1,9 @@
 """OGBench pointmaze, calibration: the noise-free oracle and goal-conditioned behaviour cloning (GCBC) on locally
 generated datasets, by OGBench's evaluation protocol, beside OGBench's published GCBC.
 
-Rows: the protocol's JSONs, ``bridgeplan oracle NAME --json`` in docs/results/ogbench-oracle/
-and ``bridgeplan gcbc eval`` in docs/results/ogbench-gcbc/ (medium navigate) and ogbench-gcbc-<dataset>/ (the
-other datasets' studies; one per training seed and snapshot). Success
+Rows: the protocol's JSONs, ``bridgeplan oracle NAME --json`` in docs/results/ogbench-oracle/ and ``bridgeplan
+eval`` of GCBC runs (earlier ``gcbc eval``) in docs/results/ogbench-gcbc/ (medium navigate) and
+ogbench-gcbc-<dataset>/ (the other datasets' studies; one per training seed and snapshot). Success
 is OGBench's ``overall_success``: the mean over the 5 tasks of each task's rate. GCBC is averaged as OGBench
 averages: per training seed, the mean of its last :data:`LAST` evaluations; then mean ± standard error over
 seeds (OGBench: 8 seeds; here as many as the rows have).
@@ -14,11 +14,11 @@ docs/results/ogbench-calibration.md.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.analysis.load import read_evaluation
 from bridgeplan.analysis.tables import fmt_mean_se, table
 
 READS = ()
@@ -38,12 +38,7 @@ docs/results/ogbench-gcbc/README.md."""
 
 
 def read_rows(folder: Path) -> list[dict]:
-    return [oracle_row(json.loads(p.read_text())) for p in sorted(folder.glob("*.json"))]
-
-
-def oracle_row(d: dict) -> dict:
-    """An evaluation JSON as one row: itself, or the one row of ``bridgeplan oracle``'s (with its code version)."""
-    return {**d["rows"][0], "code_version": d["code_version"]} if "rows" in d else d
+    return [read_evaluation(p) for p in sorted(folder.glob("*.json"))]
 
 
 def task_cells(row: dict) -> list[str]:

@@ -16,15 +16,13 @@ docs/results/ogbench-planners.md.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from bridgeplan.analysis.load import read_evaluation
 from bridgeplan.analysis.stats import mean_se
 from bridgeplan.analysis.tables import bold, fmt_mean_se, table
-
-from .ogbench_calibration import oracle_row
 
 READS = ()
 """Its rows are the protocol's JSONs, not a Maze2D store."""
@@ -50,7 +48,7 @@ def dataset_name(maze: str, kind: str) -> str:
 
 
 def read_rows(root: Path, maze: str, kind: str = "navigate") -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted((root / folder(maze, kind)).glob("*/*.json"))]
+    return [read_evaluation(p) for p in sorted((root / folder(maze, kind)).glob("*/*.json"))]
 
 
 def graph_alone(row: dict) -> bool:
@@ -164,13 +162,13 @@ def dataset_lines(root: Path, maze: str, kind: str) -> list[str]:
                          cell(by_seed(rows, m, c, TEST_SEED, floor)),
                          f"{np.mean(list(ms.values())):.0f}" if ms else "-"])
     oracle_path = root / ORACLE / f"{maze}.json"
-    oracle = (f"{100 * oracle_row(json.loads(oracle_path.read_text()))['success_rate']:.1f}" if oracle_path.exists()
+    oracle = (f"{100 * read_evaluation(oracle_path)['success_rate']:.1f}" if oracle_path.exists()
               else "-")
     published = PUBLISHED[kind].get(maze, {})
     trained = [r for r in rows if not graph_alone(r)]
     seeds = sorted({training_seed(r) for r in trained})
     steps = sorted({r["step"] for r in trained})
-    versions = sorted({r["environment"]["code_version"] for r in rows})
+    versions = sorted({r["code_version"] for r in rows})
     training = (f"Training seeds {', '.join(map(str, seeds))}; step {', '.join(map(str, steps))}; " if trained
                 else "No trained planner yet; ")
     goal = goal_lines(rows, maze, kind, methods, chosen)

@@ -178,6 +178,22 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
         raise BridgeplanError(f"{path}: not an evaluation JSON ({type(e).__name__}: {e})") from None
 
 
+def read_evaluation(path: str | Path) -> dict:
+    """Any command's evaluation JSON as one flat dict (the form a family's success rows are read in): an
+    :class:`~bridgeplan.evaluate.EvalResult`'s (``eval``, of a planner or a policy, ``hierarchy eval``, ``graph``),
+    the one row of an ``oracle`` file, or an earlier ``gcbc eval``'s; its ``code_version`` at the top whichever."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise BridgeplanError(f"{path}: not an evaluation JSON ({type(e).__name__}: {e})") from None
+    if "rows" in d:  # the oracle's file: its rows and the code that made them
+        if len(d["rows"]) != 1:
+            raise BridgeplanError(f"{path}: {len(d['rows'])} oracle rows, a study's evaluation has one")
+        d = {**d["rows"][0], "code_version": d["code_version"]}
+    return {"code_version": d.get("environment", {}).get("code_version"), **d}
+
+
 @dataclass(frozen=True)
 class Point:
     """Where a series of per-seed evaluations sits: a method, a snapshot step and an NFE."""

@@ -1,7 +1,7 @@
 """Studies whose rows are evaluation JSONs, one command each: named runs trained per training seed as the study
-says, then ``bridgeplan eval``, ``hierarchy eval``, ``graph``, ``oracle`` or ``gcbc eval`` per training seed, split
-and task set, each writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table cell one declared
-line, run by ``study run``)::
+says, then ``bridgeplan eval`` (a planner's or a GCBC/GCIQL policy's), ``hierarchy eval``, ``graph`` or ``oracle`` per
+training seed, split and task set, each writing one JSON (the form of OGBench's ``hyperparameters.sh``: every table
+cell one declared line, run by ``study run``)::
 
     [runs.high-ddpm-k12]                 # a named run: TrainConfig fields over [training]'s, one per training seed
     process = "ddpm"
@@ -9,7 +9,7 @@ line, run by ``study run``)::
     stride = 12
 
     [[evaluations]]
-    command = "hierarchy eval"           # eval | hierarchy eval | graph | oracle | gcbc eval
+    command = "hierarchy eval"           # eval | hierarchy eval | graph | oracle
     runs = ["high-ddpm-k12", "low-flow-k4"]
     args = { nfe_high = 16, nfe_low = 1, replan_every = 12, lookahead = 1.5 }   # the command's options
     out = "large-hierarchy/high-ddpm-k12-nfe16-low-flow-k4-nfe1/{tasks}-seed{eval_seed}.json"   # under docs/results
@@ -125,7 +125,7 @@ def jobs(study, results: Path, out_root: Path, quick: bool) -> list[Job]:
                     if command.reads_dataset:
                         args.setdefault("maze", study.dataset.maze)
                     validation_tasks = study.dataset.family.validation_tasks
-                    if (split == "validation" and validation_tasks and command.takes_tasks and "tasks" not in args
+                    if (split == "validation" and validation_tasks and "tasks" not in args
                             and study.evaluation.validation == "other-tasks"):
                         args["tasks"] = ",".join(map(str, validation_tasks))  # not the test tasks, reseeded
                     args |= {**({"episodes": episodes} if episodes is not None else {}), command.seed: eval_seed,

@@ -63,7 +63,7 @@ Example (the keys and their defaults: the dataclasses below)::
     maze = "medium"
 
     [[evaluations]]
-    command = "eval"                     # or hierarchy eval, graph, oracle, gcbc eval (any environment's)
+    command = "eval"                     # or hierarchy eval, graph, oracle (any environment's)
     runs = ["high-ddpm-k12"]
     args = { nfe = 16, replan_every = 48, controller = "pursuit", lookahead = 1.5 }
     out = "large-hierarchy-flat/high-ddpm-k12-nfe16-replan48/{tasks}-seed{eval_seed}.json"
@@ -636,10 +636,6 @@ def read_study(path: Path | str, shown: Path | str | None = None, generators: di
         raise StudyError(path, "experiments", f"the thesis's grids and declared series run in Maze2D; a "
                                               f"{dataset.family.title} study declares [runs.NAME] and [[evaluations]]")
     for i, e in enumerate(evaluations):
-        if ("validation" in e.splits and dataset.family.validation_tasks and not STUDY_COMMANDS[e.command].takes_tasks
-                and evaluation.validation == "other-tasks"):
-            raise StudyError(path, f"evaluations[{i}].splits", f"{e.command} evaluates {dataset.family.title}'s test "
-                                                               f"tasks only: it has no validation split")
         missing = set(e.task_sets) - set(dataset.family.task_sets)
         if missing:
             raise StudyError(path, f"evaluations[{i}].task_sets", f"{dataset.family.title} has the task sets "
