@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from pathlib import Path
 
@@ -86,6 +87,26 @@ def test_sweep_resumes_and_reports(tiny_dataset, tmp_path, capsys, monkeypatch):
     assert main(["report", "--results", str(results), "--csv", str(tmp_path / "all.csv")]) == 0
     assert len((tmp_path / "all.csv").read_text().strip().splitlines()) == 1 + len(
         ResultsStore(results / "results.sqlite").rows())
+
+
+def test_a_run_from_the_learned_prior_trains_it_inside_its_unit(tiny_dataset, tmp_path):
+    """The learned prior is trained by the unit of the run that samples from it (in a worker where the units run in
+    workers, the seeds' priors side by side), not before the units start: making the units trains nothing."""
+    from bridgeplan.experiments.runner import grid_units
+    from bridgeplan.studies.plan import sweeps
+    from bridgeplan.studies.spec import read_study
+    from bridgeplan.workers import Executor
+
+    tiny_study(tmp_path, tiny_dataset, "nfe1", steps=1)
+    sweep = sweeps(read_study(tmp_path / "studies" / "tiny.toml"), tmp_path)[0]
+    units = grid_units([(sweep.settings, [sweep.experiment])], progress=False)
+    runs = tmp_path / "results" / "tiny" / "runs"
+    assert len(units) == 4 and not runs.exists()
+    learned = [u for u in units if u.args[3] is not None]
+    assert len(learned) == 1 and learned[0].args[1].prior == "learned"
+    assert sum(Executor().map(learned, False)) == 1  # its one snapshot's row, after training its prior
+    prior = runs / learned[0].args[3].run_name()
+    assert json.loads((prior / "config.json").read_text())["config"]["steps"] == 2
 
 
 def test_validation_sweep_scores_other_episodes_of_the_same_runs(tiny_dataset, tmp_path, capsys):

@@ -1,9 +1,10 @@
 """Running a sweep: train what is missing, evaluate what is not in the store yet.
 
 Work is split into units, one per trained run (train or resume it, in a study's stages first, then evaluate its
-snapshots for every series of every experiment and split that shows it: :func:`grid_units`). The learned prior is
-trained first, since the runs from it need it. The units run in a :class:`~bridgeplan.workers.Executor` (this
-process, worker processes or Ray tasks), beside a study's declared evaluations.
+snapshots for every series of every experiment and split that shows it: :func:`grid_units`). A run from the learned
+prior trains its prior first, under the prior's lock (the units of one seed share it: one trains it, the others wait).
+The units run in a :class:`~bridgeplan.workers.Executor` (this process, worker processes or Ray tasks), beside a study's
+declared evaluations.
 """
 
 from __future__ import annotations
@@ -107,11 +108,13 @@ def _train(settings: SweepSettings, spec: RunSpec, seed: int, prior_run: str, pr
     return config
 
 
-def run_job(work: list[tuple[SweepSettings, list[Experiment]]], spec: RunSpec, seed: int, prior_run: str,
-            stages: tuple[tuple[int, int], ...] = (), threads: int = 0, progress: bool = True) -> int:
-    """Train (or finish) one run, in ``stages`` first ((steps, checkpoint interval) of earlier passes, as a study's
-    committed runs were trained), then evaluate every (snapshot, series) that each of ``work``'s sweeps (its
-    settings, its experiments: the splits and experiments that show this run) needs of it; returns the new rows.
+def run_job(work: list[tuple[SweepSettings, list[Experiment]]], spec: RunSpec, seed: int,
+            prior: cfg.PriorTrainConfig | None, stages: tuple[tuple[int, int], ...] = (), threads: int = 0,
+            progress: bool = True) -> int:
+    """Train (or finish) one run, its learned ``prior`` first (None: it samples from another prior), in ``stages``
+    first ((steps, checkpoint interval) of earlier passes, as a study's committed runs were trained), then evaluate
+    every (snapshot, series) that each of ``work``'s sweeps (its settings, its experiments: the splits and
+    experiments that show this run) needs of it; returns the new rows.
 
     Each snapshot is loaded once per sweep and evaluated for every series (NFE, sampler, correction, execution, task
     set) whose evaluation is missing from the store (its ``store.KEY``, with ``Series.sampling_tag`` as the row
@@ -119,9 +122,13 @@ def run_job(work: list[tuple[SweepSettings, list[Experiment]]], spec: RunSpec, s
     computed once per task set and controller for the sweep.
     """
     from bridgeplan.device import configure_threads
+    from bridgeplan.train import train_prior
 
     first = work[0][0]
+    prior_run = "" if prior is None else str(paths.runs_dir(first.results_dir) / prior.run_name())
     configure_threads(threads or _train_config(first, spec, seed, prior_run).threads)
+    if prior is not None:
+        train_to(train_prior, prior, Path(prior_run), progress)
     for steps, every in stages:
         _train(dataclasses.replace(first, train_steps=steps, checkpoint_every=every), spec, seed, prior_run, progress)
     config = _train(first, spec, seed, prior_run, progress)
@@ -195,10 +202,9 @@ def ensure_dataset(settings: SweepSettings) -> SweepSettings:
 def grid_units(sweeps: list[tuple[SweepSettings, list[Experiment]]], stages: tuple[tuple[int, int], ...] = (),
                progress: bool = True) -> list[Unit]:
     """The units of work of ``sweeps`` (each its settings and experiments): one per trained run, whichever
-    experiments and splits show it (:func:`run_job`, in ``stages`` first), for an :class:`Executor`. The learned
-    priors the runs sample from are trained here first (the units need them); each sweep's dataset is made where
-    none was given."""
-    units: dict[str, tuple[RunSpec, int, str, list]] = {}
+    experiments and splits show it (:func:`run_job`, in ``stages`` first, after the learned prior it samples from),
+    for an :class:`Executor`; each sweep's dataset is made where none was given."""
+    units: dict[str, tuple[RunSpec, int, cfg.PriorTrainConfig | None, list]] = {}
     for settings, experiments in sweeps:
         for exp in experiments:
             exp.validate()
@@ -211,7 +217,7 @@ def grid_units(sweeps: list[tuple[SweepSettings, list[Experiment]]], stages: tup
                 if settings.only_runs is not None and name not in settings.only_runs:
                     continue
                 if name not in units:
-                    prior = _ensure_prior(settings, seed, planner, progress) if spec.prior == "learned" else ""
+                    prior = _prior_config(settings, seed, planner) if spec.prior == "learned" else None
                     units[name] = (spec, seed, prior, [])
                 units[name][3].append((settings, experiments))
     return [Unit(run_job, (work, spec, seed, prior, tuple(stages)), f"the worker of run {spec.label()} seed {seed}")
@@ -221,12 +227,3 @@ def grid_units(sweeps: list[tuple[SweepSettings, list[Experiment]]], stages: tup
 def run_sweep(experiments: list[Experiment], settings: SweepSettings, progress: bool = True) -> int:
     """Run every unit the experiments need in this process (``bridgeplan demo``); returns the number of new rows."""
     return sum(Executor().map(grid_units([(settings, experiments)], progress=progress), progress))
-
-
-def _ensure_prior(settings: SweepSettings, seed: int, planner: cfg.TrainConfig, progress: bool) -> str:
-    from bridgeplan.train import train_prior
-
-    config = _prior_config(settings, seed, planner)
-    run_dir = paths.runs_dir(settings.results_dir) / config.run_name()
-    train_to(train_prior, config, run_dir, progress)
-    return str(run_dir)
