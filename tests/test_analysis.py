@@ -321,6 +321,17 @@ def test_eval_json_rows():
     assert (r.seed, r.nfe, r.split) == (1, 1, "test") and r.floor > 0 and r.floor_learned > 0
 
 
+def test_an_eval_json_row_is_of_its_runs_training_seed_on_its_own_evaluation_seed(tmp_path):
+    """A validation evaluation (task seed 1000 + s) or one on pinned episodes (task seed 0 for every run) is a row of
+    the run's training seed, its evaluation seed beside it."""
+    import json
+
+    d = json.loads((RESULTS / "medium-v2-curves" / "learned-floor" / "s1.json").read_text())
+    (tmp_path / "v.json").write_text(json.dumps({**d, "seed": 1001}))
+    r = read_eval_json(tmp_path / "v.json", "x-validation")
+    assert (r.seed, r.eval_seed, r.split) == (1, 1001, "validation")
+
+
 # --- Markdown ---------------------------------------------------------------------------------------------------
 
 def test_markdown_table():

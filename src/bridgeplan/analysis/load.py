@@ -160,7 +160,9 @@ def read_eval_json(path: str | Path, experiment: str = "") -> Row:
         latency = d.get("decision_ms_batch1")
         learned = d.get("prior_only_learned")
         residuals = d.get("plan_residuals") or {}
-        return Row(key=key, split=split_of(experiment), seed=int(d["seed"]), step=int(d["step"]), nfe=int(d["nfe"]),
+        # the training seed is the run's (the JSON's seed is its evaluation's: the same only by the test split's rule)
+        return Row(key=key, split=split_of(experiment), seed=int(config.get("seed", d["seed"])), step=int(d["step"]),
+                   nfe=int(d["nfe"]), eval_seed=int(d["seed"]),
                    score=float(d["score"]["minari"]["mean"]), score_se=float(d["score"]["minari"]["se"]),
                    floor=float(d["floor_line"]["score"]["minari"]["mean"]) if d.get("floor_line") else float("nan"),
                    success=float(d["success_rate"]["mean"]), calls=float(d.get("calls_per_episode", d["nfe"])),
