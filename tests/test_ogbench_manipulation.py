@@ -527,6 +527,8 @@ def test_gcbc_trains_and_evaluates_on_cube_single(tiny_data, tmp_path, capsys):
         "error: task ids must be in 1..5")
     assert _error(capsys, ["eval", str(run), "--nfe", "4"]) == (
         f"error: {run} is a GCBC run (a policy, no plans): --nfe do not apply")
+    assert _error(capsys, ["eval", str(run), "--controller", "pursuit", "--candidates", "2", "--no-floor"]) == (
+        f"error: {run} is a GCBC run (a policy, no plans): --no-floor, --candidates, --controller do not apply")
     assert _error(capsys, ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(data), "--low", str(run),
                            "--no-progress"]) == (
         f"error: {run} was trained on 28-D observations, puzzle-3x3-play-v0's are 55-D")

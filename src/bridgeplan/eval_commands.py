@@ -31,7 +31,7 @@ from bridgeplan.option_groups import (
     Threads,
     task_ids,
 )
-from bridgeplan.options import group, int_tuple, opt, positive, shared
+from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared
 
 
 def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None, env: str | None = None):
@@ -140,6 +140,16 @@ def _out(output: Output, tasks: Tasks, folder: Path, name: str) -> Path:
     return Path(output.out) if output.out else folder / f"{name}{tasks.file_tag()}.json"
 
 
+POLICY_GROUPS = {("tasks",), ("device",), ("output",), ("progress",), ("threads",)}
+"""The groups of ``eval``'s options that a policy's evaluation takes (with the run and its snapshot)."""
+
+
+def _value(options, leaf):
+    for name in leaf.path:
+        options = getattr(options, name)
+    return getattr(options, leaf.name)
+
+
 def _eval_policy(o: EvalOptions) -> int:
     """``eval`` of a GCBC/GCIQL run: its policy (``--snapshot``: that step's) on its environment's tasks, its JSON
     every evaluation's; the flags about plans do not apply and are refused."""
@@ -148,10 +158,8 @@ def _eval_policy(o: EvalOptions) -> int:
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
-    given = {"nfe": o.nfe, "plan_batch": o.plan_batch, "sampler": o.sampler, "correction": o.correction.correction,
-             "replan_every": o.replanning.replan_every, "replan_tolerance": o.replanning.replan_tolerance}
-    planning = [f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None] + (
-        ["--compile"] if o.compile else [])
+    planning = [leaf.flag for leaf in leaves(EvalOptions) if leaf.path not in POLICY_GROUPS
+                and leaf.name not in ("run", "snapshot") and _value(o, leaf) != leaf.default]
     if planning:
         raise BridgeplanError(f"{o.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
     folder = eval_dir(run_dir_of(Path(o.run)))
