@@ -136,6 +136,9 @@ def test_replan_every_makes_ceil_steps_over_k_plans(tiny_runs, monkeypatch, k):
     assert result["calls_per_episode"] == plans * 2
     assert result["decision_ms_batch1"]["count"] == plans and result["decision_ms_per_batch"]["count"] == plans
     assert result["decision_ms_batch1"]["p50"] > 0 and result["decision_ms_per_batch"]["mean_batch"] == 3
+    # every step of the lone episode timed (300: Maze2D runs to its limit), its decisions inside its steps
+    steps, decisions = result["step_ms_batch1"], result["decision_ms_batch1"]
+    assert steps["count"] == 300 and steps["mean"] * steps["count"] >= decisions["mean"] * decisions["count"]
     assert result["execution"] == {"mode": "closed_loop", "replan_every": k, "replan_tolerance": None,
                                    "candidates": 1, "select": None, "arrival": "truncate",
                                    "first_prior": "learned", "replan_prior": "learned", "controller": "track",

@@ -238,6 +238,9 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys, monkeypatch):
     assert saved["step"] == 4 and saved["episodes"] == 5 and set(saved["tasks"]) == {"1", "2", "3", "4", "5"}
     assert saved["execution"]["controller"] == "policy" and saved["train_seed"] == 0
     assert saved["calls_per_episode"] == np.mean([t["steps"] for t in saved["tasks"].values()])  # one per step
+    # at batch 1 the first episode again, every step (the policy's call) timed; one decision (its goal)
+    assert saved["step_ms_batch1"]["count"] == saved["tasks"]["1"]["steps"][0]
+    assert saved["decision_ms_batch1"]["count"] == 1
     assert saved["environment"]["cpu"] == cpu_model() == json.loads((run / "config.json").read_text())["cpu"]
     # mistakes: one error line, exit 2
     assert main(train) == 2

@@ -11,7 +11,8 @@ the family (its normalized score, its success rate). Every evaluation also measu
 - the cost: plans per episode, network calls per episode, milliseconds per plan in the evaluation's batches;
 - the decision latency: every decision of the evaluation in its batch (``decision_ms_per_batch``), and at batch 1
   (``decision_ms_batch1``): the first episode run again alone by fresh decisions, after one untimed decision, every
-  one of its decisions timed.
+  one of its decisions timed; and each of that episode's steps, observation to action (``step_ms_batch1``: a plan
+  when one is due and the controller's action, a policy's network call among them).
 
 :func:`evaluate_planner` scores a loaded planner; :func:`evaluate_run` loads a run and calls it.
 """
@@ -159,10 +160,11 @@ def run_episodes(decisions: Decisions, family: Family, tasks: Tasks, execution: 
 
 
 def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution: Execution,
-                   follower: Callable[[int], Follower] | None = None) -> dict:
-    """Decision latency at batch 1 (p50/p95/mean ms): the first episode of ``tasks`` run again alone by a fresh
-    source (its generator seeded with the tasks' seed + 1), after one untimed decision on its first state (then
-    forgotten), every one of its decisions timed."""
+                   follower: Callable[[int], Follower] | None = None) -> tuple[dict, dict]:
+    """Latency at batch 1 (p50/p95/mean ms) of a decision and of a whole step (observation to action: the decision
+    when one is due, then the controller's action): the first episode of ``tasks`` run again alone by a fresh source
+    (its generator seeded with the tasks' seed + 1), after one untimed decision on its first state (then forgotten),
+    every one of its decisions and steps timed."""
     gen = generator(decisions.device, tasks.seed + 1)
     lone = decisions.source(1, gen)
 
@@ -174,7 +176,7 @@ def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution
     executor = PlanExecutor(lambda n: lone, followers(family, tasks, execution, follower), execution.replan_every,
                             execution.tolerance, warm_up)
     family.run(tasks.first(), executor)
-    return percentiles_ms(executor.decision_seconds)
+    return percentiles_ms(executor.decision_seconds), percentiles_ms(executor.step_seconds)
 
 
 @dataclass
@@ -261,8 +263,8 @@ def evaluate(decisions: Decisions, family: Family, tasks: Tasks, execution: Exec
                             follower=follower)
     if after_run is not None:
         after_run(episodes)
-    latency = batch1_latency(decisions, family, tasks, execution, follower)
-    cost = {**episodes.cost(candidates), "decision_ms_batch1": latency}
+    decision, step = batch1_latency(decisions, family, tasks, execution, follower)
+    cost = {**episodes.cost(candidates), "decision_ms_batch1": decision, "step_ms_batch1": step}
     described = {**execution.to_dict(entries.get("prior") or ""), **episodes.executor.follower.described()}
     result = EvalResult(family, tasks, entries, family.score(tasks, episodes.outcome), floors or {}, described, cost,
                         environment_of(decisions.device))
@@ -415,6 +417,8 @@ def format_table(r: dict) -> str:
     if b1["p50"] is not None:
         lines.append(f"  decision latency: batch 1 p50 {b1['p50']:.2f} ms, p95 {b1['p95']:.2f} ms; per batch "
                      f"({pb['mean_batch']:.0f} plans) p50 {pb['p50']:.2f} ms")
+    if (s1 := r.get("step_ms_batch1")) and s1["p50"] is not None:
+        lines.append(f"  a step at batch 1 (observation to action): p50 {s1['p50']:.2f} ms, p95 {s1['p95']:.2f} ms")
     c = r.get("correction")
     if c is not None:
         lines.append(f"  correction:                {c['tag']}: {c['network_call_equivalents_per_plan']} "
