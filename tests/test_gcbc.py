@@ -251,6 +251,15 @@ def test_cli_train_and_evaluate_on_pointmaze(tmp_path, capsys, monkeypatch):
     assert "not a pointmaze-large dataset" in capsys.readouterr().err
     assert main(["eval", str(run), "--snapshot", "3"]) == 2
     assert "no snapshot at step 3" in capsys.readouterr().err
+    unnamed = [*train[:train.index("--maze")], *train[train.index("--maze") + 2:]]
+    unnamed[unnamed.index("--run-dir") + 1] = str(tmp_path / "r4")
+    assert main(unnamed) == 0
+    capsys.readouterr()
+    assert main(["eval", str(tmp_path / "r4")]) == 2
+    assert capsys.readouterr().err.strip() == (f"error: {tmp_path / 'r4'} was trained without --maze: name the "
+                                               f"environment its data is of (`bridgeplan graph --maze NAME --low "
+                                               f"{tmp_path / 'r4'}`)")
+    assert not (tmp_path / "r4" / "eval").exists()
     # the policy acts at every step on the environment's states and goals (the goal is the decision it follows)
     from bridgeplan.gcbc import GCBCPolicy, evaluate_policy
     from bridgeplan.replan import PlanExecutor

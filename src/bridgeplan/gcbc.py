@@ -301,7 +301,7 @@ class GCBCPolicy:
                  dataset_identity: str = "", elapsed_seconds: float | None = None):
         self.net, self.step, self.config, self.device = net.eval(), step, config, device
         self.elapsed_seconds = elapsed_seconds
-        """Wall-clock seconds the run had trained at this step (None in a shipped policy's file)."""
+        """Wall-clock seconds the run had trained at this step (None where its file does not say)."""
         self.dataset_identity = dataset_identity
         """A shipped policy's: the identity of the data its scores' graph was built over (else empty)."""
 
@@ -532,7 +532,8 @@ def run_policy(run: str | Path, snapshot: int | None = None, device: str = "cpu"
     policy = load_policy(policy_path(run, snapshot), device)
     env = env or policy.env
     if env is None:
-        raise BridgeplanError(f"{run} was trained without --maze: say which environment to evaluate in")
+        raise BridgeplanError(f"{run} was trained without --maze: name the environment its data is of "
+                              f"(`bridgeplan graph --maze NAME --low {run}`)")
     obs_dim = family_of(env).layout(env).obs_dim
     if policy.net.obs_dim != obs_dim:
         raise BridgeplanError(f"{run} was trained on {policy.net.obs_dim}-D observations, {env}'s are {obs_dim}-D")
