@@ -145,6 +145,19 @@ def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, ep
     return Generated(name, train_path, val_path, record, cached=False, seconds=seconds, made=made)
 
 
+def compact_stream(data: dict[str, np.ndarray], name: str, source: str | Path, layout):
+    """An OGBench file as read by ogbench's loader in its compact form (every row: the state before each action, and
+    that action; each episode's last row marked invalid) as environment ``name``'s training
+    :class:`~bridgeplan.data.stream.Stream` of ``layout``: one continuous segment per episode, split after those rows.
+    An episode's last row is kept (its action is what was done there; windows never cross it)."""
+    from bridgeplan.data.stream import Stream
+
+    ends = np.flatnonzero(data["valids"] == 0)  # each episode's last row (the files' checks: the file's last is one)
+    starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
+    return Stream(name, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
+                  episodes=len(ends), source=str(source), layout=layout)
+
+
 class OGBenchFamily(Family):
     """The data commands of a family whose datasets are OGBench's: npz files under ``datasets/ogbench`` (or
     ``$BRIDGEPLAN_DATASETS/ogbench``), of the recipe's size, made by the package ``data_package``'s
@@ -169,6 +182,17 @@ class OGBenchFamily(Family):
         made = import_module(f"{self.data_package}.generate").generate_dataset(
             env, folder, seed=seed, episodes=episodes, episode_steps=episode_steps, force=force, progress=progress)
         return made.train_path, not made.cached
+
+    def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
+              task_ids: tuple[int, ...] | None = None):
+        if multi_task:
+            raise BridgeplanError("OGBench's protocol has its 5 tasks, no Multi2D (--multi-task): choose tasks with "
+                                  "--tasks")
+        return self.protocol_tasks(env, self.episodes if episodes is None else episodes, seed, task_ids)
+
+    def protocol_tasks(self, env: str, episodes: int, seed: int, task_ids: tuple[int, ...] | None):
+        """``episodes`` per task of the protocol's tasks (``task_ids``: some of them, or validation tasks)."""
+        raise NotImplementedError
 
     def reads(self, path: str) -> bool:
         """An npz file (OGBench's format); which environment's it is is :meth:`dataset_info`'s to check."""

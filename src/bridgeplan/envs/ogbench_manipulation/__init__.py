@@ -11,7 +11,7 @@ evaluation protocol in ogbench's own environments (``protocol``). Its environmen
 
 from __future__ import annotations
 
-from bridgeplan.envs.ogbench_data import OGBenchFamily
+from bridgeplan.envs.ogbench_data import OGBenchFamily, compact_stream
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
     CUBE_COLUMNS,
@@ -98,17 +98,10 @@ class OGBenchManipulation(OGBenchFamily):
 
     def load_stream(self, dataset: str, env: str):
         """The file (checked to be ``env``'s) read by ogbench's loader in its compact form, one segment per episode,
-        every row kept (as pointmaze's, :func:`bridgeplan.envs.ogbench_pointmaze.reading.load_stream`)."""
-        import numpy as np
-
-        from bridgeplan.data.stream import Stream
+        every row kept (:func:`~bridgeplan.envs.ogbench_data.compact_stream`)."""
         from bridgeplan.envs.ogbench_manipulation.reading import load_dataset
 
-        data = load_dataset(dataset, env, compact_dataset=True)
-        ends = np.flatnonzero(data["valids"] == 0)
-        starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
-        return Stream(env, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
-                      episodes=len(ends), source=str(dataset), layout=self.layout(env))
+        return compact_stream(load_dataset(dataset, env, compact_dataset=True), env, dataset, self.layout(env))
 
     # --- evaluation --------------------------------------------------------------------------------------------
 
@@ -139,14 +132,10 @@ class OGBenchManipulation(OGBenchFamily):
 
         return body(self.layout(env))
 
-    def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
-              task_ids: tuple[int, ...] | None = None):
+    def protocol_tasks(self, env: str, episodes: int, seed: int, task_ids: tuple[int, ...] | None):
         from bridgeplan.envs.ogbench_manipulation.protocol import ManipulationTasks
 
-        if multi_task:
-            raise BridgeplanError("OGBench's protocol has its 5 tasks, no Multi2D (--multi-task): choose tasks with "
-                                  "--tasks")
-        return ManipulationTasks.make(env, self.episodes if episodes is None else episodes, seed, task_ids)
+        return ManipulationTasks.make(env, episodes, seed, task_ids)
 
     def run(self, tasks, agent, progress: bool = False):
         """OGBench's protocol in its own environments, the episodes side by side (:mod:`.protocol`)."""

@@ -16,7 +16,6 @@ from bridgeplan.envs.ogbench_data import OGBenchFamily
 from bridgeplan.envs.ogbench_pointmaze import plans
 from bridgeplan.envs.ogbench_pointmaze.names import KINDS, MAZES, parse_dataset_name
 from bridgeplan.envs.ogbench_pointmaze.protocol import VALIDATION_TASK_IDS
-from bridgeplan.errors import BridgeplanError
 from bridgeplan.trajectory import KINEMATIC_POINT, Layout
 
 PREFIX = "pointmaze-"
@@ -77,15 +76,10 @@ class OGBenchPointmaze(OGBenchFamily):
 
         return BODY
 
-    def tasks(self, env: str, episodes: int | None = None, seed: int = 0, multi_task: bool = False,
-              task_ids: tuple[int, ...] | None = None):
+    def protocol_tasks(self, env: str, episodes: int, seed: int, task_ids: tuple[int, ...] | None):
         from bridgeplan.envs.ogbench_pointmaze.protocol import SuiteTasks
 
-        if multi_task:
-            raise BridgeplanError("OGBench's protocol has its 5 tasks, no Multi2D (--multi-task): choose tasks with "
-                                  "--tasks")
-        return SuiteTasks.make(env, parse_dataset_name(env).maze, self.episodes if episodes is None else episodes,
-                               seed, task_ids)
+        return SuiteTasks.make(env, parse_dataset_name(env).maze, episodes, seed, task_ids)
 
     def run(self, tasks, agent, progress: bool = False):
         """OGBench's protocol in its own environments, 250 episodes side by side (:mod:`.protocol`)."""

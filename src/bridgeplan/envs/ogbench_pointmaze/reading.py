@@ -99,17 +99,9 @@ def load_dataset(path: str | Path, maze: str, compact_dataset: bool = False,
 def load_stream(path: str | Path, name: str):
     """Dataset file ``path`` of dataset ``name`` (``pointmaze-medium-navigate-v0``; checked as
     :func:`load_dataset` does) as bridgeplan's training :class:`~bridgeplan.data.stream.Stream`: maze ``name``
-    (so the kinematic point's layout, ``trajectory.KINEMATIC_POINT``), one continuous segment per episode.
+    (so the kinematic point's layout, ``trajectory.KINEMATIC_POINT``), one continuous segment per episode
+    (:func:`~bridgeplan.envs.ogbench_data.compact_stream`)."""
+    from bridgeplan.envs.ogbench_data import compact_stream
 
-    Read with ogbench's loader in its compact form, which keeps every row (the state before each action, and
-    that action) and marks each episode's last row invalid: the episodes are split after those rows. Every
-    row is kept, an episode's last one too (its action is what was done there; windows never cross it).
-    """
-    from bridgeplan.data.stream import Stream
-
-    spec = parse_dataset_name(name)
-    data = load_dataset(path, spec.maze, compact_dataset=True)
-    ends = np.flatnonzero(data["valids"] == 0)  # each episode's last row (check_dataset: the file's last is one)
-    starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.int64)
-    return Stream(name, data["observations"].astype(np.float64), data["actions"].astype(np.float64), starts,
-                  episodes=len(ends), source=str(path), layout=KINEMATIC_POINT)
+    return compact_stream(load_dataset(path, parse_dataset_name(name).maze, compact_dataset=True), name, path,
+                          KINEMATIC_POINT)
