@@ -79,8 +79,8 @@ def _show(result, output: Output, out: Path) -> int:
 
 @dataclass(kw_only=True)
 class EvalOptions:
-    run: str = opt(help="run directory (or a checkpoint/snapshot file), or a shipped planner's name (`bridgeplan "
-                        "planners list`)")
+    run: str = opt(help="run directory (a planner's or a GCBC/GCIQL policy's; or a checkpoint/snapshot file), or a "
+                        "shipped planner's name (`bridgeplan planners list`)")
     nfe: int | None = opt(None, "network calls per plan (default: the full count)")
     plan_batch: int | None = opt(None, "episodes planned per network call (default: all live episodes at once; "
                                        "--batch-size of the training commands is the gradient's)")
@@ -105,8 +105,9 @@ class EvalOptions:
 
 EVAL_DESCRIPTION = ("Maze2D: seeded single-task or Multi2D episodes, the normalized score; OGBench: its 5-task "
                     "protocol, the success rate; your own environment (a spec file): its seeded resets, the success "
-                    "rate. Beside the score: the straight line alone, the cost and the decision latency. Writes "
-                    "RUN/eval/<settings>.json unless --out.")
+                    "rate. Beside the score: the straight line alone, the cost and the decision latency. A GCBC or "
+                    "GCIQL run (`gcbc train`): its policy toward each episode's goal, acting at every step (the "
+                    "options about plans do not apply). Writes RUN/eval/<settings>.json unless --out.")
 
 
 def eval_run(o: EvalOptions) -> int:
