@@ -412,8 +412,6 @@ def oracle(o: OracleOptions) -> int:
     return 0
 
 
-
-
 # --- what a study runs ----------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)

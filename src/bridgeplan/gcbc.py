@@ -513,7 +513,6 @@ def read_metrics(run_dir: str | Path) -> list[dict]:
     return [json.loads(ln) for ln in path.read_text().splitlines() if ln.strip()] if path.exists() else []
 
 
-
 @dataclass
 class GoalDecisions:
     """A goal-conditioned policy's decisions: each episode's goal, a plan of one state made when the episode starts
