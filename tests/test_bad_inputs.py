@@ -270,3 +270,8 @@ def test_22_a_missing_low_run_is_reported_first(capsys, tmp_path):
     # no --replan-every (which a low level needs) and no dataset file: the run named is what is reported
     line = refused(capsys, "graph", "--maze", OGBENCH, "--low", tmp_path / "nowhere", watch=tmp_path)
     assert f"no checkpoint or run directory {str(tmp_path / 'nowhere')!r}" in line
+
+
+def test_23_a_negative_task_seed(capsys, tmp_path, tiny_runs):
+    line = refused(capsys, "eval", tiny_runs["ddpm"], *EVAL, "--seed", "-1", watch=tmp_path)
+    assert line == "error: the tasks' seed must be >= 0, got -1"

@@ -341,6 +341,8 @@ def make_tasks(env: str, episodes: int | None = None, seed: int = 0, multi_task:
     """``env``'s family's evaluation tasks (:meth:`~bridgeplan.envs.family.Family.tasks`)."""
     if episodes is not None and episodes <= 0:
         raise BridgeplanError(f"episodes must be positive, got {episodes}")
+    if seed < 0:
+        raise BridgeplanError(f"the tasks' seed must be >= 0, got {seed}")
     return family_of(env).tasks(env, episodes, seed, multi_task, task_ids)
 
 
