@@ -272,6 +272,14 @@ def test_22_a_missing_low_run_is_reported_first(capsys, tmp_path):
     assert f"no checkpoint or run directory {str(tmp_path / 'nowhere')!r}" in line
 
 
-def test_23_a_negative_task_seed(capsys, tmp_path, tiny_runs):
+def test_23_a_negative_seed(capsys, tmp_path, tiny_runs, tiny_dataset):
     line = refused(capsys, "eval", tiny_runs["ddpm"], *EVAL, "--seed", "-1", watch=tmp_path)
     assert line == "error: the tasks' seed must be >= 0, got -1"
+    line = refused(capsys, *train_args(tiny_dataset, tmp_path / "run", 2), "--seed", "-1", watch=tmp_path)
+    assert line == "error: seed must be >= 0, got -1"
+    line = refused(capsys, "gcbc", "train", tmp_path / "data.npz", "--run-dir", tmp_path / "gcbc", "--seed", "-1",
+                   watch=tmp_path)
+    assert line == "error: seed must be >= 0, got -1"
+    line = refused(capsys, "data", "generate", "--maze", "umaze", "--steps", "100", "--seed", "-1", "--out",
+                   tmp_path / "data", watch=tmp_path)
+    assert line == "error: --seed must be >= 0, got -1"

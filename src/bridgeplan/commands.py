@@ -80,6 +80,8 @@ def _cmd_data_generate(o: DataGenerateOptions) -> int:
     for flag in ("steps", "workers", "episodes", "episode_steps"):
         if getattr(o, flag) is not None:
             positive("--" + flag.replace("_", "-"), getattr(o, flag))
+    if o.seed is not None and o.seed < 0:
+        raise BridgeplanError(f"--seed must be >= 0, got {o.seed}")
     out, written = family.generate_dataset(maze, Path(o.out) if o.out else None,
                                   seed=family.data_seed if o.seed is None else o.seed,
                                   steps=o.steps, piece_steps=o.piece_steps, episodes=o.episodes,

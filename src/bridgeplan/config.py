@@ -156,6 +156,8 @@ def check_optimization(config) -> None:
     for name in ("steps", "batch_size", "checkpoint_every", "log_every"):
         if getattr(config, name) <= 0:
             raise BridgeplanError(f"{name} must be positive, got {getattr(config, name)}")
+    if config.seed < 0:
+        raise BridgeplanError(f"seed must be >= 0, got {config.seed}")
     if not (math.isfinite(config.lr) and config.lr > 0):
         raise BridgeplanError(f"lr must be a positive, finite number, got {config.lr}")
     if not (math.isfinite(config.minutes) and config.minutes >= 0):
