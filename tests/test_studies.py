@@ -743,6 +743,18 @@ def test_the_committed_ogbench_studies_pin_the_validation_draw_their_rows_were_m
     assert studies["manip-cube-single"].evaluation.validation == "other-tasks" and committed["manip-cube-single"]
 
 
+def test_a_policys_evaluation_refuses_a_plans_option_when_the_study_is_read(tmp_path, capsys):
+    """``eval`` of a GCBC/GCIQL run with a plan's option (an NFE, a controller) is refused as the file is read, not
+    after its policy has trained."""
+    (tmp_path / "studies").mkdir()
+    text = OGBENCH_SPLITS.format(evaluation="", command="eval", args='nfe = 4, controller = "pursuit"')
+    (tmp_path / "studies" / "g.toml").write_text(text.replace('process = "flow"', 'trainer = "gcbc"\nmaze = "medium"')
+                                                 .replace("horizon = 10\nstride = 4\n", ""))
+    assert main(["study", "run", "g", "--dry-run", "--root", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == ("error: studies/g.toml: evaluations[0].args.controller: run 'flow' is a "
+                                               "GCBC/GCIQL policy: a plan's option does not apply")
+
+
 TINY_CALIBRATION = """
 [dataset]
 generator = "ogbench"

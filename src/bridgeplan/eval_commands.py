@@ -145,6 +145,12 @@ POLICY_GROUPS = {("tasks",), ("device",), ("output",), ("progress",), ("threads"
 """The groups of ``eval``'s options that a policy's evaluation takes (with the run and its snapshot)."""
 
 
+def plan_options() -> list:
+    """``eval``'s options that only a planner takes: a GCBC/GCIQL policy's evaluation refuses them."""
+    return [leaf for leaf in leaves(EvalOptions)
+            if leaf.path not in POLICY_GROUPS and leaf.name not in ("run", "snapshot")]
+
+
 def _value(options, leaf):
     for name in leaf.path:
         options = getattr(options, name)
@@ -159,8 +165,7 @@ def _eval_policy(o: EvalOptions) -> int:
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
-    planning = [leaf.flag for leaf in leaves(EvalOptions) if leaf.path not in POLICY_GROUPS
-                and leaf.name not in ("run", "snapshot") and _value(o, leaf) != leaf.default]
+    planning = [leaf.flag for leaf in plan_options() if _value(o, leaf) != leaf.default]
     if planning:
         raise BridgeplanError(f"{o.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
     folder = eval_dir(run_dir_of(Path(o.run)))

@@ -87,7 +87,7 @@ from pathlib import Path
 from typing import Any
 
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.eval_commands import STUDY_COMMANDS
+from bridgeplan.eval_commands import STUDY_COMMANDS, plan_options
 from bridgeplan.options import options_from_dict
 
 SPLITS = ("test", "validation")
@@ -532,6 +532,11 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         except (KeyError, IndexError, ValueError) as err:
             raise StudyError(file, f"{key}.out", f"names only {{seed}}, {{eval_seed}} and {{tasks}} ({err})") from None
         _check_flags(file, key, evaluation)
+        trainers = {r.name: r.trainer for r in runs}
+        if command == "eval" and trainers[levels[0]] == "gcbc":
+            for name in sorted(set(args) & {leaf.name for leaf in plan_options()}):
+                raise StudyError(file, f"{key}.args.{name}", f"run {levels[0]!r} is a GCBC/GCIQL policy: a plan's "
+                                                              f"option does not apply")
         out.append(evaluation)
     return tuple(out)
 
