@@ -492,7 +492,7 @@ def parse_runs(file, raw) -> tuple[NamedRun, ...]:
 def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEvaluation, ...]:
     if not isinstance(raw, list):
         raise StudyError(file, "evaluations", "expected an array of tables ([[evaluations]])")
-    names = {r.name for r in runs}
+    trainers = {r.name: r.trainer for r in runs}
     out = []
     for i, e in enumerate(raw):
         key = f"evaluations[{i}]"
@@ -510,9 +510,9 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
             raise StudyError(file, f"{key}.runs", f"{command} takes {' or '.join(map(str, counts))} run name(s), got "
                                                   f"{levels!r}")
         for r in levels:
-            if r not in names:
+            if r not in trainers:
                 raise StudyError(file, f"{key}.runs", f"unknown run {r!r} (declared: "
-                                                      f"{', '.join(sorted(names)) or 'none'}; see [runs.NAME])")
+                                                      f"{', '.join(sorted(trainers)) or 'none'}; see [runs.NAME])")
         args = _table(file, f"{key}.args", e.get("args", {}), set(e.get("args", {})))
         for name in sorted(set(args) & (SET_BY_THE_RUNNER | {STUDY_COMMANDS[command].seed, *runs_of})):
             raise StudyError(file, f"{key}.args.{name}", "set by the runner (the seed and split, the task set, the "
@@ -532,7 +532,6 @@ def parse_evaluations(file, raw, runs: tuple[NamedRun, ...]) -> tuple[CommandEva
         except (KeyError, IndexError, ValueError) as err:
             raise StudyError(file, f"{key}.out", f"names only {{seed}}, {{eval_seed}} and {{tasks}} ({err})") from None
         _check_flags(file, key, evaluation)
-        trainers = {r.name: r.trainer for r in runs}
         if command == "eval" and trainers[levels[0]] == "gcbc":
             for name in sorted(set(args) & {leaf.name for leaf in plan_options()}):
                 raise StudyError(file, f"{key}.args.{name}", f"run {levels[0]!r} is a GCBC/GCIQL policy: a plan's "
