@@ -7,6 +7,7 @@ import json
 import pytest
 import torch
 
+from bridgeplan import files
 from bridgeplan.cli import main
 from bridgeplan.device import cpu_model
 
@@ -85,6 +86,18 @@ def test_run_killed_while_writing_its_first_config_starts_again(tiny_dataset, tm
     run.mkdir()
     (run / ".lock").touch()
     (run / ".config.json.k1ll3d.tmp").write_text('{"kind": ')
+    assert main(train_args(tiny_dataset, run, 2)) == 0
+    assert weights(run)[2] == 2 and not list(run.glob(".*.tmp"))
+
+
+def test_run_killed_while_probing_its_directory_starts_again(tiny_dataset, tmp_path, monkeypatch):
+    # what a kill between check_writable's probe and its removal leaves (a sweep killed as a run starts)
+    run = tmp_path / "run"
+    run.mkdir()
+    with monkeypatch.context() as m:
+        m.setattr(files.os, "unlink", lambda path: None)
+        files.check_writable(run, folder=True)
+    assert len(list(run.iterdir())) == 1
     assert main(train_args(tiny_dataset, run, 2)) == 0
     assert weights(run)[2] == 2 and not list(run.glob(".*.tmp"))
 

@@ -14,7 +14,8 @@ def check_writable(path: Path | str, what: str = "output", folder: bool = False)
     """Refuse (:class:`BridgeplanError`, the CLI's one ``error:`` line) an output path that cannot be written, before
     any work is done: a file where a folder is wanted (or the other way round), a folder below a file, a folder
     that does not take files (read-only, no permission). Creates nothing: the nearest existing folder is probed
-    with a temporary file, removed at once. Returns ``path``."""
+    with a temporary file, removed at once (named as an atomic write's, ``.*.tmp``: what a process killed in
+    between leaves is what a run's next trainer knows to remove). Returns ``path``."""
     path = Path(path)
     if folder and path.exists() and not path.is_dir():
         raise BridgeplanError(f"cannot write the {what} {path}: it is a file, not a folder")
@@ -26,7 +27,7 @@ def check_writable(path: Path | str, what: str = "output", folder: bool = False)
     if not existing.is_dir():
         raise BridgeplanError(f"cannot write the {what} {path}: {existing} is a file, not a folder")
     try:
-        fd, probe = tempfile.mkstemp(prefix=".bridgeplan-probe.", dir=existing)
+        fd, probe = tempfile.mkstemp(prefix=".bridgeplan-probe.", suffix=".tmp", dir=existing)
         os.close(fd)
         os.unlink(probe)
     except OSError as e:
