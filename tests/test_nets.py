@@ -101,3 +101,19 @@ def test_mish_equals_torchs_mish_and_its_gradient():
     torch.testing.assert_close(mine.grad.double(), x64.grad, rtol=2e-6, atol=1e-6)
     # the backward is the derivative of the forward: float64 finite differences
     assert torch.autograd.gradcheck(Mish(), (torch.linspace(-8, 8, 41, dtype=torch.float64).requires_grad_(),))
+
+
+def test_planning_gets_the_networks_very_numbers():
+    # inference mode (planning) takes Mish's path without the autograd function: the same numbers, bit for bit
+    from bridgeplan.config import preset_config
+    from bridgeplan.runs import build_model
+
+    config = preset_config("umaze", "cpu-small")
+    torch.manual_seed(0)
+    model = build_model(config).eval()
+    x, t = torch.randn(3, config.horizon, config.layout.transition_dim), torch.tensor([0.1, 0.5, 0.9])
+    with torch.no_grad():
+        trained_path = model(x, t)
+    with torch.inference_mode():
+        planning_path = model(x, t)
+    assert torch.equal(trained_path, planning_path)
