@@ -71,6 +71,15 @@ def test_hold_share_and_loss_variants_are_saved_and_checked(tiny_dataset, tmp_pa
         assert not (tmp_path / "bad").exists()
 
 
+def test_a_training_logged_to_a_file_draws_its_bar_once_a_minute_not_every_step(tiny_dataset, tmp_path, capsys):
+    # stderr captured is not a terminal, as a log under nohup: the bar at its start and end only, though every step
+    # logs its loss (--log-every 1) and a step takes milliseconds
+    args = [a for a in train_args(tiny_dataset, tmp_path / "run", 40) if a != "--no-progress"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "40/40" in err and err.count("\r") <= 3, err
+
+
 def test_existing_run_without_resume_is_refused(tiny_dataset, tmp_path, capsys):
     run = tmp_path / "run"
     assert main(train_args(tiny_dataset, run, 2)) == 0

@@ -72,7 +72,7 @@ class Picture:
 
 @dataclass(kw_only=True)
 class Progress:
-    no_progress: bool = opt(False, "no progress bars")
+    no_progress: bool = opt(False, "no progress bars (into a file, not a terminal, a bar is redrawn once a minute)")
 
 
 @dataclass(kw_only=True)

@@ -22,7 +22,6 @@ from typing import Callable
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from bridgeplan import config as cfg
 from bridgeplan.checkpoint import check_checkpoint_file, load_checkpoint, save_checkpoint, write_config
@@ -33,6 +32,7 @@ from bridgeplan.files import check_writable, code_version
 from bridgeplan.locks import LOCK_NAME, run_lock
 from bridgeplan.paths import checkpoint_path, config_path, snapshot_path, snapshot_steps
 from bridgeplan.priors import train_prior_loss
+from bridgeplan.progress import progress_bar
 from bridgeplan.runs import build_model, build_prior, build_prior_net, load_teacher, load_windows
 from bridgeplan.trajectory import window_conditions
 
@@ -349,7 +349,7 @@ def run_steps(step: int, elapsed: float, config, one_step: Callable[[int], torch
     non-finite step is never saved); every ``config.log_every`` steps ``log(step, steps per second, loss,
     elapsed)`` gives the progress bar's fields; every ``config.checkpoint_every`` steps, and at the end,
     ``save(step, elapsed)``. A progress bar named ``desc`` where ``progress``."""
-    bar = tqdm(total=config.steps, initial=step, disable=not progress, desc=desc, unit="step", dynamic_ncols=True)
+    bar = progress_bar(progress, total=config.steps, initial=step, desc=desc, unit="step", dynamic_ncols=True)
     budget = config.minutes * 60.0 if config.minutes > 0 else math.inf
     last_saved = step
     check_every = loss_check_every(device, config.log_every)
@@ -382,7 +382,7 @@ def run_steps(step: int, elapsed: float, config, one_step: Callable[[int], torch
                 now = time.perf_counter()
                 rate = (step - step_log) / max(now - t_log, 1e-9)
                 t_log, step_log = now, step
-                bar.set_postfix(**log(step, rate, loss, elapsed), steps_per_s=f"{rate:.1f}")
+                bar.set_postfix(**log(step, rate, loss, elapsed), steps_per_s=f"{rate:.1f}", refresh=False)
             if save_due:
                 save(step, elapsed)
                 last_saved = step

@@ -41,6 +41,7 @@ import numpy as np
 from bridgeplan.envs.controllers import Body
 from bridgeplan.envs.family import Family, Tasks
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.progress import progress_bar
 from bridgeplan.trajectory import Layout
 
 SUFFIX = ".toml"
@@ -320,15 +321,13 @@ class Outcome:
 def run_episodes(tasks: GoalTasks, agent, progress: bool = False) -> Outcome:
     """Every episode of ``tasks``, :data:`BATCH` environments side by side, each stepped until it terminates, is
     truncated or has run ``tasks.episode_steps`` steps."""
-    from tqdm import tqdm
-
     io = interface(tasks.env)
     seeds = tasks.episode_seeds()
     n = tasks.episodes
     success, returns, steps = np.zeros(n, bool), np.zeros(n), np.zeros(n, np.int64)
     envs = [io.spec.make_env() for _ in range(min(BATCH, n))]
     t0 = time.perf_counter()
-    with tqdm(total=n, disable=not progress, desc=f"evaluate {Path(tasks.env).stem}", unit="episode") as bar:
+    with progress_bar(progress, total=n, desc=f"evaluate {Path(tasks.env).stem}", unit="episode") as bar:
         for lo in range(0, n, len(envs)):
             rows = np.arange(lo, min(lo + len(envs), n))
             agent.begin(len(rows))

@@ -11,6 +11,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.progress import progress_bar
 
 
 def episode_seed(seed: int, task_id: int, index: int) -> int:
@@ -93,11 +94,9 @@ def run_episodes(episodes: Sequence[tuple[int, int]], envs: list, episode: Episo
     the next: ``begin(n)`` as a batch of ``n`` starts, ``act(states, goals)`` once per step for the whole batch (an
     ended row's action is ignored), ``end(rows)`` after the step that ended those rows. Each episode's success (its
     last ``info["success"]``) and steps."""
-    from tqdm import tqdm
-
     success = np.zeros(len(episodes), dtype=bool)
     steps = np.zeros(len(episodes), dtype=np.int64)
-    with tqdm(total=len(episodes), disable=not progress, desc=desc, unit="episode") as bar:
+    with progress_bar(progress, total=len(episodes), desc=desc, unit="episode") as bar:
         for lo in range(0, len(episodes), len(envs)):
             batch = episodes[lo:lo + len(envs)]
             n = len(batch)

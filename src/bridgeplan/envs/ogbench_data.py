@@ -22,6 +22,7 @@ from bridgeplan.envs.family import Family
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_bytes, atomic_write_text, check_writable
 from bridgeplan.paths import datasets_root
+from bridgeplan.progress import progress_bar
 
 
 @contextlib.contextmanager
@@ -113,8 +114,6 @@ def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, ep
     adds and what :attr:`Generated.made` holds. Files already there with the same identity and the recorded digests
     are the cache: nothing is made. Other files there are refused (BridgeplanError) unless ``force``. Each file is
     written whole (a temporary file renamed)."""
-    from tqdm import tqdm
-
     if episodes <= 0 or episode_steps <= 0:
         raise BridgeplanError(f"episodes and steps must be positive, got {episodes} and {episode_steps}")
     train_path, val_path, record_path = dataset_paths(name, out_dir)
@@ -128,7 +127,7 @@ def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, ep
     check_writable(out_dir, "dataset folder", folder=True)
     total = episodes + validation_episodes(episodes)
     t0 = time.perf_counter()
-    with tqdm(total=total * episode_steps, disable=not progress, desc=f"generate {name}", unit="step",
+    with progress_bar(progress, total=total * episode_steps, desc=f"generate {name}", unit="step",
               unit_scale=True, mininterval=1.0) as bar:
         data, extra, made = make(total, bar.update)
     seconds = time.perf_counter() - t0

@@ -37,6 +37,7 @@ from bridgeplan.envs.maze2d.expert import (
 from bridgeplan.envs.maze2d.grids import GOAL_RADIUS, POSITION_NOISE, Maze, get_maze
 from bridgeplan.envs.maze2d.sim import MAX_SPEED, point_maze_model
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.progress import progress_bar
 from bridgeplan.workers import WorkerDied, exit_with_parent
 
 CHUNK = 4096
@@ -196,8 +197,6 @@ def generate_streams(maze: Maze, steps: int, seed: int, workers: int = 1, progre
     ``SeedSequence(seed).spawn(pieces)[i]`` (whatever ``workers``): a stitching dataset, as OGBench's ``stitch``
     (no piece goes far; a long task must join several).
     """
-    from tqdm import tqdm
-
     if steps <= 0:
         raise BridgeplanError(f"steps must be positive, got {steps}")
     if workers <= 0:
@@ -208,7 +207,7 @@ def generate_streams(maze: Maze, steps: int, seed: int, workers: int = 1, progre
     sizes = [steps // count + (i < steps % count) for i in range(count)]
     seeds = [seed] if count == 1 else np.random.SeedSequence(seed).spawn(count)
     workers = min(workers, count)
-    bar = tqdm(total=steps, disable=not progress, desc=f"generate {maze.name}", unit="step",
+    bar = progress_bar(progress, total=steps, desc=f"generate {maze.name}", unit="step",
                unit_scale=True, mininterval=0.5)
     try:
         if workers == 1:
