@@ -127,7 +127,7 @@ def test_nothing_outside_envs_tests_an_environments_name(tmp_path):
 
 
 LAYERS = (
-    ("errors", "files", "paths", "locks", "device", "workers", "shipped", "options", "option_groups"),
+    ("errors", "files", "paths", "locks", "device", "progress", "workers", "shipped", "options", "option_groups"),
     ("trajectory", "normalizer", "data", "nets", "processes", "checkpoint"),
     ("envs",),
     ("priors", "consistency", "planner", "replan", "graph", "config", "runs", "train"),
