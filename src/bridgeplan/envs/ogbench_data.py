@@ -128,7 +128,7 @@ def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, ep
     total = episodes + validation_episodes(episodes)
     t0 = time.perf_counter()
     with progress_bar(progress, total=total * episode_steps, desc=f"generate {name}", unit="step",
-              unit_scale=True, mininterval=1.0) as bar:
+                      unit_scale=True, mininterval=1.0) as bar:
         data, extra, made = make(total, bar.update)
     seconds = time.perf_counter() - t0
     cut = episodes * episode_steps

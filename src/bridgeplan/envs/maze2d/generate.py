@@ -207,8 +207,8 @@ def generate_streams(maze: Maze, steps: int, seed: int, workers: int = 1, progre
     sizes = [steps // count + (i < steps % count) for i in range(count)]
     seeds = [seed] if count == 1 else np.random.SeedSequence(seed).spawn(count)
     workers = min(workers, count)
-    bar = progress_bar(progress, total=steps, desc=f"generate {maze.name}", unit="step",
-               unit_scale=True, mininterval=0.5)
+    bar = progress_bar(progress, total=steps, desc=f"generate {maze.name}", unit="step", unit_scale=True,
+                       mininterval=0.5)
     try:
         if workers == 1:
             return [generate_stream(maze, n, s, progress=bar.update) for n, s in zip(sizes, seeds)]
