@@ -813,6 +813,43 @@ def test_the_objects_apart_move_one_cube_at_a_time():
     assert graphs.next_object(done, done) == 0
 
 
+def test_a_swap_sets_one_cube_aside_first():
+    """Each cube on the other's goal: the cube moved first is set down where the data rested it at the goal's height,
+    the nearest such place clear of both cubes and goals (3 tolerances); a stack's top, whose goal is held by a cube
+    already at its own goal, and a free goal go straight to the goal."""
+    from bridgeplan.graph import ObjectGraphs
+
+    class Searched:  # a graph that returns the goal it was asked for
+        def __init__(self, places):
+            self.observations = np.array([[*p, 0, 0, 0] for p in places], np.float64)
+            self.nodes = np.arange(len(places))
+
+        def path(self, start, goal):
+            return goal[None]
+
+    places = [(1, 0, 0.2), (0, 3, 0.2), (0, 1.5, 0.5), (0, 5, 0.2), (0, -1.1, 0.2)]
+    graphs = ObjectGraphs([Searched(places), Searched(places)], ((0, 1, 2), (3, 4, 5)), tolerance=0.4)
+
+    def state(a, b):
+        return np.array([*a, *b], np.float64)
+
+    swap_start, swap_goal = state((0, 0, 0.2), (2, 0, 0.2)), state((2, 0, 0.2), (0, 0, 0.2))
+    # (1, 0) is 1 from both cubes, (0, 1.5) rests higher, (0, -1.1) is nearer than (0, 3) but within 1.2 of (0, 0)
+    np.testing.assert_allclose(graphs.aside(swap_start, swap_goal, 0), (0, 3, 0.2))
+    path = graphs.path(swap_start, swap_goal)
+    np.testing.assert_allclose(path[-1], state((0, 3, 0.2), (0, 0, 0.2)))
+    assert graphs.chosen == [0] and graphs.set_aside == 1
+    # set aside: cube 1's goal is free now, and it goes there
+    aside = state((0, 3, 0.2), (2, 0, 0.2))
+    assert graphs.next_object(aside, swap_goal) == 1 and graphs.aside(aside, swap_goal, 1) is None
+    stack = state((0, 0, 0.6), (0, 0, 0.2))  # cube 0 onto cube 1, which is at its goal
+    assert graphs.aside(state((2, 0, 0.2), (0, 0, 0.2)), stack, 0) is None
+    assert graphs.aside(state((2, 0, 0.2), (4, 4, 0.2)), swap_goal, 1) is None  # cube 1's goal is free
+    crowded = ObjectGraphs([Searched(places[:1]), Searched(places[:1])], graphs.objects, tolerance=0.4)
+    assert crowded.aside(swap_start, swap_goal, 0) is None
+    np.testing.assert_allclose(crowded.path(swap_start, swap_goal)[-1], swap_goal)
+
+
 def test_the_objects_apart_over_two_cubes(tmp_path):
     """On cube-double the objects' graphs are the arm's and one cube's columns each (the cube's weighted as the
     family's one graph weighs the goal's), the other cube left out; a query moves the cube not at its goal: its path

@@ -336,6 +336,11 @@ def queries_summary(queries: list[tuple[int, bool, int]]) -> dict:
             "path_steps": {"mean": float(steps.mean()), "max": int(steps.max())}}
 
 
+ASIDE_CLEARANCE = 3.0
+"""A place to set an object aside is this many tolerances (the task's success distance; on the cubes 0.04 m, a cube's
+width) from every object and goal in the plane: the cube set down clear of the others, with room for the gripper."""
+
+
 @dataclass
 class ObjectGraphs:
     """The objects apart: one :class:`DatasetGraph` per object, over the arm and that object's position alone (the
@@ -349,25 +354,60 @@ class ObjectGraphs:
     """How near its goal an object is done (the task's own success distance, in the state's units)."""
     chosen: list[int] = field(default_factory=list)
     """Per query, the object searched for."""
+    set_aside: int = 0
+    """Queries that moved their object to a place aside (:meth:`aside`)."""
 
     def next_object(self, start: np.ndarray, goal: np.ndarray) -> int:
         """The object to move from state ``start`` toward goal ``goal``: of those farther than :attr:`tolerance` from
         their goal, one whose goal no other object occupies (in the plane; a swap has none: any), the lowest goal first
         (a stack's bottom first); the first object when all are done."""
-        at = np.stack([start[list(c)] for c in self.objects])
-        to = np.stack([goal[list(c)] for c in self.objects])
-        away = np.flatnonzero(np.linalg.norm(at - to, axis=1) > self.tolerance)
+        at, to = self._positions(start), self._positions(goal)
+        away = self._away(at, to)
         if len(away) == 0:
             return 0
-        free = [i for i in away
-                if all(np.linalg.norm(at[j, :2] - to[i, :2]) > self.tolerance for j in range(len(at)) if j != i)]
+        free = [i for i in away if not self._occupants(at, to, i)]
         return int(min(free or away, key=lambda i: to[i, 2]))
 
+    def _positions(self, state: np.ndarray) -> np.ndarray:
+        return np.stack([state[list(c)] for c in self.objects])
+
+    def _away(self, at: np.ndarray, to: np.ndarray) -> np.ndarray:
+        return np.flatnonzero(np.linalg.norm(at - to, axis=1) > self.tolerance)
+
+    def _occupants(self, at: np.ndarray, to: np.ndarray, i: int) -> list[int]:
+        """The other objects on object ``i``'s goal, in the plane."""
+        return [j for j in range(len(at)) if j != i and np.linalg.norm(at[j, :2] - to[i, :2]) <= self.tolerance]
+
+    def aside(self, start: np.ndarray, goal: np.ndarray, i: int) -> np.ndarray | None:
+        """Where to set object ``i`` down first, when its goal is held by an object that must itself move away (a
+        swap: each cube on the other's goal): of the places the data rested it at the goal's height, the one nearest
+        to it at least :data:`ASIDE_CLEARANCE` tolerances from every object and goal in the plane; None when its goal
+        is free, held by an object already at its own goal (a stack's bottom), or no such place is in the data."""
+        at, to = self._positions(start), self._positions(goal)
+        away = set(self._away(at, to).tolist())
+        if not any(j in away for j in self._occupants(at, to, i)):
+            return None
+        places = self.graphs[i].observations[self.graphs[i].nodes][:, list(self.objects[i])]
+        places = places[np.abs(places[:, 2] - to[i, 2]) <= self.tolerance / 4]
+        taken = np.concatenate([at[:, :2], to[:, :2]])
+        clear = np.linalg.norm(places[:, None, :2] - taken[None], axis=2).min(axis=1) > ASIDE_CLEARANCE * self.tolerance
+        if not clear.any():
+            return None
+        places = places[clear]
+        return places[np.argmin(np.linalg.norm(places[:, :2] - at[i, :2], axis=1))]
+
     def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, obs_dim]`` the cheapest path that moves :meth:`next_object` to its goal (:meth:`DatasetGraph.path`
-        in its graph)."""
-        i = self.next_object(np.asarray(start, np.float64), np.asarray(goal, np.float64))
+        """``[L, obs_dim]`` the cheapest path that moves :meth:`next_object` to its goal, or first to a place aside
+        (:meth:`aside`) where its goal is held by an object that must move too (:meth:`DatasetGraph.path` in its
+        graph)."""
+        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        i = self.next_object(start, goal)
+        place = self.aside(start, goal, i)
         self.chosen.append(i)
+        self.set_aside += place is not None
+        if place is not None:
+            goal = goal.copy()
+            goal[list(self.objects[i])] = place
         return self.graphs[i].path(start, goal)
 
     @property
@@ -380,7 +420,8 @@ class ObjectGraphs:
                 "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
                 "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
                 "objects": len(self.objects), **queries_summary(self.queries),
-                "paths_per_object": np.bincount(self.chosen, minlength=len(self.objects)).tolist()}
+                "paths_per_object": np.bincount(self.chosen, minlength=len(self.objects)).tolist(),
+                "set_aside": self.set_aside}
 
 
 def objects_of(family, env: str) -> tuple[tuple[tuple[int, ...], ...], float]:
