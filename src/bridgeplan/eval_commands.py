@@ -31,7 +31,7 @@ from bridgeplan.option_groups import (
     Threads,
     task_ids,
 )
-from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared
+from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared, values
 
 
 def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None, env: str | None = None):
@@ -151,12 +151,6 @@ def plan_options() -> list:
             if leaf.path not in POLICY_GROUPS and leaf.name not in ("run", "snapshot")]
 
 
-def _value(options, leaf):
-    for name in leaf.path:
-        options = getattr(options, name)
-    return getattr(options, leaf.name)
-
-
 def _eval_policy(o: EvalOptions) -> int:
     """``eval`` of a GCBC/GCIQL run: its policy (``--snapshot``: that step's) on its environment's tasks, its JSON
     every evaluation's; the flags about plans do not apply and are refused."""
@@ -165,7 +159,8 @@ def _eval_policy(o: EvalOptions) -> int:
     from bridgeplan.paths import eval_dir
     from bridgeplan.runs import run_dir_of
 
-    planning = [leaf.flag for leaf in plan_options() if _value(o, leaf) != leaf.default]
+    given = values(o)
+    planning = [leaf.flag for leaf in plan_options() if given[leaf.name] != leaf.default]
     if planning:
         raise BridgeplanError(f"{o.run} is a GCBC run (a policy, no plans): {', '.join(planning)} do not apply")
     folder = eval_dir(run_dir_of(Path(o.run)))
