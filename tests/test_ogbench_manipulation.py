@@ -890,10 +890,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
              "--keep", "2", "--no-progress", "--objects"]
     assert _error(capsys, [*graph, "--low", str(tmp_path)]).startswith("error: --objects: ")
-    puzzle = ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(tiny_data), "--objects", "--out",
-              str(tmp_path / "puzzle.json")]
-    assert _error(capsys, puzzle).startswith("error: --objects: puzzle-3x3-play-v0's goals move no objects apart")
-    assert not (tmp_path / "puzzle.json").exists()
+    scene = ["graph", "--maze", "scene-play-v0", "--dataset", str(tiny_data), "--objects", "--out",
+             str(tmp_path / "scene.json")]
+    assert _error(capsys, scene).startswith("error: --objects: scene-play-v0's goals move no objects apart")
+    assert not (tmp_path / "scene.json").exists()
     assert main([*graph, "--out", str(tmp_path / "objects.json")]) == 0
     row = json.loads((tmp_path / "objects.json").read_text())
     assert row["method"] == "dataset graph, objects apart" and row["config"]["graph"]["objects"] is True
@@ -901,3 +901,161 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert main([*graph[:-1], "--out", str(tmp_path / "one.json")]) == 0  # one cube: the one graph's own paths
     one = json.loads((tmp_path / "one.json").read_text())
     assert one["graph"]["path_steps"] == row["graph"]["path_steps"] and "objects" not in one["config"]["graph"]
+
+
+@pytest.fixture(scope="module")
+def tiny_puzzle(tmp_path_factory):
+    """A generated puzzle-3x3 dataset of 4 episodes of 301 steps: 36 presses, every button but button 1 pressed."""
+    folder = tmp_path_factory.mktemp("puzzle-data")
+    generate_dataset("puzzle-3x3-play-v0", folder, seed=0, episodes=4, episode_steps=301, progress=False)
+    return folder / "puzzle-3x3-play-v0.npz"
+
+
+def lights_out(rows: int, cols: int) -> np.ndarray:
+    """``[B, B]`` what a press of each button toggles: itself and its 4 neighbours (OGBench's puzzle_env)."""
+    toggles = np.zeros((rows * cols, rows * cols), dtype=bool)
+    for i in range(rows * cols):
+        r, c = divmod(i, cols)
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            if 0 <= r + dr < rows and 0 <= c + dc < cols:
+                toggles[i, (r + dr) * cols + c + dc] = True
+    return toggles
+
+
+def test_a_puzzles_presses_are_learned_from_the_data_and_end_its_path(tiny_puzzle):
+    """``graph --objects`` on a puzzle: what each press toggles is read from the data's presses (Lights Out's cross,
+    for every button the data presses; nothing for the one it never does); a goal one press away is solved as that
+    press, and its path is the arm's way clear of the buttons, then the data's own descent onto that button. Below the
+    clearance the arm goes on as the data did: down a press under way, up from a press made."""
+    from bridgeplan.graph import BUTTON_UP, ButtonPresses, for_stream
+
+    stream = FAMILY.load_stream(str(tiny_puzzle), "puzzle-3x3-play-v0")
+    presses, _ = for_stream(stream, FAMILY, {"keep": 2}, objects=True)
+    assert isinstance(presses, ButtonPresses)
+    pressed = np.bincount(presses.pressed, minlength=9)
+    assert pressed[1] == 0 and (np.delete(pressed, 1) > 0).all()
+    expected = lights_out(3, 3)
+    expected[1] = False
+    np.testing.assert_array_equal(presses.toggles, expected)
+    assert presses.graph.space.columns == (12, 13, 14) and presses.height == 14
+    pushed = (stream.states[:, 21::4] <= BUTTON_UP).any(axis=1)
+    assert presses.clearance == stream.states[pushed, 14].max()
+    clear = stream.states[presses.rows]
+    assert (clear[:, 21::4] > BUTTON_UP).all() and (clear[:, 14] > presses.clearance).all()
+
+    def one_press(state, k):
+        goal = state.copy()
+        goal[20::4] = (state[20::4] > 0.5) ^ expected[k]  # the buttons' "on" columns
+        return goal
+
+    def toggles_of(k):
+        return stream.states[presses.press_rows[presses.pressed == k, 1]]  # the data's states as k toggled
+
+    start = stream.states[0]
+    for k in (4, 8):
+        assert presses.presses(start, one_press(start, k)) == [k]
+        path = presses.path(start, one_press(start, k))
+        high = path[:, 14] > presses.clearance
+        down = int(np.argmin(high))
+        assert high[:down].all() and not high[down:].any()  # clear of the buttons, then the descent
+        assert (path[:down, 21::4] > BUTTON_UP).all()
+        assert np.argmin(path[-1, 21::4]) == k and path[-1, 21 + 4 * k] < -2.4  # the press toggled (-0.02 m x 120)
+        assert np.isclose(toggles_of(k), path[-1]).all(axis=1).any()
+        space = presses.graph.space  # the arm is at the path's first node: the path goes on from the next
+        assert presses.rows[presses.graph.nodes[0]] == 0
+        assert np.linalg.norm(space.point(path[1]) - space.point(start)) > presses.graph.step
+    assert presses.chosen == [4, 8] and presses.presses(start, start) == []
+    assert len(presses.path(start, start)) == 1 and presses.summary()["queries_pressing_none"] == 1
+    # pushing button 4, not yet toggled: on down to where a press of it toggled
+    a, b, _ = next(rows for rows, k in zip(presses.press_rows, presses.pressed) if k == 4)
+    halfway = next(stream.states[r] for r in range(a + 1, b) if presses.toggled_at < stream.states[r, 37] <= BUTTON_UP)
+    path = presses.path(halfway, one_press(halfway, 4))
+    assert presses.chosen[-1] == 4 and np.isclose(toggles_of(4), path[-1]).all(axis=1).any()
+    assert (np.diff(path[:, 14]) <= 1e-9).all()  # down, never up
+    # just toggled button 4, button 8 to press: up first (as the data rose from 4), then to 8
+    path = presses.path(stream.states[b], one_press(stream.states[b], 8))
+    assert presses.chosen[-1] == 8 and np.isclose(toggles_of(8), path[-1]).all(axis=1).any()
+    assert path[1, 14] > path[0, 14] and (path[:, 14] > presses.clearance).any()
+
+
+def test_the_fewest_presses_solve_lights_out():
+    """The presses solved are the fewest that make the change (checked against every combination of 4x4 Lights Out,
+    whose 16 presses make only 4096 of the 65 536 changes); a change none makes is None."""
+    from bridgeplan.graph import ButtonPresses
+
+    toggles = lights_out(4, 4)
+    solver = ButtonPresses(None, None, None, tuple(range(16)), (), toggles, None, None, None, -2.4)
+    combinations = (np.arange(1 << 16)[:, None] >> np.arange(16)) & 1
+    made = (combinations @ toggles.astype(np.int64)) % 2
+    change = (made << np.arange(16)).sum(axis=1)
+    fewest = np.full(1 << 16, 99)
+    np.minimum.at(fewest, change, combinations.sum(axis=1))
+    assert (fewest < 99).sum() == 4096
+    rng = np.random.default_rng(0)
+    for goal in rng.integers(0, 2, (200, 16)).astype(np.float64):
+        start = rng.integers(0, 2, 16).astype(np.float64)
+        bits = int(((start > 0.5) != (goal > 0.5)).astype(np.int64) @ (1 << np.arange(16)))
+        solved = solver.presses(start, goal)
+        if fewest[bits] == 99:
+            assert solved is None
+            continue
+        assert len(solved) == fewest[bits]
+        flips = np.bitwise_xor.reduce(toggles[solved], axis=0) if solved else np.zeros(16, dtype=bool)
+        np.testing.assert_array_equal(flips, (start > 0.5) != (goal > 0.5))
+
+
+def test_a_press_toggles_what_the_datas_presses_of_it_toggled_most_often():
+    """Hand-made data: button 0 pressed four times, once in a slip that toggled itself alone. What a press of it
+    toggles is its cross (3 of 4); each press's descent starts where the arm was last clear of the buttons (every
+    button up, higher than the data ever had one pushed), its toggle is where the buttons changed, its rise ends clear
+    again; the graph holds only the clear states."""
+    from bridgeplan.graph import ButtonPresses
+
+    bits = np.zeros(9, dtype=bool)
+
+    def state(x, z, depth=None):
+        s = np.zeros(55)
+        s[12], s[14], s[20::4], s[21::4] = x, z, bits, 0.055
+        if depth is not None:
+            s[21] = depth  # button 0 pushed
+        return s
+
+    cross = lights_out(3, 3)[0]
+    rows = []
+    for i, flips in enumerate([cross, np.eye(9, dtype=bool)[0], cross, cross]):
+        rows += [state(i, 2.0), state(i + 0.5, 2.0), state(i + 0.5, 1.05), state(i + 0.5, 1.1, -1.0)]
+        bits ^= flips
+        rows += [state(i + 0.5, 1.0, -3.0), state(i + 0.5, 1.1, -1.0)]
+    presses = ButtonPresses.build(np.array(rows), np.array([0]), tuple((20 + 4 * k, 21 + 4 * k) for k in range(9)),
+                                  14, {"keep": 1, "radius": 1.0, "neighbours": 2, "reach": 1.0},
+                                  FAMILY.layout("puzzle-3x3-play-v0"), (12, 13, 14))
+    np.testing.assert_array_equal(presses.toggles[0], cross)
+    assert not presses.toggles[1:].any()
+    assert presses.clearance == 1.1 and presses.toggled_at == -3.0
+    # the descent's start, the toggle, the rise's end (the last press's episode ends pushed: its toggle)
+    np.testing.assert_array_equal(presses.press_rows, [[6 * i + 1, 6 * i + 4, 6 * i + 6] for i in range(3)] +
+                                  [[19, 22, 22]])
+    np.testing.assert_array_equal(presses.rows, [6 * i + j for i in range(4) for j in (0, 1)])
+    np.testing.assert_array_equal(presses.approach, [2 * i + 1 for i in range(4)])
+    np.testing.assert_array_equal(presses.pressed, [0, 0, 0, 0])
+
+
+def test_a_puzzles_validation_goals_are_pressable():
+    """:func:`protocol.pressable` is Lights Out's reach: every change on 3x3, exactly those some combination of
+    presses makes on 4x4 (4096 of 65 536; checked on 300 drawn against every combination); so every puzzle validation
+    task can be solved."""
+    combinations = (np.arange(1 << 16)[:, None] >> np.arange(16)) & 1
+    made = set(((combinations @ lights_out(4, 4).astype(np.int64)) % 2 @ (1 << np.arange(16))).tolist())
+    assert len(made) == 4096
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        init, goal = rng.integers(0, 2, (2, 16))
+        assert protocol.pressable(init, goal, 4, 4) == (int((init ^ goal) @ (1 << np.arange(16))) in made)
+    assert all(protocol.pressable(np.zeros(9, int), (c >> np.arange(9)) & 1, 3, 3) for c in range(512))
+    for name in ("puzzle-3x3-play-v0", "puzzle-4x4-play-v0"):
+        spec = parse_dataset_name(name)
+        env = make_env(spec.scene.env_id)
+        rows = env.unwrapped._num_rows
+        for task in protocol.validation_tasks(spec, env):
+            assert protocol.pressable(task["init_button_states"], task["goal_button_states"], rows, rows)
+        env.close()

@@ -253,7 +253,9 @@ class GraphOptions(LevelledEvaluation):
                                          "25, chosen on cube-single's validation tasks)", metavar="K")
     graph: GraphSettings = group(GraphSettings)
     objects: bool = opt(False, "the objects apart (OGBench's cubes): one graph per cube over the arm and that cube, "
-                               "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs)")
+                               "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs); "
+                               "a puzzle's buttons: the presses solved (Lights Out), each decision the arm's way to "
+                               "the next press (bridgeplan.graph.ButtonPresses)")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
                               "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
                               "episodes")
@@ -311,9 +313,9 @@ def graph_eval(o: GraphOptions) -> int:
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
     if o.objects:
-        from bridgeplan.graph import objects_of
+        from bridgeplan.graph import check_objects
 
-        objects_of(family_of(env), env)  # refused before the data is read
+        check_objects(family_of(env), env)  # refused before the data is read
     plan = execution(o.replanning, o.controller, env=env)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))

@@ -29,7 +29,9 @@ manipulation), a goal then joining the nodes whose objects are where the goal pu
 Where several objects must each be moved (OGBench's cube-double), the objects' configurations rarely recur in the
 data: the graph over all of them joins almost nothing. :class:`ObjectGraphs` (``bridgeplan graph --objects``) takes
 them apart: one graph per object over the arm and that object alone, and each decision moves one object not yet at its
-goal (``Family.graph_objects``).
+goal (``Family.graph_objects``). A puzzle's buttons toggle one another (Lights Out): their 2^16 configurations recur
+even less, but which to press is a linear system over GF(2) that the data's presses teach; :class:`ButtonPresses`
+(``--objects`` on a puzzle) solves it and searches only the arm's way to each press (``Family.graph_buttons``).
 
 Nothing of the maze's walls is read: only the data. :class:`GraphSource` turns it into decisions, and ``bridgeplan
 graph`` scores them on the environment's tasks: what the data's connectivity alone allows, the floor a stitching
@@ -45,7 +47,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
@@ -249,7 +251,12 @@ class DatasetGraph:
         """The cheapest node path from the point ``start`` to the goal point ``goal`` (:attr:`space`'s; in the plane
         positions, ``[2]`` each); [] when no path joins them. The search runs once per goal (:meth:`to_goal`); from
         any start it is then a lookup."""
-        cost, toward = self.to_goal(goal)
+        return self.walk(start, self.to_goal(goal))
+
+    def walk(self, start: np.ndarray, search: tuple[np.ndarray, np.ndarray]) -> list[int]:
+        """The cheapest node path from the point ``start`` along ``search`` (:meth:`to_goal`'s or :meth:`to_nodes`'s:
+        every node's cost and next node); [] when none."""
+        cost, toward = search
         (s_idx, s_cost), = self._ends(np.asarray(start, np.float64)[None], self.tree)
         through = cost[s_idx] + s_cost
         if not np.isfinite(through).any():
@@ -263,15 +270,25 @@ class DatasetGraph:
 
     def to_goal(self, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every node's cheapest cost to the goal point ``goal`` (steps; inf where none) and its next node on the way
-        (``len(nodes)``: the goal itself): one search (Dijkstra, the goal one more node joined to its nodes by the
-        steps from them), kept for the goal's next queries (replanning from wherever the agent is, other episodes
-        to the same goal; at most :data:`GOALS_KEPT` goals, the oldest forgotten)."""
-        key = np.asarray(goal, np.float64).tobytes()
+        (``len(nodes)``: the goal itself): the goal one more node, joined to its nodes (:meth:`_ends`) by the steps
+        from them (:meth:`to_nodes`)."""
+        goal = np.asarray(goal, np.float64)
+        key = goal.tobytes()
+        if key in self._to_goal:
+            return self._to_goal[key]
+        (g_idx, g_cost), = self._ends(goal[None], self.goal_tree)
+        return self.to_nodes(key, g_idx, g_cost)
+
+    def to_nodes(self, key: object, nodes: np.ndarray, costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every node's cheapest cost to a goal joined to ``nodes`` by ``costs`` (steps; inf where none) and its next
+        node on the way (``len(nodes)``: the goal itself): one search (Dijkstra), kept under ``key`` for the goal's
+        next queries (replanning from wherever the agent is, other episodes to the same goal; at most
+        :data:`GOALS_KEPT` goals, the oldest forgotten)."""
         if key not in self._to_goal:
-            (g_idx, g_cost), = self._ends(np.asarray(goal, np.float64)[None], self.goal_tree)
             n, c = len(self.nodes), self.costs
-            with_goal = csr_matrix((np.concatenate([c.data, np.maximum(g_cost, 1e-9)]),
-                                    np.concatenate([c.indices, g_idx]), np.append(c.indptr, c.indptr[-1] + len(g_idx))),
+            nodes = np.asarray(nodes, np.int64)
+            with_goal = csr_matrix((np.concatenate([c.data, np.maximum(costs, 1e-9)]),
+                                    np.concatenate([c.indices, nodes]), np.append(c.indptr, c.indptr[-1] + len(nodes))),
                                    shape=(n + 1, n + 1))
             cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # undirected: from = to
             if len(self._to_goal) >= GOALS_KEPT:
@@ -347,6 +364,7 @@ class ObjectGraphs:
     others' columns left out), and each query searched in the graph of the object it moves next (:meth:`next_object`).
     A path moves one object; the next decision, the next. The same queries as a :class:`DatasetGraph`'s."""
 
+    kind: ClassVar[str] = "objects apart"
     graphs: list[DatasetGraph]
     objects: tuple[tuple[int, ...], ...]
     """Each object's position columns (x, y, z) in the state, the goal's alike."""
@@ -424,29 +442,256 @@ class ObjectGraphs:
                 "set_aside": self.set_aside}
 
 
-def objects_of(family, env: str) -> tuple[tuple[tuple[int, ...], ...], float]:
-    """The objects ``env``'s goals move apart (``Family.graph_objects``); none: the ``--objects`` error."""
-    found = family.graph_objects(env)
-    if found is None:
-        raise BridgeplanError(f"--objects: {env}'s goals move no objects apart (OGBench's cube datasets do; a "
-                              f"puzzle's buttons toggle one another, scene's lock its drawer and window)")
-    return found
+BUTTON_UP = -0.1
+"""A button is up (not pushed) while its position column is above this (OGBench's observation: the joint's position
+times 120; 0 at a reset, 0.055 at rest, a press toggles at -2.4): pushed by less than 1 mm."""
+MOST_BUTTONS = 20
+"""Buttons :class:`ButtonPresses` solves for at most: it tabulates every combination of presses (2^buttons)."""
+
+
+@dataclass
+class ButtonPresses:
+    """Buttons that toggle one another (OGBench's puzzles, Lights Out): which buttons to press is solved, the arm's way
+    to each press searched in the data.
+
+    A press toggles a fixed set of buttons, read from the data (:meth:`build`: at each change of the buttons' states,
+    the one pushed deepest and what changed), so the presses that turn one configuration into another solve a linear
+    system over GF(2) (:meth:`presses`: the fewest, from a table of every combination). That needs no configuration
+    to recur in the data, which 16 buttons' 65 536 hardly do. The arm's way to a press is a :class:`DatasetGraph` over
+    the effector's position alone, made of the data's states clear of the buttons (every button up, the effector
+    higher than the data ever had one pushed: no step along it pushes one), searched to where the data's own presses
+    of the buttons still to press began their descent; the data's steps down from there end the path. Below that
+    height the arm goes on as the data did: down the nearest press of a button still to press, or up from one. Each
+    decision presses the cheapest to reach; the next decision solves again from the buttons as they are (a wrong
+    press is one more to undo)."""
+
+    kind: ClassVar[str] = "presses solved"
+    graph: DatasetGraph
+    """Over the states clear of the buttons (``rows``), its episodes cut wherever the arm went below."""
+    rows: np.ndarray
+    """``[V_states]`` each of the graph's states' row in :attr:`observations`."""
+    observations: np.ndarray
+    """``[T, obs_dim]`` the dataset's states, all of them (a press's descent and rise go below the graph's)."""
+    states: tuple[int, ...]
+    """Each button's state column (1: on)."""
+    positions: tuple[int, ...]
+    """Each button's position column (pushed: at or below :data:`BUTTON_UP`)."""
+    toggles: np.ndarray
+    """``[B, B]`` bool: the buttons a press of each toggles, as the data's presses did (none: never pressed there)."""
+    approach: np.ndarray
+    """``[P]`` per press of the data, the graph's node its descent starts from."""
+    press_rows: np.ndarray
+    """``[P, 3]`` per press, its rows of :attr:`observations`: the start of its descent (clear), its toggle (the
+    buttons changed) and the end of its rise (clear again; its toggle where the episode ended first)."""
+    pressed: np.ndarray
+    """``[P]`` per press, the button pushed."""
+    toggled_at: float
+    """The shallowest a pushed button's position was as the data's presses toggled."""
+    height: int = 0
+    """The effector's height column."""
+    clearance: float = 0.0
+    """The highest the effector was while the data had a button pushed: above it, the arm is clear of the buttons."""
+    fewest: np.ndarray = field(init=False, repr=False)
+    """``[2^B]`` per configuration change (bits), the fewest presses that make it (bits), or -1: none does."""
+    chosen: list[int] = field(default_factory=list)
+    """Per query, the button the path presses (-1: none: the goal reached, out of the presses' reach, or a rise)."""
+    _segments: dict = field(default_factory=dict, repr=False)
+    """:meth:`_nearest`'s trees, by (button, descent or rise)."""
+
+    def __post_init__(self):
+        b = len(self.states)
+        masks = (self.toggles.astype(np.int64) << np.arange(b)).sum(axis=1)  # per button, what it toggles (bits)
+        effect, weight = np.zeros(1, np.int64), np.zeros(1, np.int64)
+        for m in masks:  # every combination of presses in order: combination c presses the bits of c
+            effect, weight = np.concatenate([effect, effect ^ m]), np.concatenate([weight, weight + 1])
+        order = np.argsort(weight, kind="stable")
+        made, first = np.unique(effect[order], return_index=True)  # each change's first combination: its fewest
+        self.fewest = np.full(1 << b, -1, np.int64)
+        self.fewest[made] = order[first]
+
+    @classmethod
+    def build(cls, observations: np.ndarray, starts: np.ndarray, buttons: tuple[tuple[int, int], ...], height: int,
+              settings: dict, layout: Layout, effector: tuple[int, ...]) -> ButtonPresses:
+        """From ``observations [T, obs_dim]`` (episodes beginning at rows ``starts``), each button's (state column,
+        position column) and the effector's ``height`` column: the toggles, the presses and the graph over
+        ``effector``'s columns (standardized over the data) with the given ``settings`` (keep, radius, neighbours,
+        reach)."""
+        if not 0 < len(buttons) <= MOST_BUTTONS:
+            raise BridgeplanError(f"the presses of 1 to {MOST_BUTTONS} buttons are solved, not {len(buttons)}")
+        observations = np.asarray(observations, np.float64)
+        state, position = (list(c) for c in zip(*buttons))
+        bits = observations[:, state] > 0.5
+        up = (observations[:, position] > BUTTON_UP).all(axis=1)
+        if up.all():
+            raise BridgeplanError("the data presses no button: no toggles to learn")
+        clearance = float(observations[~up, height].max())
+        clear = up & (observations[:, height] > clearance)
+        t = len(observations)
+        episode = np.zeros(t, np.int64)
+        episode[np.asarray(starts[1:], np.int64)] = 1
+        episode = np.cumsum(episode)
+        changes = np.flatnonzero((bits[1:] != bits[:-1]).any(axis=1) & (episode[1:] == episode[:-1])) + 1
+        last_clear = np.maximum.accumulate(np.where(clear, np.arange(t), -1))  # per row, the last clear one by then
+        approach = last_clear[changes - 1]
+        keep = (approach >= 0) & (episode[np.maximum(approach, 0)] == episode[changes])
+        changes, approach = changes[keep], approach[keep]
+        if len(changes) == 0:
+            raise BridgeplanError("no press in the data starts clear of the buttons: no way to a press to learn")
+        pressed = np.argmin(observations[changes][:, position], axis=1)
+        flips = bits[changes] != bits[changes - 1]
+        toggles = np.zeros((len(buttons), len(buttons)), dtype=bool)
+        for k in np.unique(pressed):  # a button the data never presses toggles nothing known: it is not pressed
+            seen, counts = np.unique(flips[pressed == k], axis=0, return_counts=True)
+            toggles[k] = seen[np.argmax(counts)]  # what a press of k did most often (a slip may press two)
+        next_clear = np.minimum.accumulate(np.where(clear, np.arange(t), t)[::-1])[::-1]
+        released = next_clear[changes]
+        released = np.where((released < t) & (episode[np.minimum(released, t - 1)] == episode[changes]), released,
+                            changes)
+        rows = np.flatnonzero(clear)
+        cut = np.ones(len(rows), dtype=bool)  # a new piece wherever the arm went below or an episode began
+        cut[1:] = (np.diff(rows) > 1) | (episode[rows[1:]] != episode[rows[:-1]])
+        pieces = np.flatnonzero(cut)
+        space = GraphSpace.standardized(observations[rows], effector)
+        graph = DatasetGraph.build(observations[rows], pieces, **settings, layout=layout,
+                                   step=space.pace(observations[rows], pieces), space=space)
+        node_of = np.full(len(rows), -1, np.int64)
+        node_of[graph.nodes] = np.arange(len(graph.nodes))
+        nodes = node_of[np.searchsorted(rows, approach)]  # a descent's start ends its piece: a node
+        assert (nodes >= 0).all()
+        toggled_at = float(observations[changes, np.asarray(position)[pressed]].max())
+        return cls(graph, rows, observations, tuple(state), tuple(position), toggles, nodes,
+                   np.stack([approach, changes, released], axis=1), pressed, toggled_at, height, clearance)
+
+    def bits(self, states: np.ndarray) -> int:
+        """The buttons' configuration in ``states [obs_dim]`` (a state, or a goal observation), as bits."""
+        on = np.asarray(states, np.float64)[list(self.states)] > 0.5
+        return int((on.astype(np.int64) << np.arange(len(on))).sum())
+
+    def presses(self, start: np.ndarray, goal: np.ndarray) -> list[int] | None:
+        """The fewest buttons whose presses turn ``start``'s configuration into ``goal``'s; None where none do."""
+        combination = int(self.fewest[self.bits(start) ^ self.bits(goal)])
+        return None if combination < 0 else [k for k in range(len(self.states)) if combination >> k & 1]
+
+    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """``[L, obs_dim]`` the arm's way from state ``start`` to the cheapest press of a button still to press, ending
+        pushed: from clear of the buttons, the graph's path, then the data's descent of that press. Below, as the data
+        went on from the state nearest the arm: pushing a button still to press and not yet as deep as the data's
+        presses toggle, down that press; pushing any other, up from it; pushing none, down a press still to make or up
+        from any, then on (so that a decision every step finishes a press, and no press is made twice by sliding off
+        it). ``[start]`` (stay) when none is needed, none can make the goal's configuration, or the way is not found."""
+        start = np.asarray(start, np.float64)
+        todo = self.presses(start, goal)
+        if not todo:
+            return self._stay(start, todo)
+        depth = start[list(self.positions)]
+        if (depth > BUTTON_UP).all() and start[self.height] > self.clearance:
+            way = self._to_press(start, todo)
+            return self._stay(start, todo) if way is None else self._onward(start, *way)
+        k = int(np.argmin(depth))
+        if depth[k] > BUTTON_UP:
+            options = [(j, True) for j in todo] + [(j, False) for j in np.unique(self.pressed)]
+        else:
+            options = [(k, k in todo and depth[k] > self.toggled_at)]
+        press, row, down = self._nearest(start, options)
+        _, toggled, released = self.press_rows[press]
+        if down:
+            return self._onward(start, int(self.pressed[press]), self.observations[row:toggled + 1], 1)
+        rise = self.observations[row:released + 1]
+        way = self._to_press(rise[-1], todo)
+        if way is None:
+            return self._onward(start, -1, rise, 1)
+        return self._onward(start, way[0], np.concatenate([rise, way[1][1:]]), way[2])
+
+    def _to_press(self, start: np.ndarray, todo: list[int]) -> tuple[int, np.ndarray, int] | None:
+        """The button, the states (``start`` first) and the data's episodes of the graph's cheapest way from ``start``
+        to a press of one of ``todo``, then that press's descent; None where the graph reaches none."""
+        ends = np.flatnonzero(np.isin(self.pressed, todo))
+        nodes = self.graph.walk(self.graph.space.point(start), self.graph.to_nodes(
+            ("presses", tuple(todo)), self.approach[ends], self.press_rows[ends, 1] - self.press_rows[ends, 0]))
+        if not nodes:
+            return None
+        press = ends[self.approach[ends] == nodes[-1]][0]
+        a, b, _ = self.press_rows[press]
+        dense = np.concatenate([self.graph.densify(start, self.observations[a], nodes), self.observations[a + 1:b + 1]])
+        return int(self.pressed[press]), dense, len(set(self.graph.episode[nodes].tolist()))
+
+    def _nearest(self, state: np.ndarray, options: list[tuple[int, bool]]) -> tuple[int, int, bool]:
+        """Of the data's descents (``True``) or rises (``False``) of the buttons in ``options``, the press, the row
+        and the direction of the state whose arm was nearest ``state``'s."""
+        point, best = self.graph.space.point(state), (np.inf, 0, 0, True)
+        for k, down in options:
+            if (k, down) not in self._segments:
+                ours = np.flatnonzero(self.pressed == k)
+                first, last = (0, 1) if down else (1, 2)
+                spans = [np.arange(a + 1, b + 1) for a, b in self.press_rows[ours][:, [first, last]]]
+                rows = np.concatenate(spans) if spans else np.zeros(0, np.int64)
+                press = np.repeat(ours, [len(r) for r in spans])
+                self._segments[k, down] = (cKDTree(self.graph.space.point(self.observations[rows])), rows, press)
+            tree, rows, press = self._segments[k, down]
+            if len(rows):
+                d, i = tree.query(point)
+                if d < best[0]:
+                    best = (d, int(press[i]), int(rows[i]), down)
+        return best[1:]
+
+    def _onward(self, start: np.ndarray, button: int, states: np.ndarray, episodes: int) -> np.ndarray:
+        """``start``, then ``states`` from the first more than a step from it (the states the arm is already at
+        skipped: else the next one, where a decision every step sends the arm, is where it is); recorded as a query
+        that presses ``button`` (-1: none)."""
+        space = self.graph.space
+        near = np.linalg.norm(space.point(states) - space.point(start), axis=1) <= self.graph.step
+        first_far = len(near) - 1 if near.all() else int(np.argmin(near))
+        dense = np.concatenate([start[None], states[first_far:]])
+        self.chosen.append(button)
+        self.graph.queries.append((len(dense), True, episodes))
+        return dense
+
+    def _stay(self, start: np.ndarray, todo: list[int] | None) -> np.ndarray:
+        self.chosen.append(-1)
+        self.graph.queries.append((1, todo == [], 0))
+        return start[None]
+
+    @property
+    def queries(self) -> list[tuple[int, bool, int]]:
+        return self.graph.queries
+
+    def summary(self) -> dict:
+        """The graph's size and what its queries found, the presses the data taught and each button's presses made."""
+        chosen = np.asarray(self.chosen, np.int64)
+        return {**self.graph.summary(), "buttons": len(self.states), "data_presses": int(len(self.pressed)),
+                "clearance": self.clearance,
+                "presses_per_button": np.bincount(chosen[chosen >= 0], minlength=len(self.states)).tolist(),
+                "queries_pressing_none": int(np.sum(chosen < 0))}
+
+
+def check_objects(family, env: str) -> None:
+    """``--objects``' refusal where ``env``'s goals neither move objects apart (``Family.graph_objects``) nor toggle
+    buttons (``Family.graph_buttons``)."""
+    if family.graph_objects(env) is None and family.graph_buttons(env) is None:
+        raise BridgeplanError(f"--objects: {env}'s goals move no objects apart and press no buttons that toggle one "
+                              f"another (OGBench's cube and puzzle datasets do; scene's buttons lock its drawer and "
+                              f"window)")
 
 
 def for_stream(stream: Stream, family, settings: dict | None = None,
-               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs, dict]:
+               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs | ButtonPresses, dict]:
     """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
     pace (``Family.graph_pace``) and space (``Family.graph_space``); ``objects``: one per object
-    (:class:`ObjectGraphs`, ``Family.graph_objects``). Returns it and the settings it was built with."""
+    (:class:`ObjectGraphs`, ``Family.graph_objects``), or the presses of buttons that toggle one another
+    (:class:`ButtonPresses`, ``Family.graph_buttons``). Returns it and the settings it was built with."""
     defaults, step, within = family.graph_pace(stream)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
     wanted = family.graph_space(stream)
     if objects:
-        parts, tolerance = objects_of(family, stream.maze)
-        columns, weight = wanted
-        arm = tuple(c for c in columns if c not in stream.layout.goal)
-        spaces = [GraphSpace.standardized(stream.states, arm + part, weight, goal=part) for part in parts]
+        check_objects(family, stream.maze)
+        arm = tuple(c for c in wanted[0] if c not in stream.layout.goal)
+        buttons = family.graph_buttons(stream.maze)
+        if buttons is not None:
+            return ButtonPresses.build(stream.states, stream.segment_starts, *buttons, settings, stream.layout,
+                                       arm), settings
+        parts, tolerance = family.graph_objects(stream.maze)
+        spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1], goal=part) for part in parts]
     else:
         spaces = [GraphSpace.plane(stream.layout) if wanted is None
                   else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal)]
@@ -469,7 +714,7 @@ class GraphSource:
     """The graph's paths as decisions (``replan.DecisionSource``): each decision plans from the episodes' current
     states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took."""
 
-    graph: DatasetGraph | ObjectGraphs
+    graph: DatasetGraph | ObjectGraphs | ButtonPresses
     length: int
     plan_seconds: float = 0.0
     plans_sampled: int = 0
@@ -490,7 +735,7 @@ class GraphSource:
 class GraphDecisions:
     """The graph's decisions for :func:`bridgeplan.evaluate.evaluate` (no network: any device)."""
 
-    graph: DatasetGraph | ObjectGraphs
+    graph: DatasetGraph | ObjectGraphs | ButtonPresses
     length: int
     device: object = "cpu"
 

@@ -556,7 +556,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
         agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead)
         graph, settings = agent.decisions.graph, agent.settings
         execution = (execution or Execution()).resolved(family, env)
-        method = "dataset graph" + (", objects apart" if objects else "") + (
+        method = "dataset graph" + (f", {graph.kind}" if objects else "") + (
             f", {policy.config.agent.upper()} low level" if policy else "")
         entries = {"kind": "graph", "run": f"graph over {env}", "step": 0, "method": method, "nfe": 0,
                    "horizon": agent.decisions.length, "stride": 1, "plan_span": tasks.episode_steps}

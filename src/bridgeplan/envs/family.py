@@ -208,6 +208,13 @@ class Family:
         no such objects."""
         return None
 
+    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int] | None:
+        """The buttons a goal in ``env`` sets, whose presses toggle one another
+        (:class:`bridgeplan.graph.ButtonPresses`, ``bridgeplan graph --objects``): each one's state column (1: on) and
+        position column (pushed: at or below :data:`bridgeplan.graph.BUTTON_UP`), and the column of the height of
+        what presses them; None: no such buttons."""
+        return None
+
     # --- evaluation --------------------------------------------------------------------------------------------
 
     def body(self, env: str) -> Body:

@@ -14,6 +14,7 @@ from __future__ import annotations
 from bridgeplan.envs.ogbench_data import OGBenchFamily, compact_stream
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
+    BUTTON_COLUMNS,
     CUBE_COLUMNS,
     CUBE_TOLERANCE,
     EFFECTOR_SCALE,
@@ -126,6 +127,17 @@ class OGBenchManipulation(OGBenchFamily):
             return None
         first = [ROBOT_COLUMNS + CUBE_COLUMNS * i for i in range(scene.cubes)]
         return tuple(tuple(range(c, c + 3)) for c in first), CUBE_TOLERANCE * EFFECTOR_SCALE
+
+    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int] | None:
+        """A puzzle's buttons: each one's state (the one-hot's "on" column) and its position (the joint's, times 120),
+        and the effector's height (its z); None where a goal sets anything else (scene's buttons lock its drawer and
+        window)."""
+        scene = parse_dataset_name(env).scene
+        if not scene.buttons or scene.cubes or scene.drawer_window:
+            return None
+        first = ROBOT_COLUMNS + CUBE_COLUMNS * scene.cubes
+        return tuple((first + BUTTON_COLUMNS * i + 1, first + BUTTON_COLUMNS * i + 2)
+                     for i in range(scene.buttons)), EFFECTOR_XY + 2
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body

@@ -99,6 +99,31 @@ def _cube_xyzs(rng: np.random.Generator, bounds: np.ndarray, cubes: int) -> np.n
             return np.column_stack([xy, np.full(cubes, 0.02)])
 
 
+def pressable(init: np.ndarray, goal: np.ndarray, rows: int, cols: int) -> bool:
+    """Whether presses turn button states ``init`` into ``goal`` on a ``rows`` x ``cols`` puzzle, where a press toggles
+    its button and the 4 next to it (ogbench's ``PuzzleEnv.post_step``): whether the change lies in the presses' span
+    over GF(2) (Gaussian elimination). On 3x3 every change does; on 4x4 one in 16."""
+    n = rows * cols
+    system = np.zeros((n, n + 1), dtype=bool)  # a column per press, the change last
+    for i in range(n):
+        r, c = divmod(i, cols)
+        for dr, dc in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)):
+            if 0 <= r + dr < rows and 0 <= c + dc < cols:
+                system[(r + dr) * cols + c + dc, i] = True
+    system[:, n] = np.asarray(init) != np.asarray(goal)
+    pivot_row = 0
+    for col in range(n):
+        below = np.flatnonzero(system[pivot_row:, col])
+        if len(below) == 0:
+            continue
+        system[[pivot_row, pivot_row + below[0]]] = system[[pivot_row + below[0], pivot_row]]
+        others = np.flatnonzero(system[:, col])
+        others = others[others != pivot_row]
+        system[others] ^= system[pivot_row]
+        pivot_row += 1
+    return not (system[:, n] & ~system[:, :n].any(axis=1)).any()  # no row reads 0 = 1
+
+
 def validation_tasks(spec: DatasetName, env) -> list[dict]:
     """Five tasks that are not the test tasks, in ogbench's ``task_info`` form, named ``validation_task6`` to
     ``validation_task10``, drawn by NumPy's ``default_rng(VALIDATION_TASKS_SEED)`` by the rules of the scene's own
@@ -106,8 +131,8 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
 
     - cubes: each cube's start and goal uniform on the table in the environment's object sampling bounds, the cubes
       at least 8 cm apart at the start and at the goal (no stacking), each moved at least 10 cm;
-    - puzzles: start and goal button states uniform bits, drawn again while the goal equals the start or the pair is
-      a test task's;
+    - puzzles: start and goal button states uniform bits, drawn again while the goal equals the start, the pair is
+      a test task's or no presses make the goal from the start (:func:`pressable`: on 4x4, 15 pairs in 16);
     - scene: the cube as above; buttons as the puzzle's; drawer closed (0) or open (-0.16) and window closed (0) or
       open (0.2), each uniform, start and goal apart; drawn again while no part of the goal differs from the start.
     The test tasks' continuous positions are never drawn exactly, so no validation task is a test task."""
@@ -128,7 +153,8 @@ def validation_tasks(spec: DatasetName, env) -> list[dict]:
             pairs = {(tuple(t["init_button_states"]), tuple(t["goal_button_states"])) for t in tests}
             while True:
                 init, goal = rng.integers(0, 2, scene.buttons), rng.integers(0, 2, scene.buttons)
-                if (init != goal).any() and (tuple(init), tuple(goal)) not in pairs:
+                if (init != goal).any() and (tuple(init), tuple(goal)) not in pairs and pressable(
+                        init, goal, u._num_rows, u._num_cols):
                     break
             out.append({"task_name": name, "init_button_states": init, "goal_button_states": goal})
         else:
