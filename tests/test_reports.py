@@ -461,11 +461,12 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert "No rows yet" in mc.render(tmp_path)
     folder = tmp_path / mc.folder("cube-single")
 
-    def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000, replan=None):
+    def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000, replan=None, graph=None):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"success_rate": rate, "train_seed": seed, "step": step,
                                     "execution": {"replan_every": replan},
-                                    "tasks": {str(t): {"success_rate": rate} for t in tasks}}))
+                                    "tasks": {str(t): {"success_rate": rate} for t in tasks},
+                                    **({"graph": graph} if graph else {})}))
 
     write(folder / "gcbc-s0-step20000-seed0.json", 0.04)
     write(folder / "gcbc-s1-step20000-seed0.json", 0.08, seed=1)
@@ -506,6 +507,12 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
           replan=150)
     assert ("| cube-double-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per cube, "
             "replanned every 150 steps) | 20.0 (one run) |") in mc.block(tmp_path)
+    # on a puzzle, the presses solved (its graph counts buttons)
+    write(tmp_path / mc.folder("puzzle-4x4") / "graph-keep5-r1-objects" / "track-replan5-seed0.json", 1.0, step=0,
+          replan=5, graph={"buttons": 16})
+    assert ("| puzzle-4x4-play-v0 | the dataset graph (no network: every 5th state, radius 1, the buttons' presses "
+            "solved (Lights Out), the arm's way to each searched, replanned every 5 steps) | 100.0 (one run) |"
+            ) in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /

@@ -72,7 +72,7 @@ def label(method: str, found: list[dict]) -> str:
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
     first = next(r for r in found if r["method"] == method)
     apart = ("" if not m[3] else ", the buttons' presses solved (Lights Out), the arm's way to each searched"
-             if "buttons" in first["graph"] else ", one graph per cube")
+             if "buttons" in first.get("graph", {}) else ", one graph per cube")
     if m[6]:  # a planner low level: its settings are its rows'
         row = next(r for r in found if r["method"] == method)
         low, ex = row["low"], row["execution"]
