@@ -927,7 +927,8 @@ def test_a_puzzles_presses_are_learned_from_the_data_and_end_its_path(tiny_puzzl
     for every button the data presses; nothing for the one it never does); a goal one press away is solved as that
     press, and its path is the arm's way clear of the buttons, then the data's own descent onto that button. Below the
     clearance the arm goes on as the data did: down a press under way, up from a press made."""
-    from bridgeplan.graph import BUTTON_UP, ButtonPresses, for_stream
+    from bridgeplan.envs.ogbench_manipulation import BUTTON_UP
+    from bridgeplan.graph import ButtonPresses, for_stream
 
     stream = FAMILY.load_stream(str(tiny_puzzle), "puzzle-3x3-play-v0")
     presses, _ = for_stream(stream, FAMILY, {"keep": 2}, objects=True)
@@ -937,7 +938,7 @@ def test_a_puzzles_presses_are_learned_from_the_data_and_end_its_path(tiny_puzzl
     expected = lights_out(3, 3)
     expected[1] = False
     np.testing.assert_array_equal(presses.toggles, expected)
-    assert presses.graph.space.columns == (12, 13, 14) and presses.height == 14
+    assert presses.graph.space.columns == (12, 13, 14) and presses.height == 14 and presses.up == BUTTON_UP
     pushed = (stream.states[:, 21::4] <= BUTTON_UP).any(axis=1)
     assert presses.clearance == stream.states[pushed, 14].max()
     clear = stream.states[presses.rows]
@@ -1027,7 +1028,7 @@ def test_a_press_toggles_what_the_datas_presses_of_it_toggled_most_often():
         bits ^= flips
         rows += [state(i + 0.5, 1.0, -3.0), state(i + 0.5, 1.1, -1.0)]
     presses = ButtonPresses.build(np.array(rows), np.array([0]), tuple((20 + 4 * k, 21 + 4 * k) for k in range(9)),
-                                  14, {"keep": 1, "radius": 1.0, "neighbours": 2, "reach": 1.0},
+                                  14, -0.1, {"keep": 1, "radius": 1.0, "neighbours": 2, "reach": 1.0},
                                   FAMILY.layout("puzzle-3x3-play-v0"), (12, 13, 14))
     np.testing.assert_array_equal(presses.toggles[0], cross)
     assert not presses.toggles[1:].any()

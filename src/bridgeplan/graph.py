@@ -442,9 +442,6 @@ class ObjectGraphs:
                 "set_aside": self.set_aside}
 
 
-BUTTON_UP = -0.1
-"""A button is up (not pushed) while its position column is above this (OGBench's observation: the joint's position
-times 120; 0 at a reset, 0.055 at rest, a press toggles at -2.4): pushed by less than 1 mm."""
 MOST_BUTTONS = 20
 """Buttons :class:`ButtonPresses` solves for at most: it tabulates every combination of presses (2^buttons)."""
 
@@ -475,7 +472,7 @@ class ButtonPresses:
     states: tuple[int, ...]
     """Each button's state column (1: on)."""
     positions: tuple[int, ...]
-    """Each button's position column (pushed: at or below :data:`BUTTON_UP`)."""
+    """Each button's position column (pushed: at or below :attr:`up`)."""
     toggles: np.ndarray
     """``[B, B]`` bool: the buttons a press of each toggles, as the data's presses did (none: never pressed there)."""
     approach: np.ndarray
@@ -489,6 +486,8 @@ class ButtonPresses:
     """The shallowest a pushed button's position was as the data's presses toggled."""
     height: int = 0
     """The effector's height column."""
+    up: float = 0.0
+    """A button is up (not pushed) while its position column is above this."""
     clearance: float = 0.0
     """The highest the effector was while the data had a button pushed: above it, the arm is clear of the buttons."""
     fewest: np.ndarray = field(init=False, repr=False)
@@ -511,9 +510,10 @@ class ButtonPresses:
 
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, buttons: tuple[tuple[int, int], ...], height: int,
-              settings: dict, layout: Layout, effector: tuple[int, ...]) -> ButtonPresses:
+              up: float, settings: dict, layout: Layout, effector: tuple[int, ...]) -> ButtonPresses:
         """From ``observations [T, obs_dim]`` (episodes beginning at rows ``starts``), each button's (state column,
-        position column) and the effector's ``height`` column: the toggles, the presses and the graph over
+        position column), the effector's ``height`` column and the position above which a button is ``up``: the
+        toggles, the presses and the graph over
         ``effector``'s columns (standardized over the data) with the given ``settings`` (keep, radius, neighbours,
         reach)."""
         if not 0 < len(buttons) <= MOST_BUTTONS:
@@ -521,11 +521,11 @@ class ButtonPresses:
         observations = np.asarray(observations, np.float64)
         state, position = (list(c) for c in zip(*buttons))
         bits = observations[:, state] > 0.5
-        up = (observations[:, position] > BUTTON_UP).all(axis=1)
-        if up.all():
+        released = (observations[:, position] > up).all(axis=1)
+        if released.all():
             raise BridgeplanError("the data presses no button: no toggles to learn")
-        clearance = float(observations[~up, height].max())
-        clear = up & (observations[:, height] > clearance)
+        clearance = float(observations[~released, height].max())
+        clear = released & (observations[:, height] > clearance)
         t = len(observations)
         episode = np.zeros(t, np.int64)
         episode[np.asarray(starts[1:], np.int64)] = 1
@@ -544,9 +544,8 @@ class ButtonPresses:
             seen, counts = np.unique(flips[pressed == k], axis=0, return_counts=True)
             toggles[k] = seen[np.argmax(counts)]  # what a press of k did most often (a slip may press two)
         next_clear = np.minimum.accumulate(np.where(clear, np.arange(t), t)[::-1])[::-1]
-        released = next_clear[changes]
-        released = np.where((released < t) & (episode[np.minimum(released, t - 1)] == episode[changes]), released,
-                            changes)
+        risen = next_clear[changes]
+        risen = np.where((risen < t) & (episode[np.minimum(risen, t - 1)] == episode[changes]), risen, changes)
         rows = np.flatnonzero(clear)
         cut = np.ones(len(rows), dtype=bool)  # a new piece wherever the arm went below or an episode began
         cut[1:] = (np.diff(rows) > 1) | (episode[rows[1:]] != episode[rows[:-1]])
@@ -560,7 +559,7 @@ class ButtonPresses:
         assert (nodes >= 0).all()
         toggled_at = float(observations[changes, np.asarray(position)[pressed]].max())
         return cls(graph, rows, observations, tuple(state), tuple(position), toggles, nodes,
-                   np.stack([approach, changes, released], axis=1), pressed, toggled_at, height, clearance)
+                   np.stack([approach, changes, risen], axis=1), pressed, toggled_at, height, up, clearance)
 
     def bits(self, states: np.ndarray) -> int:
         """The buttons' configuration in ``states [obs_dim]`` (a state, or a goal observation), as bits."""
@@ -584,11 +583,11 @@ class ButtonPresses:
         if not todo:
             return self._stay(start, todo)
         depth = start[list(self.positions)]
-        if (depth > BUTTON_UP).all() and start[self.height] > self.clearance:
+        if (depth > self.up).all() and start[self.height] > self.clearance:
             way = self._to_press(start, todo)
             return self._stay(start, todo) if way is None else self._onward(start, *way)
         k = int(np.argmin(depth))
-        if depth[k] > BUTTON_UP:
+        if depth[k] > self.up:
             options = [(j, True) for j in todo] + [(j, False) for j in np.unique(self.pressed)]
         else:
             options = [(k, k in todo and depth[k] > self.toggled_at)]

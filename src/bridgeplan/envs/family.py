@@ -208,11 +208,11 @@ class Family:
         no such objects."""
         return None
 
-    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int] | None:
+    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int, float] | None:
         """The buttons a goal in ``env`` sets, whose presses toggle one another
         (:class:`bridgeplan.graph.ButtonPresses`, ``bridgeplan graph --objects``): each one's state column (1: on) and
-        position column (pushed: at or below :data:`bridgeplan.graph.BUTTON_UP`), and the column of the height of
-        what presses them; None: no such buttons."""
+        position column, the column of the height of what presses them, and the position above which a button is up
+        (not pushed); None: no such buttons."""
         return None
 
     # --- evaluation --------------------------------------------------------------------------------------------

@@ -38,6 +38,9 @@ GRAPH = {"keep": 5, "radius": 1.0, "neighbours": 8, "reach": 2.0}
 """The dataset graph's settings, distances in the graph's space: on cube-single's real dataset (1000 x 1001 steps)
 every 5th state, 201 k nodes, about 0.3 M jumps, built in 2-8 s on this machine; chosen on its validation tasks
 (weight 30; 10 episodes each): keep 5 82 %, keep 10 76 %, keep 20 58 %, radius 0.5 28 % (too few jumps), 1.5 72 %."""
+BUTTON_UP = -0.1
+"""A button is up (not pushed) while its position column is above this (the joint's position times 120: 0 at a reset,
+0.055 at rest, a press toggles at -2.4): pushed by less than 1 mm (``graph --objects`` on a puzzle)."""
 GRAPH_RADIUS = {"scene": 12.0}
 """A scene's own radius where :data:`GRAPH`'s joins too few of its states, chosen on its validation tasks (6-10, 10
 episodes each, keep 5; studies/manip-scene.toml): scene radius 1-2 0 %, 3 8 %, 4 14 %, 6 16 %, 8 20 %, 12-24 26 % (the
@@ -128,16 +131,16 @@ class OGBenchManipulation(OGBenchFamily):
         first = [ROBOT_COLUMNS + CUBE_COLUMNS * i for i in range(scene.cubes)]
         return tuple(tuple(range(c, c + 3)) for c in first), CUBE_TOLERANCE * EFFECTOR_SCALE
 
-    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int] | None:
+    def graph_buttons(self, env: str) -> tuple[tuple[tuple[int, int], ...], int, float] | None:
         """A puzzle's buttons: each one's state (the one-hot's "on" column) and its position (the joint's, times 120),
-        and the effector's height (its z); None where a goal sets anything else (scene's buttons lock its drawer and
-        window)."""
+        the effector's height (its z) and :data:`BUTTON_UP`; None where a goal sets anything else (scene's buttons lock
+        its drawer and window)."""
         scene = parse_dataset_name(env).scene
         if not scene.buttons or scene.cubes or scene.drawer_window:
             return None
         first = ROBOT_COLUMNS + CUBE_COLUMNS * scene.cubes
         return tuple((first + BUTTON_COLUMNS * i + 1, first + BUTTON_COLUMNS * i + 2)
-                     for i in range(scene.buttons)), EFFECTOR_XY + 2
+                     for i in range(scene.buttons)), EFFECTOR_XY + 2, BUTTON_UP
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body
