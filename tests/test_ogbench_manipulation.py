@@ -941,7 +941,7 @@ def test_a_puzzles_presses_are_learned_from_the_data_and_end_its_path(tiny_puzzl
     assert presses.graph.space.columns == (12, 13, 14) and presses.height == 14 and presses.up == BUTTON_UP
     pushed = (stream.states[:, 21::4] <= BUTTON_UP).any(axis=1)
     assert presses.clearance == stream.states[pushed, 14].max()
-    clear = stream.states[presses.rows]
+    clear = presses.graph.observations
     assert (clear[:, 21::4] > BUTTON_UP).all() and (clear[:, 14] > presses.clearance).all()
 
     def one_press(state, k):
@@ -963,7 +963,7 @@ def test_a_puzzles_presses_are_learned_from_the_data_and_end_its_path(tiny_puzzl
         assert np.argmin(path[-1, 21::4]) == k and path[-1, 21 + 4 * k] < -2.4  # the press toggled (-0.02 m x 120)
         assert np.isclose(toggles_of(k), path[-1]).all(axis=1).any()
         space = presses.graph.space  # the arm is at the path's first node: the path goes on from the next
-        assert presses.rows[presses.graph.nodes[0]] == 0
+        np.testing.assert_array_equal(presses.graph.observations[presses.graph.nodes[0]], start)
         assert np.linalg.norm(space.point(path[1]) - space.point(start)) > presses.graph.step
     assert presses.chosen == [4, 8] and presses.presses(start, start) == []
     assert len(presses.path(start, start)) == 1 and presses.summary()["queries_pressing_none"] == 1
@@ -985,7 +985,7 @@ def test_the_fewest_presses_solve_lights_out():
     from bridgeplan.graph import ButtonPresses
 
     toggles = lights_out(4, 4)
-    solver = ButtonPresses(None, None, None, tuple(range(16)), (), toggles, None, None, None, -2.4)
+    solver = ButtonPresses(None, None, tuple(range(16)), (), toggles, None, None, None, -2.4)
     combinations = (np.arange(1 << 16)[:, None] >> np.arange(16)) & 1
     made = (combinations @ toggles.astype(np.int64)) % 2
     change = (made << np.arange(16)).sum(axis=1)
@@ -1036,7 +1036,8 @@ def test_a_press_toggles_what_the_datas_presses_of_it_toggled_most_often():
     # the descent's start, the toggle, the rise's end (the last press's episode ends pushed: its toggle)
     np.testing.assert_array_equal(presses.press_rows, [[6 * i + 1, 6 * i + 4, 6 * i + 6] for i in range(3)] +
                                   [[19, 22, 22]])
-    np.testing.assert_array_equal(presses.rows, [6 * i + j for i in range(4) for j in (0, 1)])
+    np.testing.assert_array_equal(presses.graph.observations, np.array(rows)[[6 * i + j for i in range(4)
+                                                                               for j in (0, 1)]])
     np.testing.assert_array_equal(presses.approach, [2 * i + 1 for i in range(4)])
     np.testing.assert_array_equal(presses.pressed, [0, 0, 0, 0])
 

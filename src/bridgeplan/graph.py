@@ -464,9 +464,7 @@ class ButtonPresses:
 
     kind: ClassVar[str] = "presses solved"
     graph: DatasetGraph
-    """Over the states clear of the buttons (``rows``), its episodes cut wherever the arm went below."""
-    rows: np.ndarray
-    """``[V_states]`` each of the graph's states' row in :attr:`observations`."""
+    """Over the states clear of the buttons, its episodes cut wherever the arm went below."""
     observations: np.ndarray
     """``[T, obs_dim]`` the dataset's states, all of them (a press's descent and rise go below the graph's)."""
     states: tuple[int, ...]
@@ -558,7 +556,7 @@ class ButtonPresses:
         nodes = node_of[np.searchsorted(rows, approach)]  # a descent's start ends its piece: a node
         assert (nodes >= 0).all()
         toggled_at = float(observations[changes, np.asarray(position)[pressed]].max())
-        return cls(graph, rows, observations, tuple(state), tuple(position), toggles, nodes,
+        return cls(graph, observations, tuple(state), tuple(position), toggles, nodes,
                    np.stack([approach, changes, risen], axis=1), pressed, toggled_at, height, up, clearance)
 
     def bits(self, states: np.ndarray) -> int:
