@@ -511,9 +511,8 @@ class ButtonPresses:
               up: float, settings: dict, layout: Layout, effector: tuple[int, ...]) -> ButtonPresses:
         """From ``observations [T, obs_dim]`` (episodes beginning at rows ``starts``), each button's (state column,
         position column), the effector's ``height`` column and the position above which a button is ``up``: the
-        toggles, the presses and the graph over
-        ``effector``'s columns (standardized over the data) with the given ``settings`` (keep, radius, neighbours,
-        reach)."""
+        toggles, the presses and the graph over ``effector``'s columns (standardized over the data) with the given
+        ``settings`` (keep, radius, neighbours, reach)."""
         if not 0 < len(buttons) <= MOST_BUTTONS:
             raise BridgeplanError(f"the presses of 1 to {MOST_BUTTONS} buttons are solved, not {len(buttons)}")
         observations = np.asarray(observations, np.float64)
