@@ -784,10 +784,11 @@ def test_the_graphs_radius_is_the_scenes_where_it_has_one():
 
     from bridgeplan.envs.ogbench_manipulation import GRAPH
 
-    def radius(name):
-        return FAMILY.graph_pace(SimpleNamespace(maze=name))[0]["radius"]
+    def radius(name, objects=False):
+        return FAMILY.graph_pace(SimpleNamespace(maze=name), objects=objects)[0]["radius"]
 
     assert radius("scene-play-v0") == 12.0
+    assert radius("scene-play-v0", objects=True) == GRAPH["radius"]  # each part's graph: the family's
     others = {radius(name) for name in ("cube-single-play-v0", "cube-double-play-v0", "puzzle-3x3-play-v0")}
     assert others == {GRAPH["radius"]}
 
@@ -890,10 +891,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     graph = ["graph", "--maze", "cube-single-play-v0", "--dataset", str(tiny_data), "--episodes", "1", "--tasks", "1",
              "--keep", "2", "--no-progress", "--objects"]
     assert _error(capsys, [*graph, "--low", str(tmp_path)]).startswith("error: --objects: ")
-    scene = ["graph", "--maze", "scene-play-v0", "--dataset", str(tiny_data), "--objects", "--out",
-             str(tmp_path / "scene.json")]
-    assert _error(capsys, scene).startswith("error: --objects: scene-play-v0's goals move no objects apart")
-    assert not (tmp_path / "scene.json").exists()
+    maze = ["graph", "--maze", "pointmaze-medium-navigate-v0", "--dataset", str(tiny_data), "--objects", "--out",
+            str(tmp_path / "maze.json")]
+    assert _error(capsys, maze).startswith("error: --objects: pointmaze-medium-navigate-v0's goals move no objects")
+    assert not (tmp_path / "maze.json").exists()
     assert main([*graph, "--out", str(tmp_path / "objects.json")]) == 0
     row = json.loads((tmp_path / "objects.json").read_text())
     assert row["method"] == "dataset graph, objects apart" and row["config"]["graph"]["objects"] is True
@@ -1061,3 +1062,101 @@ def test_a_puzzles_validation_goals_are_pressable():
         for task in protocol.validation_tasks(spec, env):
             assert protocol.pressable(task["init_button_states"], task["goal_button_states"], rows, rows)
         env.close()
+
+
+def test_a_scenes_parts_are_the_environments():
+    """scene's parts as ``graph --objects`` reads them: the slides' columns (the drawer open at its ``opened``), and
+    the drawer's box the environment's own (``SceneEnv._is_in_drawer``) at any drawer position, the cube carried."""
+    import mujoco
+
+    parts = FAMILY.graph_scene("scene-play-v0")
+    assert FAMILY.graph_scene("cube-double-play-v0") is None and FAMILY.graph_scene("puzzle-3x3-play-v0") is None
+    env = make_env("scene-v0")
+    ob, _ = env.reset(seed=0, options={"task_id": 1})
+    u = env.unwrapped
+    assert [ob[c] for c in parts.buttons] == [1.0, 1.0]  # task 1's buttons are on
+    rng = np.random.default_rng(0)
+    agree = 0
+    for q in (0.0, -0.08, -0.16):
+        u._data.joint("drawer_slide").qpos[0] = q
+        mujoco.mj_forward(u._model, u._data)
+        ob = u.compute_observation()
+        assert ob[parts.slides[0]] == pytest.approx(q * 18.0)
+        for _ in range(200):
+            world = rng.uniform([0.15, -0.6, -0.05], [0.5, -0.05, 0.2])
+            cube = (world - [0.425, 0.0, 0.0]) * 10.0
+            inside = parts.in_container(cube, ob[parts.slides[0]])
+            assert inside == u._is_in_drawer(world), (q, world)
+            agree += inside
+    assert agree > 50  # both sides seen
+    assert parts.opened == pytest.approx(-0.16 * 18.0)
+
+
+def test_a_scene_is_reached_one_part_at_a_time():
+    """Toward task 4's goal (the cube put in the closed drawer, button 0 on at the end): button 0 pressed (the drawer
+    is locked), the drawer opened, the cube put where the goal has it, as the open drawer holds it, the drawer closed;
+    then nothing. Toward task 2's (the drawer and the window closed, both locked again): each slide unlocked then
+    moved, then each button pressed back."""
+    from bridgeplan.graph import SceneSteps
+
+    parts = FAMILY.graph_scene("scene-play-v0")
+    steps = SceneSteps([], parts)
+
+    def state(cube, buttons, drawer, window):
+        s = np.zeros(40)
+        s[list(parts.cube)] = (np.asarray(cube) - [0.425, 0.0, 0.0]) * 10.0
+        s[list(parts.buttons)] = buttons
+        s[list(parts.slides)] = drawer * 18.0, window * 15.0
+        return s
+
+    table, drawer = (0.35, 0.05, 0.02), (0.33, -0.356, 0.066)
+    goal = state(drawer, (1, 0), 0.0, 0.0)
+    assert steps.next_step(state(table, (0, 0), 0.0, 0.0), goal) == (1, {29: 1.0})
+    assert steps.next_step(state(table, (1, 0), 0.0, 0.0), goal) == (3, {36: pytest.approx(-2.88)})
+    graph, target = steps.next_step(state(table, (1, 0), -0.16, 0.0), goal)
+    opened = (np.asarray(drawer) + [0.0, 0.16, 0.0] - [0.425, 0.0, 0.0]) * 10.0  # the drawer slid 0.16 m toward +y
+    assert graph == 0 and list(target) == list(parts.cube)
+    np.testing.assert_allclose(list(target.values()), opened)
+    in_open = state(np.asarray(drawer) + [0.0, 0.16, 0.0], (1, 0), -0.16, 0.0)
+    assert steps.next_step(in_open, goal) == (3, {36: 0.0})
+    assert steps.next_step(state(drawer, (1, 0), 0.0, 0.0), goal) is None
+    assert steps.next_step(state(table, (1, 0), -0.005, 0.0), goal) == (3, {36: pytest.approx(-2.88)})  # closed
+    # the cube out of the drawer: the drawer opened first, whatever the cube's goal
+    out = state(table, (1, 0), 0.0, 0.0)
+    assert steps.next_step(state(drawer, (1, 0), 0.0, 0.0), out) == (3, {36: pytest.approx(-2.88)})
+    # task 2
+    goal = state(table, (0, 0), 0.0, 0.0)
+    assert steps.next_step(state(table, (0, 0), -0.16, 0.2), goal) == (1, {29: 1.0})
+    assert steps.next_step(state(table, (1, 0), -0.16, 0.2), goal) == (3, {36: 0.0})
+    assert steps.next_step(state(table, (1, 0), 0.0, 0.2), goal) == (2, {33: 1.0})
+    assert steps.next_step(state(table, (1, 1), 0.0, 0.2), goal) == (4, {38: 0.0})
+    assert steps.next_step(state(table, (1, 1), 0.0, 0.0), goal) == (1, {29: 0.0})
+    assert steps.next_step(state(table, (0, 1), 0.0, 0.0), goal) == (2, {33: 0.0})
+    assert steps.next_step(goal, goal) is None
+    assert steps.path(goal, goal).shape == (1, 40) and steps.chosen == [-1]
+
+
+def test_a_scenes_graphs_are_its_parts(tmp_path):
+    """``graph --objects`` on scene: one graph per part over the effector and that part's columns, at the family's
+    radius (scene's own is for the graph over all its parts); a goal that turns button 0 over is searched in its
+    graph, the path ending with the button turned as the data turned it."""
+    from bridgeplan.envs.ogbench_manipulation import GRAPH
+    from bridgeplan.graph import SceneSteps, for_stream
+
+    generate_dataset("scene-play-v0", tmp_path, seed=0, episodes=3, episode_steps=301, progress=False)
+    stream = FAMILY.load_stream(str(tmp_path / "scene-play-v0.npz"), "scene-play-v0")
+    steps, settings = for_stream(stream, FAMILY, {"keep": 2}, objects=True)
+    assert isinstance(steps, SceneSteps) and settings["radius"] == GRAPH["radius"]
+    parts = [(19, 20, 21), (29,), (33,), (36,), (38,)]
+    assert [g.space.columns for g in steps.graphs] == [(12, 13, 14, *p) for p in parts]
+    assert [g.space.goal for g in steps.graphs] == parts
+    on = stream.states[:, 29] > 0.5
+    turned = np.flatnonzero(on[1:] != on[:-1])
+    assert len(turned), "the tiny data never presses button 0"
+    start = stream.states[turned[0] - 40 if turned[0] >= 40 else 0]
+    goal = start.copy()
+    goal[29] = 1.0 - round(start[29])
+    goal[33] = round(start[33])
+    path = steps.path(start, goal)
+    assert steps.chosen == [1] and path[-1, 29] == goal[29]
+    assert steps.summary()["paths_per_part"] == [0, 1, 0, 0, 0]

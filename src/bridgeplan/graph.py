@@ -59,6 +59,7 @@ from bridgeplan.trajectory import Layout
 
 if TYPE_CHECKING:
     from bridgeplan.data.stream import Stream
+    from bridgeplan.envs.family import SceneParts
 
 SETTINGS = ("keep", "radius", "neighbours", "reach")
 """What builds a graph; each family has its values (``Family.graph_pace``)."""
@@ -660,22 +661,98 @@ class ButtonPresses:
                 "queries_pressing_none": int(np.sum(chosen < 0))}
 
 
+@dataclass
+class SceneSteps:
+    """A goal that sets a cube, buttons and slides locked by the buttons (OGBench's scene), reached one part at a time:
+    one :class:`DatasetGraph` per part over the arm's effector and that part's columns (the others left out, as
+    :class:`ObjectGraphs`: the parts' configurations together rarely recur in the data), each decision searching the
+    graph of its next step (:meth:`next_step`). The cube first (the drawer opened first where the cube goes in or out of
+    it), then each slide, then each button; a slide locked is unlocked first (its button pressed). Each decision takes
+    the next step from the parts as they are: a step undone by a slip is taken again."""
+
+    kind: ClassVar[str] = "scene in steps"
+    graphs: list[DatasetGraph]
+    """The cube's, each button's, then each slide's graph, over the effector's columns and that part's."""
+    parts: SceneParts
+    chosen: list[int] = field(default_factory=list)
+    """Per query, the graph searched (-1: none: the goal reached)."""
+
+    def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
+        """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
+        (the rest of ``goal`` free); None when every part is at its goal."""
+        p = self.parts
+        slide, slide_goal = start[list(p.slides)], goal[list(p.slides)]
+        box = p.container
+        cube, target = start[list(p.cube)], goal[list(p.cube)]
+        into = p.in_container(target, slide_goal[box])
+        if into:  # where the goal has it in the drawer, as the drawer is now
+            target = target + np.asarray(p.carried) * (slide[box] - slide_goal[box])
+        if np.linalg.norm(cube - target) > p.cube_tolerance:
+            if (into or p.in_container(cube, slide[box])) and abs(slide[box] - p.opened) > p.slide_tolerances[box]:
+                return self._slide(start, box, p.opened)
+            return 0, dict(zip(p.cube, target.tolist()))
+        for k in range(len(p.slides)):
+            if abs(slide[k] - slide_goal[k]) > p.slide_tolerances[k]:
+                return self._slide(start, k, float(slide_goal[k]))
+        for b, column in enumerate(p.buttons):
+            if (start[column] > 0.5) != (goal[column] > 0.5):
+                return 1 + b, {column: float(goal[column] > 0.5)}
+        return None
+
+    def _slide(self, start: np.ndarray, k: int, value: float) -> tuple[int, dict[int, float]]:
+        """Slide ``k`` to ``value``, or its lock's button on first."""
+        p = self.parts
+        lock = p.buttons[p.locks[k]]
+        if start[lock] <= 0.5:
+            return 1 + p.locks[k], {lock: 1.0}
+        return 1 + len(p.buttons) + k, {p.slides[k]: value}
+
+    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """``[L, obs_dim]`` the cheapest path that takes :meth:`next_step` (:meth:`DatasetGraph.path` in its part's
+        graph toward the goal with that part's columns set to the step's target); ``[start]`` (stay) at the goal."""
+        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        step = self.next_step(start, goal)
+        if step is None:
+            self.chosen.append(-1)
+            return start[None]
+        graph, target = step
+        self.chosen.append(graph)
+        goal = goal.copy()
+        goal[list(target)] = list(target.values())
+        return self.graphs[graph].path(start, goal)
+
+    @property
+    def queries(self) -> list[tuple[int, bool, int]]:
+        return [q for g in self.graphs for q in g.queries]
+
+    def summary(self) -> dict:
+        """Their sizes summed and what their queries found, with the queries per part (cube, buttons, slides) and at
+        the goal."""
+        chosen = np.asarray(self.chosen, np.int64)
+        return {"nodes": sum(len(g.nodes) for g in self.graphs),
+                "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
+                "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
+                **queries_summary(self.queries),
+                "paths_per_part": np.bincount(chosen[chosen >= 0], minlength=len(self.graphs)).tolist(),
+                "queries_at_goal": int(np.sum(chosen < 0))}
+
+
 def check_objects(family, env: str) -> None:
     """``--objects``' refusal where ``env``'s goals neither move objects apart (``Family.graph_objects``) nor toggle
     buttons (``Family.graph_buttons``)."""
-    if family.graph_objects(env) is None and family.graph_buttons(env) is None:
-        raise BridgeplanError(f"--objects: {env}'s goals move no objects apart and press no buttons that toggle one "
-                              f"another (OGBench's cube and puzzle datasets do; scene's buttons lock its drawer and "
-                              f"window)")
+    if family.graph_objects(env) is None and family.graph_buttons(env) is None and family.graph_scene(env) is None:
+        raise BridgeplanError(f"--objects: {env}'s goals move no objects apart, press no buttons that toggle one "
+                              f"another and unlock no slides (OGBench's cube, puzzle and scene datasets do)")
 
 
 def for_stream(stream: Stream, family, settings: dict | None = None,
-               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs | ButtonPresses, dict]:
+               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps, dict]:
     """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
     pace (``Family.graph_pace``) and space (``Family.graph_space``); ``objects``: one per object
-    (:class:`ObjectGraphs`, ``Family.graph_objects``), or the presses of buttons that toggle one another
-    (:class:`ButtonPresses`, ``Family.graph_buttons``). Returns it and the settings it was built with."""
-    defaults, step, within = family.graph_pace(stream)
+    (:class:`ObjectGraphs`, ``Family.graph_objects``), the presses of buttons that toggle one another
+    (:class:`ButtonPresses`, ``Family.graph_buttons``) or one per part of a scene (:class:`SceneSteps`,
+    ``Family.graph_scene``). Returns it and the settings it was built with."""
+    defaults, step, within = family.graph_pace(stream, objects=objects)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
     wanted = family.graph_space(stream)
@@ -686,16 +763,23 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
         if buttons is not None:
             return ButtonPresses.build(stream.states, stream.segment_starts, *buttons, settings, stream.layout,
                                        arm), settings
-        parts, tolerance = family.graph_objects(stream.maze)
+        scene = family.graph_scene(stream.maze)
+        if scene is not None:
+            parts = (scene.cube, *((b,) for b in scene.buttons), *((s,) for s in scene.slides))
+        else:
+            parts, tolerance = family.graph_objects(stream.maze)
         spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1], goal=part) for part in parts]
     else:
         spaces = [GraphSpace.plane(stream.layout) if wanted is None
                   else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal)]
-    graphs = [DatasetGraph.build(stream.states, stream.segment_starts, **settings, layout=stream.layout,
-                                 step=space.pace(stream.states, stream.segment_starts) if step is None else step,
+    states = np.asarray(stream.states, np.float64)  # once: the graphs share it
+    graphs = [DatasetGraph.build(states, stream.segment_starts, **settings, layout=stream.layout,
+                                 step=space.pace(states, stream.segment_starts) if step is None else step,
                                  within_episodes=within, space=space)
               for space in spaces]
-    return (ObjectGraphs(graphs, parts, tolerance) if objects else graphs[0]), settings
+    if not objects:
+        return graphs[0], settings
+    return (SceneSteps(graphs, scene) if scene is not None else ObjectGraphs(graphs, parts, tolerance)), settings
 
 
 def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
@@ -710,7 +794,7 @@ class GraphSource:
     """The graph's paths as decisions (``replan.DecisionSource``): each decision plans from the episodes' current
     states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took."""
 
-    graph: DatasetGraph | ObjectGraphs | ButtonPresses
+    graph: DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps
     length: int
     plan_seconds: float = 0.0
     plans_sampled: int = 0
@@ -731,7 +815,7 @@ class GraphSource:
 class GraphDecisions:
     """The graph's decisions for :func:`bridgeplan.evaluate.evaluate` (no network: any device)."""
 
-    graph: DatasetGraph | ObjectGraphs | ButtonPresses
+    graph: DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps
     length: int
     device: object = "cpu"
 

@@ -545,7 +545,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     ``policy_ahead`` steps on, default :data:`POLICY_AHEAD`), the paths searched again every
     ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution, follower)`` (the graph alone
     or over a policy) hears the graph's decisions after the evaluation (``bridgeplan graph --render``).
-    ``objects``: the graph alone or over a policy, one per object (:class:`bridgeplan.graph.ObjectGraphs`)."""
+    ``objects``: the graph alone or over a policy, one per object or part (:func:`bridgeplan.graph.for_stream`)."""
     from bridgeplan.gcbc import is_gcbc_run, run_policy
 
     env, family = tasks.env, family_of(tasks.env)

@@ -54,6 +54,39 @@ class Film(Protocol):
 
 
 @dataclass(frozen=True)
+class SceneParts:
+    """A goal that sets a cube, buttons and slides (a drawer, a window), each slide moving only while its button is on,
+    the cube carried by the slide it lies in (OGBench's scene): :class:`bridgeplan.graph.SceneSteps`' parts. Every
+    position in the state's units."""
+
+    cube: tuple[int, ...]
+    """The cube's position columns (x, y, z)."""
+    cube_tolerance: float
+    """How near its goal the cube is done."""
+    buttons: tuple[int, ...]
+    """Each button's state column (1: on)."""
+    slides: tuple[int, ...]
+    """Each slide's position column."""
+    slide_tolerances: tuple[float, ...]
+    """How near its goal each slide is done."""
+    locks: tuple[int, ...]
+    """Per slide, the button that lets it move while on."""
+    container: int
+    """The slide the cube can be put in (a drawer)."""
+    opened: float
+    """The container's position open (the cube goes in or out only then)."""
+    inside: tuple[tuple[float, float], ...]
+    """The cube is in the container while its x, y and z lie within these bounds, the container closed (at 0)."""
+    carried: tuple[float, ...]
+    """How far the cube inside moves (x, y, z) per unit of the container's position: the bounds move as much."""
+
+    def in_container(self, cube: np.ndarray, slide: float) -> bool:
+        """Whether a cube at ``cube`` (x, y, z) lies in the container at ``slide``."""
+        low, high = np.asarray(self.inside).T + np.asarray(self.carried) * slide
+        return bool(np.all((low <= cube) & (cube <= high)))
+
+
+@dataclass(frozen=True)
 class Tasks:
     """Seeded evaluation episodes of one environment, as its family draws them (:meth:`Family.tasks`)."""
 
@@ -189,11 +222,11 @@ class Family:
         """A dataset file's summary (JSON-ready) and its text, checked to be of ``env`` where given."""
         raise NotImplementedError
 
-    def graph_pace(self, stream) -> tuple[dict, float | None, bool]:
+    def graph_pace(self, stream, objects: bool = False) -> tuple[dict, float | None, bool]:
         """The dataset graph's settings for this family (``keep``, ``radius``, ``neighbours``, ``reach``), the
         data's step (distance per environment step; None: its median step in the graph's space) and whether a jump
         may join two nodes of one episode (a continuous stream that passes a place again):
-        :func:`bridgeplan.graph.for_stream`."""
+        :func:`bridgeplan.graph.for_stream`; ``objects``: for the graphs of parts apart (``graph --objects``)."""
         raise NotImplementedError
 
     def graph_space(self, stream) -> tuple[tuple[int, ...], float] | None:
@@ -213,6 +246,11 @@ class Family:
         (:class:`bridgeplan.graph.ButtonPresses`, ``bridgeplan graph --objects``): each one's state column (1: on) and
         position column, the column of the height of what presses them, and the position above which a button is up
         (not pushed); None: no such buttons."""
+        return None
+
+    def graph_scene(self, env: str) -> SceneParts | None:
+        """A goal in ``env`` that sets a cube, buttons and slides locked by them, reached one part at a time
+        (:class:`bridgeplan.graph.SceneSteps`, ``bridgeplan graph --objects``); None: no such scene."""
         return None
 
     # --- evaluation --------------------------------------------------------------------------------------------

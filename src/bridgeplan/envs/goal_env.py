@@ -423,7 +423,7 @@ class GoalEnv(Family):
         return info, (f"{path}: {env}, {len(stream)} steps in {stream.episodes} episodes, states of "
                       f"{info['obs_dim']} columns, actions of {info['act_dim']}")
 
-    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+    def graph_pace(self, stream, objects: bool = False) -> tuple[dict, float, bool]:
         step = stream.pace()
         return {"keep": 10, "radius": 2.5 * step, "neighbours": 8, "reach": 10 * step}, step, True
 

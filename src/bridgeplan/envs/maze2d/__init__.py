@@ -126,7 +126,7 @@ class Maze2D(Family):
         info = summarize(load_stream(path, maze=env))
         return info, format_summary(info)
 
-    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+    def graph_pace(self, stream, objects: bool = False) -> tuple[dict, float, bool]:
         """The data's median step, and jumps within its one continuous stream (its loops closed)."""
         return GRAPH, stream.pace(), True
 

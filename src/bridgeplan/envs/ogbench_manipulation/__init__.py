@@ -17,6 +17,7 @@ from bridgeplan.envs.ogbench_manipulation.names import (
     BUTTON_COLUMNS,
     CUBE_COLUMNS,
     CUBE_TOLERANCE,
+    EFFECTOR_CENTRE,
     EFFECTOR_SCALE,
     EFFECTOR_XY,
     ROBOT_COLUMNS,
@@ -46,6 +47,17 @@ GRAPH_RADIUS = {"scene": 12.0}
 episodes each, keep 5; studies/manip-scene.toml): scene radius 1-2 0 %, 3 8 %, 4 14 %, 6 16 %, 8 20 %, 12-24 26 % (the
 cube's position with the drawer's, the window's and the buttons' is rarely where another episode had them all). On
 cube-double no radius helped (1-3 0 %, 6 and 12 2 %): it keeps the family's."""
+
+
+SLIDE_SCALES = (18.0, 15.0)
+"""The drawer's and the window's positions in the observation: the joint's (m) times these (``compute_observation``)."""
+SLIDE_TOLERANCE = 0.04
+"""How near its goal a slide is done (m of its joint): ``info["success"]``'s."""
+DRAWER_OPEN = -0.16
+"""The drawer's joint fully open (m; closed at 0): where the cube goes in and out (``drawer.xml``'s range)."""
+IN_DRAWER = ((0.21, 0.45), (-0.51, -0.31), (0.0, 0.15))
+"""Where a cube lies in the closed drawer (world x, y, z in m): ``SceneEnv._is_in_drawer``'s box about the drawer's
+handle, which is at y = -0.24 less the joint's position (the drawer slides along -y as its joint goes negative)."""
 
 
 class OGBenchManipulation(OGBenchFamily):
@@ -109,10 +121,12 @@ class OGBenchManipulation(OGBenchFamily):
 
     # --- evaluation --------------------------------------------------------------------------------------------
 
-    def graph_pace(self, stream) -> tuple[dict, None, bool]:
-        """:data:`GRAPH` (its radius the scene's where :data:`GRAPH_RADIUS` has one), the data's median step in the
-        graph's space, its episodes apart."""
-        radius = GRAPH_RADIUS.get(parse_dataset_name(stream.maze).scene_name, GRAPH["radius"])
+    def graph_pace(self, stream, objects: bool = False) -> tuple[dict, None, bool]:
+        """:data:`GRAPH` (its radius the scene's where :data:`GRAPH_RADIUS` has one, for the graph over all its objects;
+        ``objects``: each part's graph, the family's), the data's median step in the graph's space, its episodes
+        apart."""
+        radius = GRAPH["radius"] if objects else GRAPH_RADIUS.get(parse_dataset_name(stream.maze).scene_name,
+                                                                 GRAPH["radius"])
         return {**GRAPH, "radius": radius}, None, False
 
     def graph_space(self, stream) -> tuple[tuple[int, ...], float]:
@@ -141,6 +155,27 @@ class OGBenchManipulation(OGBenchFamily):
         first = ROBOT_COLUMNS + CUBE_COLUMNS * scene.cubes
         return tuple((first + BUTTON_COLUMNS * i + 1, first + BUTTON_COLUMNS * i + 2)
                      for i in range(scene.buttons)), EFFECTOR_XY + 2, BUTTON_UP
+
+    def graph_scene(self, env: str):
+        """scene's cube, its two buttons (their one-hots' "on" columns), its drawer and window, each within 0.04 m of
+        its goal as ``info["success"]`` counts (in the state's units), each slide locked unless its button is on
+        (``SceneEnv._apply_button_states``: button 0 the drawer's, 1 the window's), the cube carried by the drawer."""
+        from bridgeplan.envs.family import SceneParts
+
+        scene = parse_dataset_name(env).scene
+        if not (scene.cubes == 1 and scene.buttons == 2 and scene.drawer_window):
+            return None
+        buttons = ROBOT_COLUMNS + CUBE_COLUMNS
+        drawer = buttons + 2 * BUTTON_COLUMNS
+        x, y, z = IN_DRAWER
+        x = (x[0] - EFFECTOR_CENTRE[0], x[1] - EFFECTOR_CENTRE[0])
+        return SceneParts(
+            cube=(ROBOT_COLUMNS, ROBOT_COLUMNS + 1, ROBOT_COLUMNS + 2), cube_tolerance=CUBE_TOLERANCE * EFFECTOR_SCALE,
+            buttons=(buttons + 1, buttons + BUTTON_COLUMNS + 1), slides=(drawer, drawer + 2),
+            slide_tolerances=tuple(SLIDE_TOLERANCE * s for s in SLIDE_SCALES), locks=(0, 1), container=0,
+            opened=DRAWER_OPEN * SLIDE_SCALES[0],
+            inside=tuple((lo * EFFECTOR_SCALE, hi * EFFECTOR_SCALE) for lo, hi in (x, y, z)),
+            carried=(0.0, -EFFECTOR_SCALE / SLIDE_SCALES[0], 0.0))
 
     def body(self, env: str):
         from bridgeplan.envs.ogbench_manipulation.controllers import body

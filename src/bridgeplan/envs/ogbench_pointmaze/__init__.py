@@ -63,7 +63,7 @@ class OGBenchPointmaze(OGBenchFamily):
 
         return load_stream(dataset, env)
 
-    def graph_pace(self, stream) -> tuple[dict, float, bool]:
+    def graph_pace(self, stream, objects: bool = False) -> tuple[dict, float, bool]:
         """The point's full step along an axis, its episodes apart."""
         from bridgeplan.envs.ogbench_pointmaze.controllers import GAIN
 
