@@ -1136,6 +1136,41 @@ def test_a_scene_is_reached_one_part_at_a_time():
     assert steps.path(goal, goal).shape == (1, 40) and steps.chosen == [-1]
 
 
+def test_a_scenes_path_chains_its_steps():
+    """A path takes the steps one after another, each from where the last left the arm and the parts: toward task 4's
+    goal, button 0, the drawer opened, the cube put in, the drawer closed (the cube carried with it: done); a step
+    whose search finds no path ends the chain."""
+    from bridgeplan.graph import SceneSteps
+
+    class Straight:  # a graph whose path goes straight to the goal asked for
+        layout = FAMILY.layout("scene-play-v0")
+
+        def __init__(self, found=True):
+            self.queries, self.found = [], found
+
+        def path(self, start, goal):
+            self.queries.append((2, self.found, 1))
+            return np.stack([start, goal])
+
+    parts = FAMILY.graph_scene("scene-play-v0")
+    start, goal = np.zeros(40), np.zeros(40)
+    start[list(parts.cube)] = (0.35 - 0.425) * 10, 0.5, 0.2
+    goal[list(parts.cube)] = (0.33 - 0.425) * 10, -3.56, 0.66
+    goal[parts.buttons[0]] = 1.0
+    goal[12:15] = 9.0  # the arm's columns of a goal: no part's
+    steps = SceneSteps([Straight() for _ in range(5)], parts)
+    path = steps.path(start, goal)
+    assert steps.chosen == [1, 3, 0, 3] and len(path) == 5
+    np.testing.assert_allclose(path[2, parts.slides[0]], -2.88)
+    np.testing.assert_allclose(path[3, list(parts.cube)], goal[list(parts.cube)] + [0.0, 1.6, 0.0])
+    placed = path[3].copy()
+    placed[parts.slides[0]] = -2.88  # as the chain had it: the drawer open, the cube in it
+    ended = steps.after(placed, path[4], {parts.slides[0]: 0.0})
+    np.testing.assert_allclose(ended[list(parts.cube)], goal[list(parts.cube)])  # carried in by the drawer
+    lost = SceneSteps([Straight(), Straight(found=False), *(Straight() for _ in range(3))], parts)
+    assert len(lost.path(start, goal)) == 2 and lost.chosen == [1]
+
+
 def test_a_scenes_graphs_are_its_parts(tmp_path):
     """``graph --objects`` on scene: one graph per part over the effector and that part's columns, at the family's
     radius (scene's own is for the graph over all its parts); a goal that turns button 0 over is searched in its

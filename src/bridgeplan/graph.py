@@ -661,21 +661,26 @@ class ButtonPresses:
                 "queries_pressing_none": int(np.sum(chosen < 0))}
 
 
+MOST_STEPS = 16
+"""Steps :meth:`SceneSteps.path` chains at most (OGBench's hardest scene task takes 7)."""
+
+
 @dataclass
 class SceneSteps:
     """A goal that sets a cube, buttons and slides locked by the buttons (OGBench's scene), reached one part at a time:
     one :class:`DatasetGraph` per part over the arm's effector and that part's columns (the others left out, as
     :class:`ObjectGraphs`: the parts' configurations together rarely recur in the data), each decision searching the
     graph of its next step (:meth:`next_step`). The cube first (the drawer opened first where the cube goes in or out of
-    it), then each slide, then each button; a slide locked is unlocked first (its button pressed). Each decision takes
-    the next step from the parts as they are: a step undone by a slip is taken again."""
+    it), then each slide, then each button; a slide locked is unlocked first (its button pressed). A path chains the
+    steps to the goal; each decision plans them again from the parts as they are: a step undone by a slip is taken
+    again."""
 
     kind: ClassVar[str] = "scene in steps"
     graphs: list[DatasetGraph]
     """The cube's, each button's, then each slide's graph, over the effector's columns and that part's."""
     parts: SceneParts
     chosen: list[int] = field(default_factory=list)
-    """Per query, the graph searched (-1: none: the goal reached)."""
+    """Per step searched, its graph (-1: a query at the goal, no step)."""
 
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
@@ -708,18 +713,40 @@ class SceneSteps:
         return 1 + len(p.buttons) + k, {p.slides[k]: value}
 
     def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, obs_dim]`` the cheapest path that takes :meth:`next_step` (:meth:`DatasetGraph.path` in its part's
-        graph toward the goal with that part's columns set to the step's target); ``[start]`` (stay) at the goal."""
+        """``[L, obs_dim]`` the steps to the goal one after another, each the cheapest path in its part's graph
+        (:meth:`DatasetGraph.path` toward the goal with that part's columns set to :meth:`next_step`'s target) from
+        where the last left the arm, the parts as it left them (:meth:`after`): no step waits for a decision to begin.
+        Up to the first step whose search finds no path (that step's straight line); ``[start]`` (stay) at the goal."""
         start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
-        step = self.next_step(start, goal)
-        if step is None:
+        pieces, state = [start[None]], start
+        for _ in range(MOST_STEPS):
+            step = self.next_step(state, goal)
+            if step is None:
+                break
+            graph, target = step
+            self.chosen.append(graph)
+            toward = goal.copy()
+            toward[list(target)] = list(target.values())
+            piece = self.graphs[graph].path(state, toward)
+            pieces.append(piece[1:])
+            if not self.graphs[graph].queries[-1][1]:
+                break
+            state = self.after(state, piece[-1], target)
+        if len(pieces) == 1:
             self.chosen.append(-1)
-            return start[None]
-        graph, target = step
-        self.chosen.append(graph)
-        goal = goal.copy()
-        goal[list(target)] = list(target.values())
-        return self.graphs[graph].path(start, goal)
+        return np.concatenate(pieces)
+
+    def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
+        """The state a step toward ``target`` from ``state`` leaves: the arm as at its path's ``end``, the parts as in
+        ``state`` but the target's (the cube carried with the drawer it lies in)."""
+        p, out = self.parts, np.array(end, np.float64)
+        goal = list(self.graphs[0].layout.goal)
+        out[goal] = state[goal]
+        box = p.slides[p.container]
+        if box in target and p.in_container(state[list(p.cube)], state[box]):
+            out[list(p.cube)] += np.asarray(p.carried) * (target[box] - state[box])
+        out[list(target)] = list(target.values())
+        return out
 
     @property
     def queries(self) -> list[tuple[int, bool, int]]:
