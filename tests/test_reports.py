@@ -513,6 +513,12 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert ("| puzzle-4x4-play-v0 | the dataset graph (no network: every 5th state, radius 1, the buttons' presses "
             "solved (Lights Out), the arm's way to each searched, replanned every 5 steps) | 100.0 (one run) |"
             ) in mc.block(tmp_path)
+    # on scene, its parts' steps (its graph counts paths per part)
+    write(tmp_path / mc.folder("scene") / "graph-keep5-r1-objects" / "track-replan50-seed0.json", 0.6, step=0,
+          replan=50, graph={"paths_per_part": [1, 1, 1, 1, 1]})
+    assert ("| scene-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per part (cube, "
+            "buttons, drawer, window), their steps in order, replanned every 50 steps) | 60.0 (one run) |"
+            ) in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /

@@ -39,9 +39,9 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
 GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
                           r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)(?:-(line|learned|gaussian))?"
                           r"-k\d+-nfe\d+)?")
-"""A graph row's folder: its graph (every Nth state, radius, one graph per cube or a puzzle's presses solved), then its
-low level: a policy and its lookahead, or a planner's process, its prior where not the coarse path (the first low
-levels' folders name none), its stride and NFE."""
+"""A graph row's folder: its graph (every Nth state, radius, one graph per cube or scene's part, or a puzzle's presses
+solved), then its low level: a policy and its lookahead, or a planner's process, its prior where not the coarse path
+(the first low levels' folders name none), its stride and NFE."""
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -71,8 +71,10 @@ def label(method: str, found: list[dict]) -> str:
     every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
     first = next(r for r in found if r["method"] == method)
+    graph = first.get("graph", {})
     apart = ("" if not m[3] else ", the buttons' presses solved (Lights Out), the arm's way to each searched"
-             if "buttons" in first.get("graph", {}) else ", one graph per cube")
+             if "buttons" in graph else ", one graph per part (cube, buttons, drawer, window), their steps in order"
+             if "paths_per_part" in graph else ", one graph per cube")
     if m[6]:  # a planner low level: its settings are its rows'
         row = next(r for r in found if r["method"] == method)
         low, ex = row["low"], row["execution"]
