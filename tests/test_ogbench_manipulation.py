@@ -816,17 +816,24 @@ def test_the_objects_apart_move_one_cube_at_a_time():
 
 def test_a_swap_sets_one_cube_aside_first():
     """Each cube on the other's goal: the cube moved first is set down where the data rested it at the goal's height,
-    the nearest such place clear of both cubes and goals (3 tolerances); a stack's top, whose goal is held by a cube
-    already at its own goal, and a free goal go straight to the goal."""
+    the nearest such place clear of both cubes and goals (3 tolerances), the path chaining the other cube to its goal,
+    then the first to its own; a stack's top, whose goal is held by a cube already at its own goal, and a free goal go
+    straight to the goal."""
+    from types import SimpleNamespace
+
     from bridgeplan.graph import ObjectGraphs
 
-    class Searched:  # a graph that returns the goal it was asked for
+    class Searched:  # a graph whose path goes straight to the goal it was asked for
+        layout = SimpleNamespace(goal=(0, 1, 2, 3, 4, 5))
+
         def __init__(self, places):
             self.observations = np.array([[*p, 0, 0, 0] for p in places], np.float64)
             self.nodes = np.arange(len(places))
+            self.queries = []
 
         def path(self, start, goal):
-            return goal[None]
+            self.queries.append((2, True, 1))
+            return np.stack([start, goal])
 
     places = [(1, 0, 0.2), (0, 3, 0.2), (0, 1.5, 0.5), (0, 5, 0.2), (0, -1.1, 0.2)]
     graphs = ObjectGraphs([Searched(places), Searched(places)], ((0, 1, 2), (3, 4, 5)), tolerance=0.4)
@@ -837,9 +844,10 @@ def test_a_swap_sets_one_cube_aside_first():
     swap_start, swap_goal = state((0, 0, 0.2), (2, 0, 0.2)), state((2, 0, 0.2), (0, 0, 0.2))
     # (1, 0) is 1 from both cubes, (0, 1.5) rests higher, (0, -1.1) is nearer than (0, 3) but within 1.2 of (0, 0)
     np.testing.assert_allclose(graphs.aside(swap_start, swap_goal, 0), (0, 3, 0.2))
-    path = graphs.path(swap_start, swap_goal)
-    np.testing.assert_allclose(path[-1], state((0, 3, 0.2), (0, 0, 0.2)))
-    assert graphs.chosen == [0] and graphs.set_aside == 1
+    path = graphs.path(swap_start, swap_goal)  # cube 0 aside, cube 1 to its goal, cube 0 to its own
+    np.testing.assert_allclose(path[1], state((0, 3, 0.2), (0, 0, 0.2)))
+    np.testing.assert_allclose([path[2, 3:], path[3, :3]], [(0, 0, 0.2), (2, 0, 0.2)])
+    assert graphs.chosen == [0, 1, 0] and graphs.set_aside == 1
     # set aside: cube 1's goal is free now, and it goes there
     aside = state((0, 3, 0.2), (2, 0, 0.2))
     assert graphs.next_object(aside, swap_goal) == 1 and graphs.aside(aside, swap_goal, 1) is None

@@ -169,6 +169,8 @@ class DatasetGraph:
     queries: list[tuple[int, bool, int]] = field(default_factory=list)
     """Per :meth:`path` call: the path's states, whether a path was found (else the straight line), and how
     many of the data's episodes it runs through (1: no stitching)."""
+    directed: bool = False
+    """Whether the data's steps are walked forward only (:meth:`build`)."""
     _to_goal: dict = field(default_factory=dict, repr=False)
     """:meth:`to_goal`'s searches, by goal."""
 
@@ -181,11 +183,12 @@ class DatasetGraph:
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int, radius: float, neighbours: int,
               reach: float, layout: Layout, step: float, within_episodes: bool = False,
-              space: GraphSpace | None = None) -> DatasetGraph:
+              space: GraphSpace | None = None, directed: bool = False) -> DatasetGraph:
         """The graph of ``observations [T, obs_dim]`` (``layout``'s states) whose episodes begin at rows ``starts``
         (ascending, 0 first), its distances in ``space`` (default: the layout's plane). ``within_episodes``: jumps may
         also join two nodes of one episode that are not consecutive (a long continuous stream that passes a place
-        again)."""
+        again). ``directed``: the data's steps are walked forward only (what moved an object, a push or a press,
+        cannot be undone by walking it back), jumps either way."""
         check_graph_settings(keep, radius, neighbours, reach)
         if not np.isfinite(step) or step <= 0:
             raise BridgeplanError(f"the data's step must be a positive distance, got {step}")
@@ -216,24 +219,31 @@ class DatasetGraph:
         # the episode is a stream that comes back
         other = episode[a[ok]] != episode[b[ok]]
         ok[ok] &= other | (within_episodes & (np.abs(a[ok] - b[ok]) > 1))
-        i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
-        w = np.concatenate([w, np.maximum(d[ok], 1e-9) / step])
+        jump = np.maximum(d[ok], 1e-9) / step
+        if directed:  # the steps forward, each jump both ways
+            i, j = np.concatenate([i, a[ok], b[ok]]), np.concatenate([j, b[ok], a[ok]])
+            w = np.concatenate([w, jump, jump])
+        else:
+            i, j, w = np.minimum(np.append(i, a[ok]), np.append(j, b[ok])), \
+                np.maximum(np.append(i, a[ok]), np.append(j, b[ok])), np.append(w, jump)
         # one edge per pair, its cheapest cost (a pair found from both ends, or both a step and a jump)
+        order = np.lexsort((w, j, i))
+        i, j, w = i[order], j[order], w[order]
+        first = np.ones(len(i), dtype=bool)
+        first[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1])
+        i, j, w = i[first], j[first], w[first]
         lo, hi = np.minimum(i, j), np.maximum(i, j)
-        order = np.lexsort((w, hi, lo))
-        lo, hi, w = lo[order], hi[order], w[order]
-        first = np.ones(len(lo), dtype=bool)
-        first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
-        lo, hi, w = lo[first], hi[first], w[first]
-        jumps = int(np.sum((episode[lo] != episode[hi]) | (hi - lo > 1)))
+        jumps = int(np.sum((episode[lo] != episode[hi]) | (hi - lo > 1)) // (2 if directed else 1))
         n = len(nodes)
-        costs = coo_matrix((np.concatenate([w, w]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
-                           shape=(n, n)).tocsr()
-        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps, space)
+        if not directed:
+            i, j, w = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([w, w])
+        costs = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps, space, directed=directed)
 
     def summary(self) -> dict:
         """The graph's size and what its queries so far found (a result's ``graph`` entry, beside its settings)."""
-        return {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // 2), "jumps": self.jumps,
+        return {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // (1 if self.directed else 2)),
+                "jumps": self.jumps,
                 "step": self.step, **queries_summary(self.queries)}
 
     def _ends(self, points: np.ndarray, tree: cKDTree) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -286,12 +296,12 @@ class DatasetGraph:
         next queries (replanning from wherever the agent is, other episodes to the same goal; at most
         :data:`GOALS_KEPT` goals, the oldest forgotten)."""
         if key not in self._to_goal:
-            n, c = len(self.nodes), self.costs
+            n, c = len(self.nodes), (self.costs.T.tocsr() if self.directed else self.costs)  # searched from the goal
             nodes = np.asarray(nodes, np.int64)
             with_goal = csr_matrix((np.concatenate([c.data, np.maximum(costs, 1e-9)]),
                                     np.concatenate([c.indices, nodes]), np.append(c.indptr, c.indptr[-1] + len(nodes))),
                                    shape=(n + 1, n + 1))
-            cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # undirected: from = to
+            cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # reversed: from = to
             if len(self._to_goal) >= GOALS_KEPT:
                 self._to_goal.pop(next(iter(self._to_goal)))
             self._to_goal[key] = (cost[:n].astype(np.float32), toward[:n].astype(np.int32))
@@ -359,11 +369,75 @@ ASIDE_CLEARANCE = 3.0
 width) from every object and goal in the plane: the cube set down clear of the others, with room for the gripper."""
 
 
+MOST_STEPS = 16
+"""Steps a :class:`PartSteps` path chains at most (OGBench's hardest scene task takes 7)."""
+
+
+class PartSteps:
+    """A goal reached one part at a time (:class:`ObjectGraphs`, :class:`SceneSteps`): one :class:`DatasetGraph` per
+    part over the arm's effector and that part's columns (the others left out: the parts' configurations together
+    rarely recur in the data), a step searched in its part's graph (``next_step``: the graph and the columns its target
+    sets). A path chains the steps to the goal, each from where the last left the arm and the parts (:meth:`after`), so
+    no step waits for a decision; each decision plans them again from the parts as they are (a slip is taken again)."""
+
+    graphs: list[DatasetGraph]
+    chosen: list[int]
+    """Per step searched, its graph (-1: a query at the goal, no step)."""
+
+    def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
+        """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
+        (the rest of ``goal`` free); None when every part is at its goal."""
+        raise NotImplementedError
+
+    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """``[L, obs_dim]`` the steps to the goal one after another, each the cheapest path in its part's graph
+        (:meth:`DatasetGraph.path` toward the goal with the step's target columns set) from where the last left the
+        arm and the parts (:meth:`after`); up to the first step whose search finds no path (that step's straight
+        line); ``[start]`` (stay) at the goal."""
+        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        pieces, state = [start[None]], start
+        for _ in range(MOST_STEPS):
+            step = self.next_step(state, goal)
+            if step is None:
+                break
+            graph, target = step
+            self.chosen.append(graph)
+            toward = goal.copy()
+            toward[list(target)] = list(target.values())
+            piece = self.graphs[graph].path(state, toward)
+            pieces.append(piece[1:])
+            if not self.graphs[graph].queries[-1][1]:
+                break
+            state = self.after(state, piece[-1], target)
+        if len(pieces) == 1:
+            self.chosen.append(-1)
+        return np.concatenate(pieces)
+
+    def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
+        """The state a step toward ``target`` from ``state`` leaves: the arm as at its path's ``end``, the parts as in
+        ``state`` but the target's."""
+        out, goal = np.array(end, np.float64), list(self.graphs[0].layout.goal)
+        out[goal] = state[goal]
+        out[list(target)] = list(target.values())
+        return out
+
+    @property
+    def queries(self) -> list[tuple[int, bool, int]]:
+        return [q for g in self.graphs for q in g.queries]
+
+    def _sizes(self) -> dict:
+        """The graphs' sizes summed and what their queries found."""
+        sizes = [g.summary() for g in self.graphs]
+        return {"nodes": sum(z["nodes"] for z in sizes), "edges": sum(z["edges"] for z in sizes),
+                "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
+                **queries_summary(self.queries)}
+
+
 @dataclass
-class ObjectGraphs:
-    """The objects apart: one :class:`DatasetGraph` per object, over the arm and that object's position alone (the
-    others' columns left out), and each query searched in the graph of the object it moves next (:meth:`next_object`).
-    A path moves one object; the next decision, the next. The same queries as a :class:`DatasetGraph`'s."""
+class ObjectGraphs(PartSteps):
+    """The objects apart (a :class:`PartSteps`): one graph per object over the arm and that object's position
+    alone, each step moving one object not yet at its goal (:meth:`next_object`), to its goal or first aside
+    (:meth:`aside`)."""
 
     kind: ClassVar[str] = "objects apart"
     graphs: list[DatasetGraph]
@@ -372,9 +446,9 @@ class ObjectGraphs:
     tolerance: float
     """How near its goal an object is done (the task's own success distance, in the state's units)."""
     chosen: list[int] = field(default_factory=list)
-    """Per query, the object searched for."""
+    """Per step searched, the object it moves (-1: a query at the goal)."""
     set_aside: int = 0
-    """Queries that moved their object to a place aside (:meth:`aside`)."""
+    """Steps searched that moved their object to a place aside (:meth:`aside`)."""
 
     def next_object(self, start: np.ndarray, goal: np.ndarray) -> int:
         """The object to move from state ``start`` toward goal ``goal``: of those farther than :attr:`tolerance` from
@@ -415,31 +489,21 @@ class ObjectGraphs:
         places = places[clear]
         return places[np.argmin(np.linalg.norm(places[:, :2] - at[i, :2], axis=1))]
 
-    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, obs_dim]`` the cheapest path that moves :meth:`next_object` to its goal, or first to a place aside
-        (:meth:`aside`) where its goal is held by an object that must move too (:meth:`DatasetGraph.path` in its
-        graph)."""
-        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+    def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
+        """:meth:`next_object` to its goal, or first to a place aside (:meth:`aside`) where its goal is held by an
+        object that must move too; None when every object is at its goal."""
+        if len(self._away(self._positions(start), self._positions(goal))) == 0:
+            return None
         i = self.next_object(start, goal)
         place = self.aside(start, goal, i)
-        self.chosen.append(i)
         self.set_aside += place is not None
-        if place is not None:
-            goal = goal.copy()
-            goal[list(self.objects[i])] = place
-        return self.graphs[i].path(start, goal)
-
-    @property
-    def queries(self) -> list[tuple[int, bool, int]]:
-        return [q for g in self.graphs for q in g.queries]
+        return i, dict(zip(self.objects[i], (goal[list(self.objects[i])] if place is None else place).tolist()))
 
     def summary(self) -> dict:
-        """Their sizes summed and what their queries found, with the queries per object."""
-        return {"nodes": sum(len(g.nodes) for g in self.graphs),
-                "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
-                "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
-                "objects": len(self.objects), **queries_summary(self.queries),
-                "paths_per_object": np.bincount(self.chosen, minlength=len(self.objects)).tolist(),
+        """Their sizes summed and what their queries found, with the steps per object."""
+        chosen = np.asarray(self.chosen, np.int64)
+        return {**self._sizes(), "objects": len(self.objects),
+                "paths_per_object": np.bincount(chosen[chosen >= 0], minlength=len(self.objects)).tolist(),
                 "set_aside": self.set_aside}
 
 
@@ -661,19 +725,12 @@ class ButtonPresses:
                 "queries_pressing_none": int(np.sum(chosen < 0))}
 
 
-MOST_STEPS = 16
-"""Steps :meth:`SceneSteps.path` chains at most (OGBench's hardest scene task takes 7)."""
-
-
 @dataclass
-class SceneSteps:
-    """A goal that sets a cube, buttons and slides locked by the buttons (OGBench's scene), reached one part at a time:
-    one :class:`DatasetGraph` per part over the arm's effector and that part's columns (the others left out, as
-    :class:`ObjectGraphs`: the parts' configurations together rarely recur in the data), each decision searching the
-    graph of its next step (:meth:`next_step`). The cube first (the drawer opened first where the cube goes in or out of
-    it), then each slide, then each button; a slide locked is unlocked first (its button pressed). A path chains the
-    steps to the goal; each decision plans them again from the parts as they are: a step undone by a slip is taken
-    again."""
+class SceneSteps(PartSteps):
+    """A goal that sets a cube, buttons and slides locked by the buttons (OGBench's scene), a :class:`PartSteps`: one
+    graph per part (the cube, each button, each slide), its steps in order (:meth:`next_step`): the cube first (the
+    drawer opened first where the cube goes in or out of it), then each slide, then each button; a slide locked is
+    unlocked first (its button pressed)."""
 
     kind: ClassVar[str] = "scene in steps"
     graphs: list[DatasetGraph]
@@ -712,54 +769,19 @@ class SceneSteps:
             return 1 + p.locks[k], {lock: 1.0}
         return 1 + len(p.buttons) + k, {p.slides[k]: value}
 
-    def path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """``[L, obs_dim]`` the steps to the goal one after another, each the cheapest path in its part's graph
-        (:meth:`DatasetGraph.path` toward the goal with that part's columns set to :meth:`next_step`'s target) from
-        where the last left the arm, the parts as it left them (:meth:`after`): no step waits for a decision to begin.
-        Up to the first step whose search finds no path (that step's straight line); ``[start]`` (stay) at the goal."""
-        start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
-        pieces, state = [start[None]], start
-        for _ in range(MOST_STEPS):
-            step = self.next_step(state, goal)
-            if step is None:
-                break
-            graph, target = step
-            self.chosen.append(graph)
-            toward = goal.copy()
-            toward[list(target)] = list(target.values())
-            piece = self.graphs[graph].path(state, toward)
-            pieces.append(piece[1:])
-            if not self.graphs[graph].queries[-1][1]:
-                break
-            state = self.after(state, piece[-1], target)
-        if len(pieces) == 1:
-            self.chosen.append(-1)
-        return np.concatenate(pieces)
-
     def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
-        """The state a step toward ``target`` from ``state`` leaves: the arm as at its path's ``end``, the parts as in
-        ``state`` but the target's (the cube carried with the drawer it lies in)."""
-        p, out = self.parts, np.array(end, np.float64)
-        goal = list(self.graphs[0].layout.goal)
-        out[goal] = state[goal]
+        """:meth:`PartSteps.after`, the cube carried with the drawer it lies in."""
+        p, out = self.parts, super().after(state, end, target)
         box = p.slides[p.container]
         if box in target and p.in_container(state[list(p.cube)], state[box]):
             out[list(p.cube)] += np.asarray(p.carried) * (target[box] - state[box])
-        out[list(target)] = list(target.values())
         return out
 
-    @property
-    def queries(self) -> list[tuple[int, bool, int]]:
-        return [q for g in self.graphs for q in g.queries]
-
     def summary(self) -> dict:
-        """Their sizes summed and what their queries found, with the queries per part (cube, buttons, slides) and at
-        the goal."""
+        """Their sizes summed and what their queries found, with the steps per part (cube, buttons, slides) and the
+        queries at the goal."""
         chosen = np.asarray(self.chosen, np.int64)
-        return {"nodes": sum(len(g.nodes) for g in self.graphs),
-                "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
-                "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
-                **queries_summary(self.queries),
+        return {**self._sizes(),
                 "paths_per_part": np.bincount(chosen[chosen >= 0], minlength=len(self.graphs)).tolist(),
                 "queries_at_goal": int(np.sum(chosen < 0))}
 
@@ -802,7 +824,7 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
     states = np.asarray(stream.states, np.float64)  # once: the graphs share it
     graphs = [DatasetGraph.build(states, stream.segment_starts, **settings, layout=stream.layout,
                                  step=space.pace(states, stream.segment_starts) if step is None else step,
-                                 within_episodes=within, space=space)
+                                 within_episodes=within, space=space, directed=objects)
               for space in spaces]
     if not objects:
         return graphs[0], settings
