@@ -49,24 +49,6 @@ def test_a_path_stitches_two_episodes_where_they_meet():
     assert back[0] == 1 and back[-1] == 0 and back == sorted(back, reverse=True)
 
 
-def test_a_directed_graph_walks_the_data_forward_only():
-    """``directed``: the same stitch forward (episode 0, a jump, episode 1), but not walked back (no path); a jump is
-    taken either way, and the undirected graph's matrix is unchanged by the option's existence (symmetric)."""
-    obs, starts = two_pieces()
-    g = build(obs, starts, keep=5, radius=0.5, neighbours=4, directed=True)
-    undirected = build(obs, starts, keep=5, radius=0.5, neighbours=4)
-    assert g.jumps == undirected.jumps >= 1 and (undirected.costs != undirected.costs.T).nnz == 0
-    forward = g.path_nodes(np.array([0.0, 0.0]), np.array([10.0, 10.0]))
-    assert forward == undirected.path_nodes(np.array([0.0, 0.0]), np.array([10.0, 10.0]))
-    assert g.path_nodes(np.array([10.0, 10.0]), np.array([0.0, 0.0])) == []
-    assert g.path_nodes(np.array([5.0, 0.0]), np.array([0.0, 0.0])) == []  # back along one episode
-    # the jump's two ends: from the end of episode 0 to the start of episode 1, and back
-    end0 = g.to_nodes("end of 0", np.array([10]), np.array([0.0]))[0]
-    start1 = g.to_nodes("start of 1", np.array([11]), np.array([0.0]))[0]
-    assert np.isfinite(end0[11]) and np.isfinite(start1[10])
-    assert g.summary()["edges"] == undirected.summary()["edges"] + undirected.jumps
-
-
 def test_no_jump_beyond_the_radius():
     obs, starts = two_pieces(gap=1.0)
     g = build(obs, starts, keep=5, radius=0.5, neighbours=4)

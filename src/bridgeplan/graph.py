@@ -169,8 +169,6 @@ class DatasetGraph:
     queries: list[tuple[int, bool, int]] = field(default_factory=list)
     """Per :meth:`path` call: the path's states, whether a path was found (else the straight line), and how
     many of the data's episodes it runs through (1: no stitching)."""
-    directed: bool = False
-    """Whether the data's steps are walked forward only (:meth:`build`)."""
     _to_goal: dict = field(default_factory=dict, repr=False)
     """:meth:`to_goal`'s searches, by goal."""
 
@@ -183,12 +181,11 @@ class DatasetGraph:
     @classmethod
     def build(cls, observations: np.ndarray, starts: np.ndarray, keep: int, radius: float, neighbours: int,
               reach: float, layout: Layout, step: float, within_episodes: bool = False,
-              space: GraphSpace | None = None, directed: bool = False) -> DatasetGraph:
+              space: GraphSpace | None = None) -> DatasetGraph:
         """The graph of ``observations [T, obs_dim]`` (``layout``'s states) whose episodes begin at rows ``starts``
         (ascending, 0 first), its distances in ``space`` (default: the layout's plane). ``within_episodes``: jumps may
         also join two nodes of one episode that are not consecutive (a long continuous stream that passes a place
-        again). ``directed``: the data's steps are walked forward only (what moved an object, a push or a press,
-        cannot be undone by walking it back), jumps either way."""
+        again)."""
         check_graph_settings(keep, radius, neighbours, reach)
         if not np.isfinite(step) or step <= 0:
             raise BridgeplanError(f"the data's step must be a positive distance, got {step}")
@@ -219,31 +216,24 @@ class DatasetGraph:
         # the episode is a stream that comes back
         other = episode[a[ok]] != episode[b[ok]]
         ok[ok] &= other | (within_episodes & (np.abs(a[ok] - b[ok]) > 1))
-        jump = np.maximum(d[ok], 1e-9) / step
-        if directed:  # the steps forward, each jump both ways
-            i, j = np.concatenate([i, a[ok], b[ok]]), np.concatenate([j, b[ok], a[ok]])
-            w = np.concatenate([w, jump, jump])
-        else:
-            i, j, w = np.minimum(np.append(i, a[ok]), np.append(j, b[ok])), \
-                np.maximum(np.append(i, a[ok]), np.append(j, b[ok])), np.append(w, jump)
+        i, j = np.concatenate([i, a[ok]]), np.concatenate([j, b[ok]])
+        w = np.concatenate([w, np.maximum(d[ok], 1e-9) / step])
         # one edge per pair, its cheapest cost (a pair found from both ends, or both a step and a jump)
-        order = np.lexsort((w, j, i))
-        i, j, w = i[order], j[order], w[order]
-        first = np.ones(len(i), dtype=bool)
-        first[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1])
-        i, j, w = i[first], j[first], w[first]
         lo, hi = np.minimum(i, j), np.maximum(i, j)
-        jumps = int(np.sum((episode[lo] != episode[hi]) | (hi - lo > 1)) // (2 if directed else 1))
+        order = np.lexsort((w, hi, lo))
+        lo, hi, w = lo[order], hi[order], w[order]
+        first = np.ones(len(lo), dtype=bool)
+        first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
+        lo, hi, w = lo[first], hi[first], w[first]
+        jumps = int(np.sum((episode[lo] != episode[hi]) | (hi - lo > 1)))
         n = len(nodes)
-        if not directed:
-            i, j, w = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([w, w])
-        costs = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
-        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps, space, directed=directed)
+        costs = coo_matrix((np.concatenate([w, w]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
+                           shape=(n, n)).tocsr()
+        return cls(observations, layout, nodes, episode, costs, tree, step, reach, jumps, space)
 
     def summary(self) -> dict:
         """The graph's size and what its queries so far found (a result's ``graph`` entry, beside its settings)."""
-        return {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // (1 if self.directed else 2)),
-                "jumps": self.jumps,
+        return {"nodes": int(len(self.nodes)), "edges": int(self.costs.nnz // 2), "jumps": self.jumps,
                 "step": self.step, **queries_summary(self.queries)}
 
     def _ends(self, points: np.ndarray, tree: cKDTree) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -296,12 +286,12 @@ class DatasetGraph:
         next queries (replanning from wherever the agent is, other episodes to the same goal; at most
         :data:`GOALS_KEPT` goals, the oldest forgotten)."""
         if key not in self._to_goal:
-            n, c = len(self.nodes), (self.costs.T.tocsr() if self.directed else self.costs)  # searched from the goal
+            n, c = len(self.nodes), self.costs
             nodes = np.asarray(nodes, np.int64)
             with_goal = csr_matrix((np.concatenate([c.data, np.maximum(costs, 1e-9)]),
                                     np.concatenate([c.indices, nodes]), np.append(c.indptr, c.indptr[-1] + len(nodes))),
                                    shape=(n + 1, n + 1))
-            cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # reversed: from = to
+            cost, toward = dijkstra(with_goal, indices=n, return_predecessors=True)  # undirected: from = to
             if len(self._to_goal) >= GOALS_KEPT:
                 self._to_goal.pop(next(iter(self._to_goal)))
             self._to_goal[key] = (cost[:n].astype(np.float32), toward[:n].astype(np.int32))
@@ -824,7 +814,7 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
     states = np.asarray(stream.states, np.float64)  # once: the graphs share it
     graphs = [DatasetGraph.build(states, stream.segment_starts, **settings, layout=stream.layout,
                                  step=space.pace(states, stream.segment_starts) if step is None else step,
-                                 within_episodes=within, space=space, directed=objects)
+                                 within_episodes=within, space=space)
               for space in spaces]
     if not objects:
         return graphs[0], settings
