@@ -28,8 +28,9 @@ manipulation), a goal then joining the nodes whose objects are where the goal pu
 
 Where several objects must each be moved (OGBench's cube-double), the objects' configurations rarely recur in the
 data: the graph over all of them joins almost nothing. :class:`ObjectGraphs` (``bridgeplan graph --objects``) takes
-them apart: one graph per object over the arm and that object alone, and each decision moves one object not yet at its
-goal (``Family.graph_objects``). A puzzle's buttons toggle one another (Lights Out): their 2^16 configurations recur
+them apart: one graph per object over the arm and that object alone, a path moving one object not yet at its goal after
+another (``Family.graph_objects``); scene's parts likewise, in the order its locks and drawer need (:class:`SceneSteps`,
+``Family.graph_scene``). A puzzle's buttons toggle one another (Lights Out): their 2^16 configurations recur
 even less, but which to press is a linear system over GF(2) that the data's presses teach; :class:`ButtonPresses`
 (``--objects`` on a puzzle) solves it and searches only the arm's way to each press (``Family.graph_buttons``).
 
