@@ -253,11 +253,12 @@ class GraphOptions(LevelledEvaluation):
                                          "25, chosen on cube-single's validation tasks)", metavar="K")
     graph: GraphSettings = group(GraphSettings)
     objects: bool = opt(False, "the objects apart (OGBench's cubes): one graph per cube over the arm and that cube, "
-                               "each decision moving one cube not yet at its goal (bridgeplan.graph.ObjectGraphs); "
+                               "a path moving one cube not yet at its goal after another (bridgeplan.graph."
+                               "ObjectGraphs); "
                                "a puzzle's buttons: the presses solved (Lights Out), each decision the arm's way to "
                                "the next press (bridgeplan.graph.ButtonPresses); scene: one graph per part (cube, "
-                               "buttons, drawer, window), each decision the next step, a locked slide's button first "
-                               "(bridgeplan.graph.SceneSteps)")
+                               "buttons, drawer, window), a path taking the steps in order, a locked slide's button "
+                               "first (bridgeplan.graph.SceneSteps)")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
                               "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
                               "episodes")

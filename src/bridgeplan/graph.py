@@ -418,8 +418,8 @@ class PartSteps:
 
     def _sizes(self) -> dict:
         """The graphs' sizes summed and what their queries found."""
-        sizes = [g.summary() for g in self.graphs]
-        return {"nodes": sum(z["nodes"] for z in sizes), "edges": sum(z["edges"] for z in sizes),
+        return {"nodes": sum(len(g.nodes) for g in self.graphs),
+                "edges": sum(int(g.costs.nnz // 2) for g in self.graphs),
                 "jumps": sum(g.jumps for g in self.graphs), "step": self.graphs[0].step,
                 **queries_summary(self.queries)}
 

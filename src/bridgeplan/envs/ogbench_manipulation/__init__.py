@@ -11,6 +11,7 @@ evaluation protocol in ogbench's own environments (``protocol``). Its environmen
 
 from __future__ import annotations
 
+from bridgeplan.envs.family import SceneParts
 from bridgeplan.envs.ogbench_data import OGBenchFamily, compact_stream
 from bridgeplan.envs.ogbench_manipulation.names import (
     ACT_DIM,
@@ -156,12 +157,10 @@ class OGBenchManipulation(OGBenchFamily):
         return tuple((first + BUTTON_COLUMNS * i + 1, first + BUTTON_COLUMNS * i + 2)
                      for i in range(scene.buttons)), EFFECTOR_XY + 2, BUTTON_UP
 
-    def graph_scene(self, env: str):
+    def graph_scene(self, env: str) -> SceneParts | None:
         """scene's cube, its two buttons (their one-hots' "on" columns), its drawer and window, each within 0.04 m of
         its goal as ``info["success"]`` counts (in the state's units), each slide locked unless its button is on
         (``SceneEnv._apply_button_states``: button 0 the drawer's, 1 the window's), the cube carried by the drawer."""
-        from bridgeplan.envs.family import SceneParts
-
         scene = parse_dataset_name(env).scene
         if not (scene.cubes == 1 and scene.buttons == 2 and scene.drawer_window):
             return None
