@@ -730,6 +730,11 @@ class SceneSteps(PartSteps):
     chosen: list[int] = field(default_factory=list)
     """Per step searched, its graph (-1: a query at the goal, no step)."""
 
+    @staticmethod
+    def part_columns(parts: SceneParts) -> tuple[tuple[int, ...], ...]:
+        """Each graph's part columns, in :attr:`graphs`' order (:meth:`next_step`'s graph indices)."""
+        return (parts.cube, *((b,) for b in parts.buttons), *((s,) for s in parts.slides))
+
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
         (the rest of ``goal`` free); None when every part is at its goal."""
@@ -805,7 +810,7 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
                                        arm), settings
         scene = family.graph_scene(stream.maze)
         if scene is not None:
-            parts = (scene.cube, *((b,) for b in scene.buttons), *((s,) for s in scene.slides))
+            parts = SceneSteps.part_columns(scene)
         else:
             parts, tolerance = family.graph_objects(stream.maze)
         spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1], goal=part) for part in parts]
