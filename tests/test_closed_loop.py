@@ -163,6 +163,32 @@ def test_tolerance_replans_only_the_drifted_episode():
     assert calls[0] == [0, 1] and all(c == [1] for c in calls[1:])
 
 
+def test_after_step_replans_where_a_plans_first_step_ended():
+    """A source whose paths are made of steps says where each episode's first step ends (episode 0's at 4, episode
+    1's never): with after_step 3 episode 0 plans again 4 + 3 steps after each plan, episode 1 never; a source
+    without step ends is refused."""
+    class Steps:
+        def __init__(self, n):
+            self.step_ends, self.calls = np.full(n, np.inf), []
+
+        def __call__(self, states, goals_, idx, t):
+            self.calls.append((t, idx.tolist()))
+            self.step_ends[idx] = np.where(idx == 0, 4, np.inf)
+            return np.repeat(np.c_[states[:, :2], np.zeros((len(idx), 2))][:, None], 16, axis=1)
+
+    tasks = dataclasses.replace(MazeTasks.of(UMAZE, np.array([[1.0, 1.0], [-1.0, 1.0]]),
+                                             np.array([[1.0, -1.0], [1.0, -1.0]])), episode_steps=20)
+    source = Steps(2)
+    executor = PlanExecutor(lambda n: source, lambda n: maze2d.FAMILY.follower("umaze", n, "track"), after_step=3)
+    maze2d.FAMILY.run(tasks, executor)
+    assert source.calls == [(0, [0, 1]), (7, [0]), (14, [0])]
+    assert executor.plans_made.tolist() == [3, 1]
+    bare = PlanExecutor(lambda n: lambda *a: None, lambda n: maze2d.FAMILY.follower("umaze", n, "track"),
+                        after_step=3)
+    with pytest.raises(BridgeplanError, match="only paths made of steps"):
+        maze2d.FAMILY.run(tasks, bare)
+
+
 # ---------------------------------------------------------------- warm prior
 
 def _normalizer() -> Normalizer:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import warnings
 
 import numpy as np
@@ -910,6 +911,14 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert main([*graph[:-1], "--out", str(tmp_path / "one.json")]) == 0  # one cube: the one graph's own paths
     one = json.loads((tmp_path / "one.json").read_text())
     assert one["graph"]["path_steps"] == row["graph"]["path_steps"] and "objects" not in one["config"]["graph"]
+    # searched again where a path's first step ends: paths made of steps only, a step count in 0..episode length
+    assert _error(capsys, [*graph[:-1], "--replan-after-step", "5"]).startswith("error: --replan-after-step plans ")
+    assert _error(capsys, [*graph, "--replan-after-step", "-1", "--out", str(tmp_path / "bad.json")]).startswith(
+        "error: --replan-after-step must be in 0..200")
+    assert not (tmp_path / "bad.json").exists()
+    assert main([*graph, "--replan-after-step", "5", "--out", str(tmp_path / "after.json")]) == 0
+    after = json.loads((tmp_path / "after.json").read_text())
+    assert after["execution"]["replan_after_step"] == 5 and after["execution"]["mode"] == "closed_loop"
 
 
 @pytest.fixture(scope="module")
@@ -1148,17 +1157,17 @@ def test_a_scenes_path_chains_its_steps():
     """A path takes the steps one after another, each from where the last left the arm and the parts: toward task 4's
     goal, button 0, the drawer opened, the cube put in, the drawer closed (the cube carried with it: done); a step
     whose search finds no path ends the chain."""
-    from bridgeplan.graph import SceneSteps
+    from bridgeplan.graph import GraphDecisions, SceneSteps
 
     class Straight:  # a graph whose path goes straight to the goal asked for
         layout = FAMILY.layout("scene-play-v0")
 
-        def __init__(self, found=True):
-            self.queries, self.found = [], found
+        def __init__(self, found=True, long=2):
+            self.queries, self.found, self.long = [], found, long
 
         def path(self, start, goal):
             self.queries.append((2, self.found, 1))
-            return np.stack([start, goal])
+            return np.stack([start] * (self.long - 1) + [goal])
 
     parts = FAMILY.graph_scene("scene-play-v0")
     start, goal = np.zeros(40), np.zeros(40)
@@ -1177,6 +1186,13 @@ def test_a_scenes_path_chains_its_steps():
     np.testing.assert_allclose(ended[list(parts.cube)], goal[list(parts.cube)])  # carried in by the drawer
     lost = SceneSteps([Straight(), Straight(found=False), *(Straight() for _ in range(3))], parts)
     assert len(lost.path(start, goal)) == 2 and lost.chosen == [1]
+    # where each episode's first step ends (its path's index), for a replan there (--replan-after-step)
+    source = GraphDecisions(steps, 8).source(2)
+    source(np.stack([start, goal]), np.stack([goal, goal]), np.array([1, 0]), 0)
+    assert source.step_ends.tolist() == [math.inf, 1]
+    steps.graphs[1] = Straight(long=4)  # the press three steps long
+    source(start[None], goal[None], np.array([0]), 1)
+    assert source.step_ends.tolist() == [3, 1]
 
 
 def test_a_scenes_graphs_are_its_parts(tmp_path):

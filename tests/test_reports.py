@@ -519,6 +519,10 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert ("| scene-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per part (cube, "
             "buttons, drawer, window), their steps in order, replanned every 50 steps) | 60.0 (one run) |"
             ) in mc.block(tmp_path)
+    write(tmp_path / mc.folder("scene") / "graph-keep5-r1-objects-afterstep25" / "track-replan150-afterstep25-seed0"
+          ".json", 0.7, step=0, replan=150, graph={"paths_per_part": [1, 1, 1, 1, 1]})
+    assert ("their steps in order, replanned every 150 steps and 25 steps after a path's first step ends) | 70.0 "
+            "(one run) |") in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /

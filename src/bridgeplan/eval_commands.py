@@ -16,6 +16,7 @@ from typing import ClassVar
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.option_groups import (
+    EXECUTION,
     Controller,
     Correction,
     Dataset,
@@ -31,7 +32,7 @@ from bridgeplan.option_groups import (
     Threads,
     task_ids,
 )
-from bridgeplan.options import group, int_tuple, leaves, opt, positive, shared, values
+from bridgeplan.options import from_config, group, int_tuple, leaves, opt, positive, shared, values
 
 
 def execution(replanning: Replanning, controller: Controller, plans: PlanChoice | None = None, env: str | None = None):
@@ -259,6 +260,7 @@ class GraphOptions(LevelledEvaluation):
                                "the next press (bridgeplan.graph.ButtonPresses); scene: one graph per part (cube, "
                                "buttons, drawer, window), a path taking the steps in order, a locked slide's button "
                                "first (bridgeplan.graph.SceneSteps)")
+    replan_after_step: int | None = from_config(EXECUTION, "after_step", metavar="S")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
                               "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
                               "episodes")
@@ -319,12 +321,16 @@ def graph_eval(o: GraphOptions) -> int:
         from bridgeplan.graph import check_objects
 
         check_objects(family_of(env), env)  # refused before the data is read
-    plan = execution(o.replanning, o.controller, env=env)
+    if o.replan_after_step is not None and not (o.objects and family_of(env).graph_buttons(env) is None):
+        raise BridgeplanError("--replan-after-step plans again where a path's first step ends: give --objects on a "
+                              "cube or scene dataset (its paths are made of steps, one part at a time)")
+    plan = dataclasses.replace(execution(o.replanning, o.controller, env=env), after_step=o.replan_after_step)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))
     check_result_path(o.output.out, folder)
     draw = _graph_drawing(o, env) if o.render else None
     tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)
+    plan.validate(None, tasks.episode_steps)  # before the graph is built
     heard = []  # the graph's decisions, tasks, execution and follower, drawn once the result's name is known
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,

@@ -155,7 +155,7 @@ def run_episodes(decisions: Decisions, family: Family, tasks: Tasks, execution: 
     ``run(tasks, agent, progress)`` (default ``family.run``; ``render``: its film)."""
     gen = generator(decisions.device, tasks.seed if seed is None else seed)
     executor = PlanExecutor(lambda n: decisions.source(n, gen), followers(family, tasks, execution, follower),
-                            execution.replan_every, execution.tolerance, warm_up)
+                            execution.replan_every, execution.tolerance, warm_up, execution.after_step)
     return Episodes((run or family.run)(tasks, executor, progress), executor)
 
 
@@ -174,7 +174,7 @@ def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution
             lone.reset()
 
     executor = PlanExecutor(lambda n: lone, followers(family, tasks, execution, follower), execution.replan_every,
-                            execution.tolerance, warm_up)
+                            execution.tolerance, warm_up, execution.after_step)
     family.run(tasks.first(), executor)
     return percentiles_ms(executor.decision_seconds), percentiles_ms(executor.step_seconds)
 

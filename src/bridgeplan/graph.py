@@ -46,6 +46,7 @@ coarse``): the thesis's informative prior, here made of the data's own states (`
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
@@ -374,6 +375,8 @@ class PartSteps:
     graphs: list[DatasetGraph]
     chosen: list[int]
     """Per step searched, its graph (-1: a query at the goal, no step)."""
+    first_end: float = math.inf
+    """Where the last :meth:`path`'s first step ends (its index in the path; inf: at the goal, no step)."""
 
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
@@ -387,6 +390,7 @@ class PartSteps:
         line); ``[start]`` (stay) at the goal."""
         start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
         pieces, state = [start[None]], start
+        self.first_end = math.inf
         for _ in range(MOST_STEPS):
             step = self.next_step(state, goal)
             if step is None:
@@ -397,6 +401,8 @@ class PartSteps:
             toward[list(target)] = list(target.values())
             piece = self.graphs[graph].path(state, toward)
             pieces.append(piece[1:])
+            if len(pieces) == 2:
+                self.first_end = len(piece) - 1
             if not self.graphs[graph].queries[-1][1]:
                 break
             state = self.after(state, piece[-1], target)
@@ -837,17 +843,26 @@ def fixed_length(path: np.ndarray, length: int) -> np.ndarray:
 @dataclass
 class GraphSource:
     """The graph's paths as decisions (``replan.DecisionSource``): each decision plans from the episodes' current
-    states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took."""
+    states to their goals, paths ``length`` states long; :attr:`plan_seconds` the searches took. Paths made of steps
+    (a :class:`PartSteps` graph) say where each episode's first step ends (:attr:`step_ends`), for an execution that
+    plans again there (``Execution.after_step``)."""
 
     graph: DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps
     length: int
+    step_ends: np.ndarray | None = None
+    """``[n]`` per episode, the index in its newest path where that path's first step ends (inf: none); None where
+    paths are not made of steps."""
     plan_seconds: float = 0.0
     plans_sampled: int = 0
 
     def __call__(self, states: np.ndarray, goals: np.ndarray, episodes: np.ndarray, t: int) -> np.ndarray:
         t0 = time.perf_counter()
-        paths = np.stack([fixed_length(self.graph.path(s, g), self.length)
-                          for s, g in zip(np.asarray(states, np.float64), np.asarray(goals, np.float64))])
+        paths = []
+        for e, s, g in zip(episodes, np.asarray(states, np.float64), np.asarray(goals, np.float64)):
+            paths.append(fixed_length(self.graph.path(s, g), self.length))
+            if self.step_ends is not None:
+                self.step_ends[e] = self.graph.first_end
+        paths = np.stack(paths)
         self.plan_seconds += time.perf_counter() - t0
         self.plans_sampled += len(states)
         return paths
@@ -865,4 +880,5 @@ class GraphDecisions:
     device: object = "cpu"
 
     def source(self, n: int, generator=None) -> GraphSource:
-        return GraphSource(self.graph, self.length)
+        steps = isinstance(self.graph, PartSteps)
+        return GraphSource(self.graph, self.length, np.full(n, math.inf) if steps else None)

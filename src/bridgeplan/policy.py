@@ -49,7 +49,8 @@ class PlannerPolicy:
         self.layout = family.layout(env)
         self.maze = get_maze(env) if maze2d.FAMILY.owns(env) else None
         self.executor = PlanExecutor(lambda n: source, follower or (lambda n: family.follower(
-            env, n, execution.controller, execution.lookahead)), execution.replan_every, execution.tolerance)
+            env, n, execution.controller, execution.lookahead)), execution.replan_every, execution.tolerance,
+            after_step=execution.after_step)
         self.reset()
 
     @classmethod
@@ -100,7 +101,7 @@ class PlannerPolicy:
                    device: str = "auto", seed: int = 0, replan_high_every: int | None = None,
                    graph: dict | None = None, *, env: str | None = None, dataset: str | Path | None = None,
                    objects: bool = False, policy_ahead: int | None = None,
-                   low_snapshot: int | None = None) -> PlannerPolicy:
+                   low_snapshot: int | None = None, replan_after_step: int | None = None) -> PlannerPolicy:
         """The dataset graph (``bridgeplan.graph``; settings ``graph`` over the family's) as ``bridgeplan graph``
         executes it:
 
@@ -113,16 +114,17 @@ class PlannerPolicy:
           family's).
 
         Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
-        goal); ``objects``: one graph per object (``--objects``)."""
+        goal); ``objects``: one graph per object or part (``--objects``), the paths searched again
+        ``replan_after_step`` steps after their first step ends if given (``--replan-after-step``)."""
         from bridgeplan.gcbc import is_gcbc_run, run_policy
         from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy
 
         policy_low = low_run is not None and is_gcbc_run(low_run)
         check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
         if low_run is not None and not policy_low:
-            if env is not None or dataset is not None or objects:
+            if env is not None or dataset is not None or objects or replan_after_step is not None:
                 raise BridgeplanError("a planner low level's graph is over its own training data, one graph: no env, "
-                                      "dataset or objects")
+                                      "dataset, objects or replan_after_step")
             hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, low_snapshot, device=device)
             return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
                 replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
@@ -133,7 +135,7 @@ class PlannerPolicy:
         if env is None or dataset is None:
             raise BridgeplanError("the graph alone is over a dataset of an environment: give env and dataset")
         family = family_of(env)
-        execution = Execution(replan_every=replan_every, tolerance=tolerance,
+        execution = Execution(replan_every=replan_every, tolerance=tolerance, after_step=replan_after_step,
                               controller=controller or family.path_controller, lookahead=lookahead)
         execution = execution.resolved(family, env)
         episode_steps = family.tasks(env, 1).episode_steps

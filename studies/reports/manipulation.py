@@ -38,10 +38,11 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
 GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
                           r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)(?:-(line|learned|gaussian))?"
-                          r"-k\d+-nfe\d+)?")
+                          r"-k\d+-nfe\d+)?(?:-afterstep(\d+))?")
 """A graph row's folder: its graph (every Nth state, radius, one graph per cube or scene's part, or a puzzle's presses
 solved), then its low level: a policy and its lookahead, or a planner's process, its prior where not the coarse path
-(the first low levels' folders name none), its stride and NFE."""
+(the first low levels' folders name none), its stride and NFE; then the paths' replanning where each first step ends
+(``--replan-after-step``)."""
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -70,6 +71,8 @@ def label(method: str, found: list[dict]) -> str:
         return LABELS.get(method, method)
     every = {r["execution"].get("replan_every") for r in found if r["method"] == method}
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
+    if m[8]:
+        replan += f" and {m[8]} steps after a path's first step ends"
     first = next(r for r in found if r["method"] == method)
     graph = first.get("graph", {})
     apart = ("" if not m[3] else ", the buttons' presses solved (Lights Out), the arm's way to each searched"

@@ -112,8 +112,9 @@ def describe(key: MethodKey) -> str:
 
 def parse_execution(tag: str) -> Execution:
     """The :class:`Execution` whose ``tag()`` is ``tag`` ('' -> open loop, tracked); a tag it would not write
-    raises :class:`BridgeplanError`. Tags: ``replanK``, ``tolD``, ``candM-SELECT``, ``warm``, ``arrival-RULE``,
-    ``CONTROLLERR`` in that order, joined by ``-`` (``replan32-warm-arrival-keep``, ``pursuit1.5``)."""
+    raises :class:`BridgeplanError`. Tags: ``replanK``, ``tolD``, ``afterstepS``, ``candM-SELECT``, ``warm``,
+    ``arrival-RULE``, ``CONTROLLERR`` in that order, joined by ``-`` (``replan32-warm-arrival-keep``,
+    ``pursuit1.5``)."""
     fields: dict[str, Any] = {}
     parts = tag.split("-") if tag else []
     i = 0
@@ -124,6 +125,8 @@ def parse_execution(tag: str) -> Execution:
                 fields["replan_every"] = int(part.removeprefix("replan"))
             elif part.startswith("tol"):
                 fields["tolerance"] = float(part.removeprefix("tol"))
+            elif part.startswith("afterstep"):
+                fields["after_step"] = int(part.removeprefix("afterstep"))
             elif part.startswith("cand"):
                 fields["candidates"], fields["select"] = int(part.removeprefix("cand")), parts[i + 1]
                 i += 1
@@ -141,6 +144,7 @@ def parse_execution(tag: str) -> Execution:
     except (ValueError, IndexError, TypeError):
         execution = None
     if execution is None or execution.tag() != tag:
-        raise BridgeplanError(f"unknown execution tag {tag!r}: expected parts replanK, tolD, candM-SELECT, warm, "
-                              f"arrival-RULE, {'R/'.join(CONTROLLERS)}R joined by '-' in that order")
+        raise BridgeplanError(f"unknown execution tag {tag!r}: expected parts replanK, tolD, afterstepS, "
+                              f"candM-SELECT, warm, arrival-RULE, {'R/'.join(CONTROLLERS)}R joined by '-' in that "
+                              f"order")
     return execution
