@@ -916,7 +916,9 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert _error(capsys, [*graph, "--replan-after-step", "-1", "--out", str(tmp_path / "bad.json")]).startswith(
         "error: --replan-after-step must be in 0..200")
     assert not (tmp_path / "bad.json").exists()
+    capsys.readouterr()
     assert main([*graph, "--replan-after-step", "5", "--out", str(tmp_path / "after.json")]) == 0
+    assert "track, replan 5 steps after a first step ends" in capsys.readouterr().out
     after = json.loads((tmp_path / "after.json").read_text())
     assert after["execution"]["replan_after_step"] == 5 and after["execution"]["mode"] == "closed_loop"
 

@@ -396,7 +396,11 @@ def format_table(r: dict) -> str:
     how = ex.get("controller", "")
     if ex.get("lookahead") is not None:
         how += f" (lookahead {ex['lookahead']:g})"
-    how += ", open loop" if ex.get("replan_every") is None else f", replan every {ex['replan_every']} steps"
+    replans = [text.format(ex[key]) for key, text in (("replan_every", "every {} steps"),
+                                                       ("replan_tolerance", "past {:g} from the plan"),
+                                                       ("replan_after_step", "{} steps after a first step ends"))
+               if ex.get(key) is not None]
+    how += f", replan {', '.join(replans)}" if replans else ", open loop"
     tasks = (f"{r['episodes_per_task']} episodes per task" if "episodes_per_task" in r
              else f"{r['episodes']} episodes" + (", multi-task" if r.get("multi_task") else ""))
     nfe = "" if r.get("nfe") is None else f", NFE {r['nfe']}"  # a policy's: one call per step, no plans
