@@ -658,8 +658,8 @@ def test_the_graph_with_a_policy_low_level(tiny_data, tmp_path, capsys, monkeypa
 def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, tmp_path, capsys, monkeypatch):
     """``PlannerPolicy.from_graph(RUN)`` over a GCBC run, in a loop over ogbench's own environment (``info["goal"]``
     given): the same episode as ``bridgeplan graph --low RUN`` evaluates, the policy asked the same observations and
-    goals at every step, the same steps and success; the graph alone (``env``, ``dataset``) the same way; a goal of
-    another width refused."""
+    goals at every step, the same steps and success; the graph alone (``env``, ``dataset``) the same way, and the
+    objects apart searched again where each path's first step ends; a goal of another width refused."""
     import ogbench
 
     import bridgeplan.gcbc
@@ -707,6 +707,12 @@ def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, t
     assert own_loop(alone)[0] == 200 and alone.plans_made == 4 and alone.execution.controller == "track"
     with pytest.raises(BridgeplanError, match="an observation of 28 numbers and its goal of 28"):
         alone(np.zeros(28), np.zeros(3))
+    # the objects apart, searched again only where a path's first step ends (--replan-after-step)
+    apart = PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2}, objects=True,
+                                     replan_after_step=0)
+    assert own_loop(apart)[0] == 200 and apart.execution.after_step == 0 and apart.plans_made > 1
+    with pytest.raises(BridgeplanError, match="only paths made of steps"):
+        PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2}, replan_after_step=0)
     with pytest.raises(BridgeplanError, match="give env and dataset"):
         PlannerPolicy.from_graph(env="cube-single-play-v0")
     with pytest.raises(BridgeplanError, match="--policy-ahead is a policy low level's"):
