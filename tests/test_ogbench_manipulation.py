@@ -750,6 +750,11 @@ def test_the_graph_draws_its_episode(tiny_data, tmp_path, capsys, monkeypatch):
         start, end = frames[0], frames[-1]
         assert gif.size == (size, size) and sum(durations) == 40 * len(range(0, 201, 4)) == 40 * 51
     assert np.abs(start.astype(int) - end).mean() > 1
+    # the objects apart searched again where each step ends: drawn as evaluated
+    apart = tmp_path / "apart.json"
+    assert main([*graph, "--objects", "--replan-after-step", "0", "--render", "--out", str(apart)]) == 0
+    assert json.loads(capsys.readouterr().out)["execution"]["replan_after_step"] == 0
+    assert apart.with_suffix(".png").exists()
 
     def refused(argv, message):
         assert message in _error(capsys, [*graph, *argv, "--out", str(tmp_path / "bad.json")])

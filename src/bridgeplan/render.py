@@ -164,22 +164,24 @@ def render_episodes(decisions, family, tasks, execution, base: Path, title: str,
     first: list[np.ndarray] = []
     made: list[tuple[int, np.ndarray]] = []  # (step, plan) of the first episode's plans
 
-    class FirstPlans:  # the decisions, keeping each batch's first plans and every plan of the first episode
+    class Kept:  # a batch's decisions, keeping its first plans and, in the first batch, every plan of episode 0
+        def __init__(self, source, batch: int):
+            self.inner, self.batch = source, batch
+            self.step_ends = getattr(source, "step_ends", None)  # paths made of steps: where each first step ends
+
+        def __call__(self, states, goals, idx, t):
+            planned = self.inner(states, goals, idx, t)
+            if t == 0:
+                first.append(planned)
+            if self.batch == 0 and 0 in idx:
+                made.append((t, planned[list(idx).index(0)]))
+            return planned
+
+    class FirstPlans:  # the decisions, each batch's kept
         device = decisions.device
 
         def source(self, n, gen):
-            source = decisions.source(n, gen)
-            batch = len(first)
-
-            def decide(states, goals, idx, t):
-                planned = source(states, goals, idx, t)
-                if t == 0:
-                    first.append(planned)
-                if batch == 0 and 0 in idx:
-                    made.append((t, planned[list(idx).index(0)]))
-                return planned
-
-            return decide
+            return Kept(decisions.source(n, gen), len(first))
 
     def in_force(steps: list[int]) -> list[np.ndarray | None]:
         """The first episode's plan at each of ``steps``: the last made at or before it."""
