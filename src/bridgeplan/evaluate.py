@@ -154,8 +154,8 @@ def run_episodes(decisions: Decisions, family: Family, tasks: Tasks, execution: 
     across the batches) and executed as ``execution`` says by ``family``'s controllers (or ``follower``'s), in
     ``run(tasks, agent, progress)`` (default ``family.run``; ``render``: its film)."""
     gen = generator(decisions.device, tasks.seed if seed is None else seed)
-    executor = PlanExecutor(lambda n: decisions.source(n, gen), followers(family, tasks, execution, follower),
-                            execution.replan_every, execution.tolerance, warm_up, execution.after_step)
+    executor = PlanExecutor.executing(execution, lambda n: decisions.source(n, gen),
+                                      followers(family, tasks, execution, follower), warm_up)
     return Episodes((run or family.run)(tasks, executor, progress), executor)
 
 
@@ -173,8 +173,8 @@ def batch1_latency(decisions: Decisions, family: Family, tasks: Tasks, execution
         if hasattr(lone, "reset"):
             lone.reset()
 
-    executor = PlanExecutor(lambda n: lone, followers(family, tasks, execution, follower), execution.replan_every,
-                            execution.tolerance, warm_up, execution.after_step)
+    executor = PlanExecutor.executing(execution, lambda n: lone, followers(family, tasks, execution, follower),
+                                      warm_up)
     family.run(tasks.first(), executor)
     return percentiles_ms(executor.decision_seconds), percentiles_ms(executor.step_seconds)
 

@@ -48,9 +48,8 @@ class PlannerPolicy:
         family = family_of(env)
         self.layout = family.layout(env)
         self.maze = get_maze(env) if maze2d.FAMILY.owns(env) else None
-        self.executor = PlanExecutor(lambda n: source, follower or (lambda n: family.follower(
-            env, n, execution.controller, execution.lookahead)), execution.replan_every, execution.tolerance,
-            after_step=execution.after_step)
+        self.executor = PlanExecutor.executing(execution, lambda n: source, follower or (lambda n: family.follower(
+            env, n, execution.controller, execution.lookahead)))
         self.reset()
 
     @classmethod

@@ -389,6 +389,12 @@ class PlanExecutor:
         self.warm_up_seconds = 0.0
         self.n = 0
 
+    @classmethod
+    def executing(cls, execution: Execution, decisions: Callable[[int], DecisionSource],
+                  follower: Callable[[int], Follower], warm_up: Callable | None = None) -> PlanExecutor:
+        """The executor that replans as ``execution`` says (every K steps, past a drift, where a step ends)."""
+        return cls(decisions, follower, execution.replan_every, execution.tolerance, warm_up, execution.after_step)
+
     @property
     def plans_made(self) -> np.ndarray:
         """``[episodes]`` plans made for each episode so far (the first one included)."""
