@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import math
 import warnings
@@ -73,6 +74,7 @@ def test_the_recipe_at_a_tiny_size(tmp_path):
         generate_dataset("cube-single-play-v0", tmp_path, seed=4, episodes=4, episode_steps=201, progress=False)
     record = json.loads((tmp_path / "cube-single-play-v0.json").read_text())
     assert record["identity"]["noise"] == 0.1 and record["identity"]["noise_smoothing"] == 0.5
+    assert record["made_with"]["mujoco"] == importlib.metadata.version("mujoco") and "mujoco" not in record["identity"]
     info, text = FAMILY.dataset_info(str(made.train_path), "cube-single-play-v0")
     assert info["episodes"] == 4 and info["sha256"] == record["files"]["cube-single-play-v0.npz"]
     with np.load(made.val_path) as f:  # a file changed since: not the dataset its record names, nor the cache

@@ -51,6 +51,18 @@ def ogbench_version() -> str:
     return version("ogbench")
 
 
+def made_with() -> dict:
+    """What else a generated dataset's arrays depend on besides its identity: MuJoCo's and NumPy's versions and the CPU
+    (the same recipe and seed regenerated on another machine gave other arrays: scene's and cube-double's, on an
+    AVX2-only CPU with MuJoCo 4.0.1, against the committed rows' data). Recorded beside the identity, not in it: a
+    dataset made elsewhere is still this recipe's."""
+    from importlib.metadata import version
+
+    from bridgeplan.device import cpu_model
+
+    return {"mujoco": version("mujoco"), "numpy": np.__version__, "cpu": cpu_model()}
+
+
 def file_sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:
@@ -139,7 +151,7 @@ def write_dataset(name: str, out_dir: str | Path, ident: dict, episodes: int, ep
     record = {"identity": ident,
               "files": {train_path.name: file_sha256(train_path), val_path.name: file_sha256(val_path)},
               "content_sha256": {train_path.name: content_sha256(train), val_path.name: content_sha256(val)},
-              **extra, "seconds": round(seconds, 1)}
+              **extra, "made_with": made_with(), "seconds": round(seconds, 1)}
     atomic_write_text(record_path, json.dumps(record, indent=2) + "\n")
     return Generated(name, train_path, val_path, record, cached=False, seconds=seconds, made=made)
 
