@@ -929,6 +929,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert _error(capsys, [*graph, "--replan-after-step", "-1", "--out", str(tmp_path / "bad.json")]).startswith(
         "error: --replan-after-step must be in 0..200")
     assert not (tmp_path / "bad.json").exists()
+    # the hand in some parts' graphs: a scene's only, with --objects
+    assert _error(capsys, [*graph, "--hand", "--out", str(tmp_path / "bad.json")]).startswith(
+        "error: --hand measures the hand in some of a scene's part graphs: cube-single-play-v0 is no scene")
+    assert not (tmp_path / "bad.json").exists()
     capsys.readouterr()
     assert main([*graph, "--replan-after-step", "5", "--out", str(tmp_path / "after.json")]) == 0
     assert "track, replan 5 steps after a first step ends" in capsys.readouterr().out
@@ -1234,3 +1238,10 @@ def test_a_scenes_graphs_are_its_parts(tmp_path):
     path = steps.path(start, goal)
     assert steps.chosen == [1] and path[-1, 29] == goal[29]
     assert steps.summary()["paths_per_part"] == [0, 1, 0, 0, 0]
+    # --hand: the window's graph and its button's (button 1) measure the hand's opening too, not as a goal column
+    held, _ = for_stream(stream, FAMILY, {"keep": 2}, objects=True, hand=True)
+    hand = [(), (), (17,), (), (17,)]
+    assert [g.space.columns for g in held.graphs] == [(12, 13, 14, *h, *p) for h, p in zip(hand, parts)]
+    assert [g.space.goal for g in held.graphs] == parts
+    with pytest.raises(BridgeplanError, match="give --objects"):
+        for_stream(stream, FAMILY, {"keep": 2}, hand=True)

@@ -260,6 +260,9 @@ class GraphOptions(LevelledEvaluation):
                                "the next press (bridgeplan.graph.ButtonPresses); scene: one graph per part (cube, "
                                "buttons, drawer, window), a path taking the steps in order, a locked slide's button "
                                "first (bridgeplan.graph.SceneSteps)")
+    hand: bool = opt(False, "with --objects on scene: the window's and its button's graphs measure the hand's "
+                            "opening as well (a jump joins states whose hand is alike; chosen on validation, "
+                            "bridgeplan.envs.ogbench_manipulation.HAND_SLIDES)")
     replan_after_step: int | None = from_config(EXECUTION, "after_step", metavar="S")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
                               "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
@@ -321,6 +324,10 @@ def graph_eval(o: GraphOptions) -> int:
         from bridgeplan.graph import check_objects
 
         check_objects(family_of(env), env)  # refused before the data is read
+    if o.hand:
+        from bridgeplan.graph import check_hand
+
+        check_hand(family_of(env), env, o.objects)
     if o.replan_after_step is not None and not (o.objects and family_of(env).graph_buttons(env) is None):
         raise BridgeplanError("--replan-after-step plans again where a path's first step ends: give --objects on a "
                               "cube or scene dataset (its paths are made of steps, one part at a time)")
@@ -335,14 +342,15 @@ def graph_eval(o: GraphOptions) -> int:
     result = evaluate_graph(tasks, dataset, settings, plan, Path(o.low) if o.low else None, low_level.nfe_low,
                             low_level.replan_high_every, low_level.low_snapshot, o.device.device,
                             progress=not o.progress.no_progress,
-                            picture=draw and (lambda *args: heard.append(args)), objects=o.objects,
+                            picture=draw and (lambda *args: heard.append(args)), objects=o.objects, hand=o.hand,
                             policy_ahead=o.policy_ahead)
     d = result.to_dict()
     g = d["graph"]
     tag = plan.resolved(result.family, env).tag()
     low_tag = (f"-{d['low']['agent']}-ahead{d['low']['ahead']}" if policy_low else
                f"-nfe{d['nfe']}" if o.low else "")
-    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + ("-objects" if o.objects else "") + low_tag + (
+    name = f"graph-keep{g['keep']}-r{g['radius']:g}" + ("-objects" if o.objects else "") + (
+        "-hand" if o.hand else "") + low_tag + (
         f"-{tag}" if tag else "") + (f"-high{low_level.replan_high_every}" if low_level.replan_high_every else "")
     out = _out(o.output, o.tasks, folder, name)
     drawn = [path for args in heard for path in draw(*args, out.with_suffix(".png"),

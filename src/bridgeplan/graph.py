@@ -737,9 +737,13 @@ class SceneSteps(PartSteps):
     """Per step searched, its graph (-1: a query at the goal, no step)."""
 
     @staticmethod
-    def part_columns(parts: SceneParts) -> tuple[tuple[int, ...], ...]:
-        """Each graph's part columns, in :attr:`graphs`' order (:meth:`next_step`'s graph indices)."""
-        return (parts.cube, *((b,) for b in parts.buttons), *((s,) for s in parts.slides))
+    def part_columns(parts: SceneParts, hand: bool = False) -> tuple[tuple[int, ...], ...]:
+        """Each graph's part columns, in :attr:`graphs`' order (:meth:`next_step`'s graph indices); ``hand``: the hand's
+        opening column before the part's in the graphs of :attr:`SceneParts.hand_slides` and their lock buttons."""
+        with_hand = {1 + len(parts.buttons) + k for k in parts.hand_slides} | {1 + parts.locks[k]
+                                                                             for k in parts.hand_slides}
+        columns = (parts.cube, *((b,) for b in parts.buttons), *((s,) for s in parts.slides))
+        return tuple((parts.hand, *c) if hand and k in with_hand else c for k, c in enumerate(columns))
 
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
@@ -796,13 +800,26 @@ def check_objects(family, env: str) -> None:
                               f"another and unlock no slides (OGBench's cube, puzzle and scene datasets do)")
 
 
-def for_stream(stream: Stream, family, settings: dict | None = None,
-               objects: bool = False) -> tuple[DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps, dict]:
+def check_hand(family, env: str, objects: bool) -> None:
+    """``--hand``'s refusal without ``--objects`` or where ``env`` is no scene with a hand (``SceneParts.hand``)."""
+    scene = family.graph_scene(env)
+    if scene is None or scene.hand is None:
+        raise BridgeplanError(f"--hand measures the hand in some of a scene's part graphs: {env} is no scene whose "
+                              f"family declares its hand (OGBench's scene is)")
+    if not objects:
+        raise BridgeplanError("--hand measures the hand in some of a scene's part graphs: give --objects")
+
+
+def for_stream(stream: Stream, family, settings: dict | None = None, objects: bool = False,
+               hand: bool = False) -> tuple[DatasetGraph | ObjectGraphs | ButtonPresses | SceneSteps, dict]:
     """The graph of a dataset with its ``family``'s settings (``settings`` over them: None values are the family's),
     pace (``Family.graph_pace``) and space (``Family.graph_space``); ``objects``: one per object
     (:class:`ObjectGraphs`, ``Family.graph_objects``), the presses of buttons that toggle one another
     (:class:`ButtonPresses`, ``Family.graph_buttons``) or one per part of a scene (:class:`SceneSteps`,
-    ``Family.graph_scene``). Returns it and the settings it was built with."""
+    ``Family.graph_scene``; ``hand``: some parts' graphs over the hand's opening as well,
+    :meth:`SceneSteps.part_columns`). Returns it and the settings it was built with."""
+    if hand:
+        check_hand(family, stream.maze, objects)
     defaults, step, within = family.graph_pace(stream, objects=objects)
     settings = {k: v if (v := (settings or {}).get(k)) is not None else defaults[k] for k in SETTINGS}
     check_graph_settings(**settings)
@@ -816,10 +833,12 @@ def for_stream(stream: Stream, family, settings: dict | None = None,
                                        arm), settings
         scene = family.graph_scene(stream.maze)
         if scene is not None:
-            parts = SceneSteps.part_columns(scene)
+            parts = SceneSteps.part_columns(scene, hand)
         else:
             parts, tolerance = family.graph_objects(stream.maze)
-        spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1], goal=part) for part in parts]
+        spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1],
+                                          goal=tuple(c for c in part if c != getattr(scene, "hand", None)))
+                  for part in parts]
     else:
         spaces = [GraphSpace.plane(stream.layout) if wanted is None
                   else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal)]

@@ -498,9 +498,9 @@ class GraphAgent:
 
 
 def graph_agent(env: str, dataset: str, length: int, settings: dict | None = None, policy=None, objects: bool = False,
-                ahead: int | None = None) -> GraphAgent:
+                ahead: int | None = None, hand: bool = False) -> GraphAgent:
     """The dataset graph over ``dataset`` (of ``env``; :func:`bridgeplan.graph.for_stream`, ``objects``: one per
-    object), its paths ``length`` states long, executed by ``policy`` (a GCBC or GCIQL run's,
+    object; ``hand``: --hand), its paths ``length`` states long, executed by ``policy`` (a GCBC or GCIQL run's,
     :func:`bridgeplan.gcbc.run_policy`; its goal the path's state ``ahead`` steps on, default :data:`POLICY_AHEAD`)
     or, without one, by the execution's controller: what ``bridgeplan graph`` evaluates and
     ``PlannerPolicy.from_graph`` acts by."""
@@ -518,7 +518,7 @@ def graph_agent(env: str, dataset: str, length: int, settings: dict | None = Non
                               f"({policy.dataset_identity}): make it again with `bridgeplan data generate --maze "
                               f"{env} --force`, or give another dataset on purpose (--dataset)")
     t0 = time.perf_counter()
-    graph, settings = for_stream(stream, family, settings, objects)
+    graph, settings = for_stream(stream, family, settings, objects, hand)
     build_seconds = time.perf_counter() - t0
     if policy is None:
         return GraphAgent(GraphDecisions(graph, length), None, settings, stream.identity(), build_seconds, None)
@@ -531,7 +531,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
                    low_run: Path | None = None, nfe_low: int | None = None, replan_high_every: int | None = None,
                    low_snapshot: int | None = None, device: str = "auto", progress: bool = False,
                    picture: Callable | None = None, objects: bool = False,
-                   policy_ahead: int | None = None) -> EvalResult:
+                   policy_ahead: int | None = None, hand: bool = False) -> EvalResult:
     """The dataset graph over ``dataset`` (of ``tasks``' environment; ``bridgeplan.graph``, built with ``settings``
     over its family's) on ``tasks``: the JSON of ``bridgeplan graph``, with the graph's settings, size and what its
     queries found (``graph``) and the data's identity (``config``).
@@ -545,7 +545,8 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     ``policy_ahead`` steps on, default :data:`POLICY_AHEAD`), the paths searched again every
     ``execution.replan_every`` steps as alone. ``picture(decisions, tasks, execution, follower)`` (the graph alone
     or over a policy) hears the graph's decisions after the evaluation (``bridgeplan graph --render``).
-    ``objects``: the graph alone or over a policy, one per object or part (:func:`bridgeplan.graph.for_stream`)."""
+    ``objects``: the graph alone or over a policy, one per object or part (:func:`bridgeplan.graph.for_stream`;
+    ``hand``: some parts' graphs over the hand's opening too)."""
     from bridgeplan.gcbc import is_gcbc_run, run_policy
 
     env, family = tasks.env, family_of(tasks.env)
@@ -553,7 +554,7 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
     check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
     policy = run_policy(low_run, low_snapshot, device, env) if policy_low else None
     if low_run is None or policy is not None:
-        agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead)
+        agent = graph_agent(env, dataset, tasks.episode_steps + 1, settings, policy, objects, policy_ahead, hand)
         graph, settings = agent.decisions.graph, agent.settings
         execution = (execution or Execution()).resolved(family, env)
         method = "dataset graph" + (f", {graph.kind}" if objects else "") + (
@@ -566,7 +567,8 @@ def evaluate_graph(tasks: Tasks, dataset: str, settings: dict | None = None, exe
                              follower=agent.follower)
         result.extra["graph"] = {**settings, **seen["graph"], "build_seconds": agent.build_seconds}
         result.config = {"dataset": env, "dataset_identity": agent.identity,
-                         "graph": {**settings, "objects": True} if objects else settings}
+                         "graph": {**settings, "objects": True, **({"hand": True} if hand else {})} if objects
+                         else settings}
         if policy is not None:
             result.extra["low"] = {"run": Path(low_run).name, "agent": policy.config.agent, "step": policy.step,
                                    "ahead": agent.ahead}

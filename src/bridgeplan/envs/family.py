@@ -79,6 +79,11 @@ class SceneParts:
     """The cube is in the container while its x, y and z lie within these bounds, the container closed (at 0)."""
     carried: tuple[float, ...]
     """How far the cube inside moves (x, y, z) per unit of the container's position: the bounds move as much."""
+    hand: int | None = None
+    """The hand's opening column, which the graphs of :attr:`hand_slides` and their lock buttons also measure with
+    ``graph --objects --hand`` (a jump there joins states whose hand is alike); None: no hand."""
+    hand_slides: tuple[int, ...] = ()
+    """The slides whose graphs, and their lock buttons', measure the hand with ``--hand``."""
 
     def in_container(self, cube: np.ndarray, slide: float) -> bool:
         """Whether a cube at ``cube`` (x, y, z) lies in the container at ``slide``."""
