@@ -715,6 +715,8 @@ def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, t
     assert own_loop(apart)[0] == 200 and apart.execution.after_step == 0 and apart.plans_made > 1
     with pytest.raises(BridgeplanError, match="only paths made of steps"):
         PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2}, replan_after_step=0)
+    with pytest.raises(BridgeplanError, match="cube-single-play-v0 is no scene"):  # --hand is scene's
+        PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, objects=True, hand=True)
     with pytest.raises(BridgeplanError, match="give env and dataset"):
         PlannerPolicy.from_graph(env="cube-single-play-v0")
     with pytest.raises(BridgeplanError, match="--policy-ahead is a policy low level's"):

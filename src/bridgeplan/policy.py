@@ -100,7 +100,8 @@ class PlannerPolicy:
                    device: str = "auto", seed: int = 0, replan_high_every: int | None = None,
                    graph: dict | None = None, *, env: str | None = None, dataset: str | Path | None = None,
                    objects: bool = False, policy_ahead: int | None = None,
-                   low_snapshot: int | None = None, replan_after_step: int | None = None) -> PlannerPolicy:
+                   low_snapshot: int | None = None, replan_after_step: int | None = None,
+                   hand: bool = False) -> PlannerPolicy:
         """The dataset graph (``bridgeplan.graph``; settings ``graph`` over the family's) as ``bridgeplan graph``
         executes it:
 
@@ -114,16 +115,17 @@ class PlannerPolicy:
 
         Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
         goal); ``objects``: one graph per object or part (``--objects``), the paths searched again
-        ``replan_after_step`` steps after their first step ends if given (``--replan-after-step``)."""
+        ``replan_after_step`` steps after their first step ends if given (``--replan-after-step``), on scene some parts'
+        graphs over the hand's opening too with ``hand`` (``--hand``)."""
         from bridgeplan.gcbc import is_gcbc_run, run_policy
         from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy
 
         policy_low = low_run is not None and is_gcbc_run(low_run)
         check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
         if low_run is not None and not policy_low:
-            if env is not None or dataset is not None or objects or replan_after_step is not None:
+            if env is not None or dataset is not None or objects or replan_after_step is not None or hand:
                 raise BridgeplanError("a planner low level's graph is over its own training data, one graph: no env, "
-                                      "dataset, objects or replan_after_step")
+                                      "dataset, objects, replan_after_step or hand")
             hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, low_snapshot, device=device)
             return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
                 replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
@@ -139,7 +141,7 @@ class PlannerPolicy:
         execution = execution.resolved(family, env)
         episode_steps = family.tasks(env, 1).episode_steps
         execution.validate(None, episode_steps)
-        agent = graph_agent(env, str(dataset), episode_steps + 1, graph, policy, objects, policy_ahead)
+        agent = graph_agent(env, str(dataset), episode_steps + 1, graph, policy, objects, policy_ahead, hand)
         return cls(agent.decisions.source(1), env, execution, agent.follower)
 
     @classmethod
