@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from itertools import repeat
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -737,13 +738,17 @@ class SceneSteps(PartSteps):
     """Per step searched, its graph (-1: a query at the goal, no step)."""
 
     @staticmethod
-    def part_columns(parts: SceneParts, hand: bool = False) -> tuple[tuple[int, ...], ...]:
-        """Each graph's part columns, in :attr:`graphs`' order (:meth:`next_step`'s graph indices); ``hand``: the hand's
-        opening column before the part's in the graphs of :attr:`SceneParts.hand_slides` and their lock buttons."""
+    def part_columns(parts: SceneParts) -> tuple[tuple[int, ...], ...]:
+        """Each graph's part columns, in :attr:`graphs`' order (:meth:`next_step`'s graph indices)."""
+        return (parts.cube, *((b,) for b in parts.buttons), *((s,) for s in parts.slides))
+
+    @staticmethod
+    def hand_columns(parts: SceneParts) -> tuple[tuple[int, ...], ...]:
+        """Per graph (:meth:`part_columns`' order), the hand's opening column where ``--hand`` measures it: the graphs
+        of :attr:`SceneParts.hand_slides` and their lock buttons."""
         with_hand = {1 + len(parts.buttons) + k for k in parts.hand_slides} | {1 + parts.locks[k]
                                                                              for k in parts.hand_slides}
-        columns = (parts.cube, *((b,) for b in parts.buttons), *((s,) for s in parts.slides))
-        return tuple((parts.hand, *c) if hand and k in with_hand else c for k, c in enumerate(columns))
+        return tuple((parts.hand,) if k in with_hand else () for k in range(1 + len(parts.buttons) + len(parts.slides)))
 
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
@@ -817,7 +822,7 @@ def for_stream(stream: Stream, family, settings: dict | None = None, objects: bo
     (:class:`ObjectGraphs`, ``Family.graph_objects``), the presses of buttons that toggle one another
     (:class:`ButtonPresses`, ``Family.graph_buttons``) or one per part of a scene (:class:`SceneSteps`,
     ``Family.graph_scene``; ``hand``: some parts' graphs over the hand's opening as well,
-    :meth:`SceneSteps.part_columns`). Returns it and the settings it was built with."""
+    :meth:`SceneSteps.hand_columns`). Returns it and the settings it was built with."""
     if hand:
         check_hand(family, stream.maze, objects)
     defaults, step, within = family.graph_pace(stream, objects=objects)
@@ -832,13 +837,13 @@ def for_stream(stream: Stream, family, settings: dict | None = None, objects: bo
             return ButtonPresses.build(stream.states, stream.segment_starts, *buttons, settings, stream.layout,
                                        arm), settings
         scene = family.graph_scene(stream.maze)
+        extra = SceneSteps.hand_columns(scene) if hand else repeat(())  # --hand: a scene's (check_hand)
         if scene is not None:
-            parts = SceneSteps.part_columns(scene, hand)
+            parts = SceneSteps.part_columns(scene)
         else:
             parts, tolerance = family.graph_objects(stream.maze)
-        spaces = [GraphSpace.standardized(stream.states, arm + part, wanted[1],
-                                          goal=tuple(c for c in part if c != getattr(scene, "hand", None)))
-                  for part in parts]
+        spaces = [GraphSpace.standardized(stream.states, arm + more + part, wanted[1], goal=part)
+                  for more, part in zip(extra, parts)]
     else:
         spaces = [GraphSpace.plane(stream.layout) if wanted is None
                   else GraphSpace.standardized(stream.states, *wanted, goal=stream.layout.goal)]
