@@ -746,9 +746,8 @@ class SceneSteps(PartSteps):
     def hand_columns(parts: SceneParts) -> tuple[tuple[int, ...], ...]:
         """Per graph (:meth:`part_columns`' order), the hand's opening column where ``--hand`` measures it: the graphs
         of :attr:`SceneParts.hand_slides` and their lock buttons."""
-        with_hand = {1 + len(parts.buttons) + k for k in parts.hand_slides} | {1 + parts.locks[k]
-                                                                             for k in parts.hand_slides}
-        return tuple((parts.hand,) if k in with_hand else () for k in range(1 + len(parts.buttons) + len(parts.slides)))
+        measured = {c for k in parts.hand_slides for c in (parts.slides[k], parts.buttons[parts.locks[k]])}
+        return tuple((parts.hand,) if measured & set(c) else () for c in SceneSteps.part_columns(parts))
 
     def next_step(self, start: np.ndarray, goal: np.ndarray) -> tuple[int, dict[int, float]] | None:
         """From state ``start`` toward goal observation ``goal``: the graph to search and the columns its target sets
