@@ -477,9 +477,9 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     write(folder / "gcbc-s0-step15000-seed0.json", 0.16, step=15000)
     write(folder / "gcbc-s1-step15000-seed0.json", 0.20, seed=1, step=15000)
     lines = mc.render(tmp_path).splitlines()
-    assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) |" in lines
-    assert "| ddpm | test | 1 | 50.0 | - |" in lines
-    assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  |" in lines
+    assert "| gcbc | test | 2 | 6.0 ± 2.0 | 6 (8 seeds, 1 M steps) | - |" in lines
+    assert "| ddpm | test | 1 | 50.0 | - | - |" in lines
+    assert "| ddpm | validation (tasks 6-10) | 1 | 30.0 |  | - |" in lines
     assert "| method | 10 k steps | 15 k steps | 20 k steps | OGBench's average (last 3) |" in lines
     assert "| gcbc | 10.0 (1) | 18.0 ± 2.0 (2) | 6.0 ± 2.0 (2) | 10.0 (1) |" in lines
     # the README's table: per dataset its best planner (not a peer) on the test tasks, in words, beside GCIQL's
@@ -492,9 +492,9 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
           replan=50)
     lines = mc.render(tmp_path).splitlines()
     assert lines.index("## cube-single-play-v0") < lines.index("## puzzle-3x3-play-v0")
-    assert lines[lines.index("## puzzle-3x3-play-v0") + 2].endswith("OGBench published: GCBC 2, GCIQL 95 (8 seeds, 1 M "
-                                                                       "steps).")
-    assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) |")
+    assert ("OGBench published: GCBC 2, GCIQL 95 (8 seeds, 1 M steps)."
+            in lines[lines.index("## puzzle-3x3-play-v0") + 2])
+    assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) | - |")
     assert mc.block(tmp_path).splitlines()[3:] == [
         "| puzzle-3x3-play-v0 | the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps) "
         "| 70.0 (one run) | 90.0 (one run) | 95 (8 seeds, 1 M steps) |"]
@@ -523,11 +523,30 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
           ".json", 0.7, step=0, replan=150, graph={"paths_per_part": [1, 1, 1, 1, 1]})
     assert ("their steps in order, replanned every 150 steps and 25 steps after a path's first step ends) | 70.0 "
             "(one run) |") in mc.block(tmp_path)
+    # rows on the recipe's data generated again elsewhere: apart from the same folder's rows on the first data, their
+    # data's sha256 beside them; the hand's opening measured named so
+    def regenerated(folder, rate, sha, seed=0):
+        path = tmp_path / mc.folder("scene") / folder / f"track-replan150-afterstep25-seed{seed}.json"
+        write(path, rate, step=0, replan=150, graph={"paths_per_part": [1, 1, 1, 1, 1]})
+        path.write_text(json.dumps({**json.loads(path.read_text()), "config": {
+            "dataset_identity": f"scene-play-v0.npz (scene-play-v0, 1001000 transitions, sha256 {sha})"}}))
+
+    regenerated("graph-keep5-r1-objects-afterstep25", 0.7, "8d47fbab505381fa", seed=1)
+    regenerated("regenerated-data/graph-keep5-r1-objects-afterstep25", 0.5, "56abd1befc8f130a")
+    regenerated("regenerated-data/graph-keep5-r1-objects-hand-afterstep25", 0.8, "56abd1befc8f130a")
+    lines = mc.render(tmp_path).splitlines()
+    assert "| graph-keep5-r1-objects-afterstep25 | test | 2 | 70.0 ± 0.0 | - | 8d47fbab505381fa |" in lines
+    assert ("| regenerated-data/graph-keep5-r1-objects-afterstep25 | test | 1 | 50.0 | - | 56abd1befc8f130a |"
+            in lines)
+    assert ("| scene-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per part (cube, "
+            "buttons, drawer, window), their steps in order, the window's and its button's graphs measuring the hand's "
+            "opening too, replanned every 150 steps and 25 steps after a path's first step ends; on the recipe's data "
+            "generated again here, sha256 56abd1befc8f130a) | 80.0 (one run) |") in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /
               "track-replan50-seed0.json", rate, step=0, replan=50)
-    assert "| graph-keep5-r1-gciql-ahead25 | test | 2 | 85.0 ± 5.0 | - |" in mc.render(tmp_path).splitlines()
+    assert "| graph-keep5-r1-gciql-ahead25 | test | 2 | 85.0 ± 5.0 | - | - |" in mc.render(tmp_path).splitlines()
     assert ("| cube-double-play-v0 | the dataset graph (every 5th state, radius 1, replanned every 50 steps), its "
             "paths executed by the policy of GCIQL (20 k steps) toward the path's state 25 steps on | 85.0 ± 5.0 (2 "
             "seeds) |") in mc.block(tmp_path)

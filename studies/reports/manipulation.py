@@ -36,13 +36,19 @@ PEERS = ("gcbc", "gciql")
 LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
           "ddpm": "DDPM planner (cpu-small, 20 k steps, NFE 16, replanned every 8 steps)"}
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
-GRAPH_FOLDER = re.compile(r"graph-keep(\d+)-r([\d.]+)(-objects)?"
+GRAPH_FOLDER = re.compile(r"(?:regenerated-data/)?graph-keep(\d+)-r([\d.]+)(-objects(?:-hand)?)?"
                           r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)(?:-(line|learned|gaussian))?"
                           r"-k\d+-nfe\d+)?(?:-afterstep(\d+))?")
-"""A graph row's folder: its graph (every Nth state, radius, one graph per cube or scene's part, or a puzzle's presses
-solved), then its low level: a policy and its lookahead, or a planner's process, its prior where not the coarse path
-(the first low levels' folders name none), its stride and NFE; then the paths' replanning where each first step ends
+"""A graph row's folder (under ``regenerated-data/`` where made on the recipe's data generated again elsewhere: its
+arrays differ, see :data:`REGENERATED`): its graph (every Nth state, radius, one graph per cube or scene's part, or a
+puzzle's presses solved; ``-hand``: scene's window and its button measuring the hand's opening too), then its low
+level: a policy and its lookahead, or a planner's process, its prior where not the coarse path (the first low levels'
+folders name none), its stride and NFE; then the paths' replanning where each first step ends
 (``--replan-after-step``)."""
+REGENERATED = "regenerated-data/"
+"""The folder of rows made on a dataset generated again by the same recipe on another machine, whose arrays are not
+the other rows' (the rows' ``dataset_identity``: the arrays' sha256; docs/usage.md says why): compared with each
+other, not with the rows beside them."""
 LAST = 3
 """Evaluations OGBench averages per training seed (its last three, at 800 k, 900 k and 1 M steps; here 10 k, 15 k and
 20 k)."""
@@ -75,9 +81,11 @@ def label(method: str, found: list[dict]) -> str:
         replan += f" and {m[8]} steps after a path's first step ends"
     first = next(r for r in found if r["method"] == method)
     graph = first.get("graph", {})
+    hand = ", the window's and its button's graphs measuring the hand's opening too" if m[3] == "-objects-hand" else ""
     apart = ("" if not m[3] else ", the buttons' presses solved (Lights Out), the arm's way to each searched"
              if "buttons" in graph else ", one graph per part (cube, buttons, drawer, window), their steps in order"
-             if "paths_per_part" in graph else ", one graph per cube")
+             if "paths_per_part" in graph
+             else ", one graph per cube")
     if m[6]:  # a planner low level: its settings are its rows'
         row = next(r for r in found if r["method"] == method)
         low, ex = row["low"], row["execution"]
@@ -89,21 +97,26 @@ def label(method: str, found: list[dict]) -> str:
     if m[4]:  # a policy low level
         return (f"the dataset graph (every {m[1]}th state, radius {m[2]}{apart}{replan}), its paths executed by "
                 f"the policy of {LABELS[m[4]]} toward the path's state {m[5]} steps on")
-    return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{apart}{replan})"
+    data = (f"; on the recipe's data generated again here, sha256 {first['data']}" if method.startswith(REGENERATED)
+            else "")
+    return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{apart}{hand}{replan}{data})"
 
 
 def rows(root: Path, scene: str) -> list[dict]:
     """Every evaluation JSON under dataset ``scene``'s folder, with the method it is of (the file's or its folder's
-    stem before ``-s<seed>``), that training seed (None: no training) and whether it is on the validation tasks."""
+    stem before ``-s<seed>``, below the dataset's folder: ``regenerated-data/graph-...``), that training seed (None: no
+    training), whether it is on the validation tasks and the first 16 hex digits of its data's sha256 (None: not
+    recorded)."""
     out = []
     home = Path(root) / folder(scene)
     for path in sorted(home.rglob("*.json")):
         d = read_evaluation(path)
-        name = path.parent.name if path.parent != home else path.stem
+        name = path.parent.relative_to(home).as_posix() if path.parent != home else path.stem
         validation = any(int(t) > 5 for t in d["tasks"])
         seed = re.search(r"-s(\d+)", name)
+        data = re.search(r"sha256 ([0-9a-f]+)", d.get("config", {}).get("dataset_identity", ""))
         out.append({**d, "method": name.split("-s")[0], "validation": validation,
-                    "training_seed": int(seed[1]) if seed else None})
+                    "training_seed": int(seed[1]) if seed else None, "data": data[1] if data else None})
     return out
 
 
@@ -277,7 +290,10 @@ def low_levels(found: list[dict]) -> list[str]:
 def section(scene: str, found: list[dict]) -> list[str]:
     """Dataset ``scene``'s tables: every method at its last snapshot, then GCBC and GCIQL against training steps."""
     lines = [f"## {scene}-play-v0", "", f"Rows in docs/results/{folder(scene)}/ ({SCENES[scene].eval_steps} steps per "
-             f"episode). OGBench published: {published_line(scene)}.", ""]
+             f"episode). OGBench published: {published_line(scene)}. The data column: the first hex digits of the "
+             f"dataset's arrays' sha256 where the rows record it (GCBC's and GCIQL's do not); rows under "
+             f"{REGENERATED} were made on the recipe's data generated again on another machine, whose arrays differ.",
+             ""]
     body = []
     for method in sorted({r["method"] for r in found}):
         for validation in (False, True):
@@ -285,9 +301,10 @@ def section(scene: str, found: list[dict]) -> list[str]:
             if mine:
                 rates = [100 * r["success_rate"] for r in mine]
                 beside = "" if validation else published(scene, method) or "-"
+                data = ", ".join(sorted({r["data"] for r in mine if r["data"]})) or "-"
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
-                             fmt_mean_se(rates, one_seed="mean"), beside])
-    lines += table(["method", "tasks", "seeds", "success (%)", "published"], body)
+                             fmt_mean_se(rates, one_seed="mean"), beside, data])
+    lines += table(["method", "tasks", "seeds", "success (%)", "published", "data (sha256)"], body)
     lines += low_levels(found)
     found_curves = curves(found)
     if found_curves:
