@@ -463,7 +463,7 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
 
     def write(path, rate, tasks=(1, 2, 3, 4, 5), seed=0, step=20000, replan=None, graph=None):
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"success_rate": rate, "train_seed": seed, "step": step,
+        path.write_text(json.dumps({"success_rate": rate, "train_seed": seed, "seed": 0, "step": step,
                                     "execution": {"replan_every": replan},
                                     "tasks": {str(t): {"success_rate": rate} for t in tasks},
                                     **({"graph": graph} if graph else {})}))
@@ -494,7 +494,8 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert lines.index("## cube-single-play-v0") < lines.index("## puzzle-3x3-play-v0")
     assert ("OGBench published: GCBC 2, GCIQL 95 (8 seeds, 1 M steps)."
             in lines[lines.index("## puzzle-3x3-play-v0") + 2])
-    assert lines[lines.index("## puzzle-3x3-play-v0"):].count("| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) | - |")
+    assert lines[lines.index("## puzzle-3x3-play-v0"):].count(
+        "| gciql | test | 1 | 90.0 | 95 (8 seeds, 1 M steps) | - |")
     assert mc.block(tmp_path).splitlines()[3:] == [
         "| puzzle-3x3-play-v0 | the dataset graph (no network: every 10th state, radius 1.5, replanned every 50 steps) "
         "| 70.0 (one run) | 90.0 (one run) | 95 (8 seeds, 1 M steps) |"]
@@ -528,20 +529,27 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     def regenerated(folder, rate, sha, seed=0):
         path = tmp_path / mc.folder("scene") / folder / f"track-replan150-afterstep25-seed{seed}.json"
         write(path, rate, step=0, replan=150, graph={"paths_per_part": [1, 1, 1, 1, 1]})
-        path.write_text(json.dumps({**json.loads(path.read_text()), "config": {
+        path.write_text(json.dumps({**json.loads(path.read_text()), "seed": seed, "config": {
             "dataset_identity": f"scene-play-v0.npz (scene-play-v0, 1001000 transitions, sha256 {sha})"}}))
 
     regenerated("graph-keep5-r1-objects-afterstep25", 0.7, "8d47fbab505381fa", seed=1)
-    regenerated("regenerated-data/graph-keep5-r1-objects-afterstep25", 0.5, "56abd1befc8f130a")
-    regenerated("regenerated-data/graph-keep5-r1-objects-hand-afterstep25", 0.8, "56abd1befc8f130a")
+    for seed, (without, hand) in enumerate(((0.5, 0.8), (0.4, 0.8), (0.6, 0.8))):
+        regenerated("regenerated-data/graph-keep5-r1-objects-afterstep25", without, "56abd1befc8f130a", seed)
+        regenerated("regenerated-data/graph-keep5-r1-objects-hand-afterstep25", hand, "56abd1befc8f130a", seed)
     lines = mc.render(tmp_path).splitlines()
     assert "| graph-keep5-r1-objects-afterstep25 | test | 2 | 70.0 ± 0.0 | - | 8d47fbab505381fa |" in lines
-    assert ("| regenerated-data/graph-keep5-r1-objects-afterstep25 | test | 1 | 50.0 | - | 56abd1befc8f130a |"
+    assert ("| regenerated-data/graph-keep5-r1-objects-afterstep25 | test | 3 | 50.0 ± 5.8 | - | 56abd1befc8f130a |"
             in lines)
+    # the hand against the same graph without it on the same data (not the first data's), paired by evaluation seed
+    assert lines[lines.index("## scene-play-v0"):].count(
+        "The hand measured against the same graph without it, on the same data, paired by evaluation seed (test "
+        "tasks; verdict: better or worse beyond 2 standard errors, else tie): regenerated-data/graph-keep5-r1-objects-"
+        "hand-afterstep25 minus regenerated-data/graph-keep5-r1-objects-afterstep25: +30.0 ± 5.8 (3 seeds, better)."
+    ) == 1
     assert ("| scene-play-v0 | the dataset graph (no network: every 5th state, radius 1, one graph per part (cube, "
             "buttons, drawer, window), their steps in order, the window's and its button's graphs measuring the hand's "
             "opening too, replanned every 150 steps and 25 steps after a path's first step ends; on the recipe's data "
-            "generated again here, sha256 56abd1befc8f130a) | 80.0 (one run) |") in mc.block(tmp_path)
+            "generated again here, sha256 56abd1befc8f130a) | 80.0 ± 0.0 (3 seeds) |") in mc.block(tmp_path)
     # a policy low level: one row per training seed of its policy, in folders -s<seed>, named by the policy
     for seed, rate in ((0, 0.8), (1, 0.9)):
         write(tmp_path / mc.folder("cube-double") / f"graph-keep5-r1-gciql-ahead25-s{seed}" /
@@ -583,7 +591,8 @@ def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_se
         path = folder / f"track-replan12-high48-step{step}-seed{1000 if min(tasks) > 5 else 0}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({
-            "success_rate": rate, "step": step, "decision_ms_batch1": {"p50": 2.0 * nfe},
+            "success_rate": rate, "seed": 1000 if min(tasks) > 5 else 0, "step": step,
+            "decision_ms_batch1": {"p50": 2.0 * nfe},
             "execution": {"replan_every": 12, "replan_high_every": 48}, "high_alone": {"success_rate": 0.24},
             "low": {"method": name, "subgoal_every": 3, "stride": 4, "horizon": 16, "nfe": nfe, "step": 20000,
                     "config": {"preset": "cpu-small"}},

@@ -287,6 +287,25 @@ def low_levels(found: list[dict]) -> list[str]:
                     "decision ms at batch 1"], body), *priors, *floor]
 
 
+def hand_pairs(found: list[dict]) -> list[str]:
+    """Each graph measuring the hand (``-objects-hand``) against the same graph without it on the same data, on the
+    test tasks paired by evaluation seed (the same episodes), with the verdict at 2 standard errors."""
+    by: dict[str, dict[int, float]] = {}
+    for r in final(found):
+        if not r["validation"] and GRAPH_FOLDER.fullmatch(r["method"]):
+            by.setdefault(f"{r['method']} {r['data']}", {})[r["seed"]] = 100 * r["success_rate"]
+    out = []
+    for key, rates in sorted(by.items()):
+        without = key.replace("-objects-hand", "-objects")
+        if "-objects-hand" in key and without in by:
+            d = paired(rates, by[without], seeds="common")
+            verdict = f" ({d.n} seeds, {compare(d)})" if d.n > 1 else " (1 seed)"
+            out.append(f"{key.split()[0]} minus {without.split()[0]}: {fmt_diff(d)}{verdict}")
+    return ["", "The hand measured against the same graph without it, on the same data, paired by evaluation seed "
+                "(test tasks; verdict: better or worse beyond 2 standard errors, else tie): " + "; ".join(out) + "."
+            ] if out else []
+
+
 def section(scene: str, found: list[dict]) -> list[str]:
     """Dataset ``scene``'s tables: every method at its last snapshot, then GCBC and GCIQL against training steps."""
     lines = [f"## {scene}-play-v0", "", f"Rows in docs/results/{folder(scene)}/ ({SCENES[scene].eval_steps} steps per "
@@ -305,6 +324,7 @@ def section(scene: str, found: list[dict]) -> list[str]:
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
                              fmt_mean_se(rates, one_seed="mean"), beside, data])
     lines += table(["method", "tasks", "seeds", "success (%)", "published", "data (sha256)"], body)
+    lines += hand_pairs(found)
     lines += low_levels(found)
     found_curves = curves(found)
     if found_curves:
