@@ -304,6 +304,7 @@ def test_a_damaged_row_names_its_file_and_id():
     ("replan32-warm-pursuit1", Execution(replan_every=32, warm=True, controller="pursuit", lookahead=1)),
     ("tol0.5-cand8-agreement-arrival-end", Execution(tolerance=0.5, candidates=8, select="agreement", arrival="end")),
     ("replan150-afterstep25", Execution(replan_every=150, after_step=25)),
+    ("replan150-objtol0.5", Execution(replan_every=150, object_tolerance=0.5)),
 ])
 def test_execution_tags_round_trip(tag, execution):
     assert parse_execution(tag) == execution and execution.tag() == tag

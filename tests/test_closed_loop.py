@@ -189,6 +189,37 @@ def test_after_step_replans_where_a_plans_first_step_ended():
         maze2d.FAMILY.run(tasks, bare)
 
 
+def test_object_tolerance_replans_where_an_object_left_its_plan():
+    """A source that says how far each episode's objects are from its plan (episode 1's 0.6 from step 5 on, episode
+    0's never): with object_tolerance 0.5 episode 1 plans again at each step from 5 on, episode 0 never; a source
+    that says nothing of objects is refused."""
+    class Objects:
+        drifts = True
+
+        def __init__(self):
+            self.calls, self.t = [], 0
+
+        def __call__(self, states, goals_, idx, t):
+            self.calls.append((t, idx.tolist()))
+            return np.repeat(np.c_[states[:, :2], np.zeros((len(idx), 2))][:, None], 16, axis=1)
+
+        def drift(self, states, plans, age):  # asked at every step after the first plan's
+            self.t += 1
+            return np.array([0.0, 0.6 if self.t >= 5 else 0.4])
+
+    tasks = dataclasses.replace(MazeTasks.of(UMAZE, np.array([[1.0, 1.0], [-1.0, 1.0]]),
+                                             np.array([[1.0, -1.0], [1.0, -1.0]])), episode_steps=8)
+    source = Objects()
+    executor = PlanExecutor(lambda n: source, lambda n: maze2d.FAMILY.follower("umaze", n, "track"),
+                            object_tolerance=0.5)
+    maze2d.FAMILY.run(tasks, executor)
+    assert source.calls == [(0, [0, 1]), (5, [1]), (6, [1]), (7, [1])]
+    bare = PlanExecutor(lambda n: lambda *a: None, lambda n: maze2d.FAMILY.follower("umaze", n, "track"),
+                        object_tolerance=0.5)
+    with pytest.raises(BridgeplanError, match="only paths that say where every object should be"):
+        maze2d.FAMILY.run(tasks, bare)
+
+
 # ---------------------------------------------------------------- warm prior
 
 def _normalizer() -> Normalizer:

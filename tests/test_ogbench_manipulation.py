@@ -715,6 +715,12 @@ def test_the_graph_over_a_policy_in_your_own_loop_acts_as_evaluated(tiny_data, t
     assert own_loop(apart)[0] == 200 and apart.execution.after_step == 0 and apart.plans_made > 1
     with pytest.raises(BridgeplanError, match="only paths made of steps"):
         PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2}, replan_after_step=0)
+    drifting = PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2}, objects=True,
+                                        replan_object_tolerance=0.5)
+    assert drifting.execution.object_tolerance == 0.5 and own_loop(drifting)[0] == 200
+    with pytest.raises(BridgeplanError, match="only paths that say where every object should be"):
+        PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, graph={"keep": 2},
+                                 replan_object_tolerance=0.5)
     with pytest.raises(BridgeplanError, match="cube-single-play-v0 is no scene"):  # --hand is scene's
         PlannerPolicy.from_graph(env="cube-single-play-v0", dataset=tiny_data, objects=True, hand=True)
     with pytest.raises(BridgeplanError, match="give env and dataset"):
@@ -861,7 +867,7 @@ def test_a_swap_sets_one_cube_aside_first():
     # (1, 0) is 1 from both cubes, (0, 1.5) rests higher, (0, -1.1) is nearer than (0, 3) but within 1.2 of (0, 0)
     np.testing.assert_allclose(graphs.aside(swap_start, swap_goal, 0), (0, 3, 0.2))
     path = graphs.path(swap_start, swap_goal)  # cube 0 aside, cube 1 to its goal, cube 0 to its own
-    np.testing.assert_allclose(path[1], state((0, 3, 0.2), (0, 0, 0.2)))
+    np.testing.assert_allclose(path[1], state((0, 3, 0.2), (2, 0, 0.2)))  # the cube not moved held where it is
     np.testing.assert_allclose([path[2, 3:], path[3, :3]], [(0, 0, 0.2), (2, 0, 0.2)])
     assert graphs.chosen == [0, 1, 0] and graphs.set_aside == 1
     # set aside: cube 1's goal is free now, and it goes there
@@ -904,6 +910,23 @@ def test_the_objects_apart_over_two_cubes(tmp_path):
     assert graphs.chosen == [1]
     np.testing.assert_allclose(path[-1, 28:31], goal[28:31])
     assert (np.abs(np.diff(path[:, 28:31], axis=0)) > 1e-3).any()  # the data carries the cube
+    np.testing.assert_array_equal(path[:, 19:22], np.repeat(start[None, 19:22], len(path), axis=0))  # cube 0 stays
+    # the objects' drift from a plan: none along it (each state at its own age), the larger of the two cubes' gaps
+    # where one is dropped or pushed, the nearest of the planned positions within DRIFT_WINDOW steps of the age
+    from bridgeplan.graph import DRIFT_WINDOW
+
+    k = int(np.argmax(np.linalg.norm(path[:, 28:31] - start[28:31], axis=1) > 0.5))  # cube 1 on its way
+    plans = np.repeat(path[None], 3, axis=0)
+    pushed, dropped = path[k].copy(), path[k].copy()
+    pushed[19] += 0.7
+    dropped[28:31] = start[28:31]
+    ages = np.array([k, k, k])
+    drift = graphs.drift(np.stack([path[k], pushed, dropped]), plans, ages)
+    window = path[max(0, k - DRIFT_WINDOW):k + DRIFT_WINDOW + 1, 28:31]
+    np.testing.assert_allclose(drift, [0.0, 0.7, np.linalg.norm(window - start[28:31], axis=1).min()], atol=1e-9)
+    assert drift[2] > 0  # the dropped cube is away from every planned position near its age
+    lag = graphs.drift(path[[max(0, k - DRIFT_WINDOW)]], plans[:1], ages[:1])  # a cube as far behind as the window
+    assert lag[0] == pytest.approx(0.0)
     summary = graphs.summary()
     assert summary["objects"] == 2 and summary["paths_per_object"] == [0, 1] and summary["paths_found"] == 1.0
     assert summary["nodes"] == sum(len(g.nodes) for g in graphs.graphs)
@@ -928,6 +951,11 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert one["graph"]["path_steps"] == row["graph"]["path_steps"] and "objects" not in one["config"]["graph"]
     # searched again where a path's first step ends: paths made of steps only, a step count in 0..episode length
     assert _error(capsys, [*graph[:-1], "--replan-after-step", "5"]).startswith("error: --replan-after-step plans ")
+    # searched again where a cube left its plan: the cubes' paths only, a distance >= 0
+    assert _error(capsys, [*graph[:-1], "--replan-object-tolerance", "0.5"]).startswith(
+        "error: --replan-object-tolerance plans again where an object left its plan: give --objects on a cube")
+    assert _error(capsys, [*graph, "--replan-object-tolerance", "-1", "--out", str(tmp_path / "bad.json")]
+                  ).startswith("error: --replan-object-tolerance must be >= 0")
     assert _error(capsys, [*graph, "--replan-after-step", "-1", "--out", str(tmp_path / "bad.json")]).startswith(
         "error: --replan-after-step must be in 0..200")
     assert not (tmp_path / "bad.json").exists()
@@ -940,6 +968,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     assert "track, replan 5 steps after a first step ends" in capsys.readouterr().out
     after = json.loads((tmp_path / "after.json").read_text())
     assert after["execution"]["replan_after_step"] == 5 and after["execution"]["mode"] == "closed_loop"
+    assert main([*graph, "--replan-object-tolerance", "0.5", "--out", str(tmp_path / "drift.json")]) == 0
+    assert "track, replan past 0.5 of an object from the plan" in capsys.readouterr().out
+    drift = json.loads((tmp_path / "drift.json").read_text())
+    assert drift["execution"]["replan_object_tolerance"] == 0.5 and drift["execution"]["mode"] == "closed_loop"
 
 
 @pytest.fixture(scope="module")

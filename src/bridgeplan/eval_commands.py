@@ -264,6 +264,7 @@ class GraphOptions(LevelledEvaluation):
                             "opening as well (a jump joins states whose hand is alike; chosen on validation, "
                             "bridgeplan.envs.ogbench_manipulation.HAND_SLIDES)")
     replan_after_step: int | None = from_config(EXECUTION, "after_step", metavar="S")
+    replan_object_tolerance: float | None = from_config(EXECUTION, "object_tolerance", metavar="D")
     render: bool = opt(False, "also draw the first episode, its path executed again (the graph alone or by a policy "
                               "low level): a PNG beside the JSON, as `bridgeplan render` draws the environment's "
                               "episodes")
@@ -331,7 +332,11 @@ def graph_eval(o: GraphOptions) -> int:
     if o.replan_after_step is not None and not (o.objects and family_of(env).graph_buttons(env) is None):
         raise BridgeplanError("--replan-after-step plans again where a path's first step ends: give --objects on a "
                               "cube or scene dataset (its paths are made of steps, one part at a time)")
-    plan = dataclasses.replace(execution(o.replanning, o.controller, env=env), after_step=o.replan_after_step)
+    if o.replan_object_tolerance is not None and not (o.objects and family_of(env).graph_objects(env) is not None):
+        raise BridgeplanError("--replan-object-tolerance plans again where an object left its plan: give --objects "
+                              "on a cube dataset (its paths say where every cube should be)")
+    plan = dataclasses.replace(execution(o.replanning, o.controller, env=env), after_step=o.replan_after_step,
+                               object_tolerance=o.replan_object_tolerance)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
               else Path("results") / "graph" / family_of(env).label(env))
     check_result_path(o.output.out, folder)

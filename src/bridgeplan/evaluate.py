@@ -398,7 +398,9 @@ def format_table(r: dict) -> str:
         how += f" (lookahead {ex['lookahead']:g})"
     replans = [text.format(ex[key]) for key, text in (("replan_every", "every {} steps"),
                                                        ("replan_tolerance", "past {:g} from the plan"),
-                                                       ("replan_after_step", "{} steps after a first step ends"))
+                                                       ("replan_after_step", "{} steps after a first step ends"),
+                                                       ("replan_object_tolerance",
+                                                        "past {:g} of an object from the plan"))
                if ex.get(key) is not None]
     how += f", replan {', '.join(replans)}" if replans else ", open loop"
     tasks = (f"{r['episodes_per_task']} episodes per task" if "episodes_per_task" in r

@@ -362,6 +362,10 @@ ASIDE_CLEARANCE = 3.0
 width) from every object and goal in the plane: the cube set down clear of the others, with room for the gripper."""
 
 
+DRIFT_WINDOW = 10
+"""Steps either side of a plan's age in which :meth:`ObjectGraphs.drift` looks for an object's planned position."""
+
+
 MOST_STEPS = 16
 """Steps a :class:`PartSteps` path chains at most (OGBench's hardest scene task takes 7)."""
 
@@ -400,7 +404,7 @@ class PartSteps:
             self.chosen.append(graph)
             toward = goal.copy()
             toward[list(target)] = list(target.values())
-            piece = self.graphs[graph].path(state, toward)
+            piece = self.held(self.graphs[graph].path(state, toward), state, target)
             pieces.append(piece[1:])
             if len(pieces) == 2:
                 self.first_end = len(piece) - 1
@@ -410,6 +414,10 @@ class PartSteps:
         if len(pieces) == 1:
             self.chosen.append(-1)
         return np.concatenate(pieces)
+
+    def held(self, piece: np.ndarray, state: np.ndarray, target: dict[int, float]) -> np.ndarray:
+        """A step's path ``piece`` as the plan says it (here as its graph found it)."""
+        return piece
 
     def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
         """The state a step toward ``target`` from ``state`` leaves: the arm as at its path's ``end``, the parts as in
@@ -496,6 +504,24 @@ class ObjectGraphs(PartSteps):
         place = self.aside(start, goal, i)
         self.set_aside += place is not None
         return i, dict(zip(self.objects[i], (goal[list(self.objects[i])] if place is None else place).tolist()))
+
+    def held(self, piece: np.ndarray, state: np.ndarray, target: dict[int, float]) -> np.ndarray:
+        """A step's path ``piece`` with the objects it does not move held where ``state`` has them (its graph leaves
+        them out: its states have another episode's), so the plan says where every object should be
+        (:meth:`drift`)."""
+        others = [c for c in self.graphs[0].layout.goal if c not in target]
+        piece[:, others] = state[others]
+        return piece
+
+    def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
+        """``[n]`` how far the objects are from their plans: per episode, over its objects the largest of each one's
+        distance to the nearest of its planned positions within :data:`DRIFT_WINDOW` steps of the plan's ``age`` (the
+        arm lags its plan, so a carried object lags too); a dropped or pushed object is far."""
+        columns = np.array(self.objects)  # [objects, 3]
+        steps = np.clip(np.asarray(age)[:, None] + np.arange(-DRIFT_WINDOW, DRIFT_WINDOW + 1), 0, plans.shape[1] - 1)
+        near = plans[np.arange(len(plans))[:, None], steps][:, :, columns]  # [n, steps, objects, 3]
+        gaps = np.linalg.norm(near - states[:, columns][:, None], axis=3)  # [n, steps, objects]
+        return gaps.min(axis=1).max(axis=1)
 
     def summary(self) -> dict:
         """Their sizes summed and what their queries found, with the steps per object."""
@@ -892,6 +918,15 @@ class GraphSource:
 
     def reset(self) -> None:
         """A new episode (:class:`bridgeplan.policy.PlannerPolicy`): each decision searches afresh."""
+
+    @property
+    def drifts(self) -> bool:
+        """Whether its paths say where each object should be (:meth:`drift`)."""
+        return isinstance(self.graph, ObjectGraphs)
+
+    def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
+        """``[n]`` the objects' distance from their plans (:meth:`ObjectGraphs.drift`)."""
+        return self.graph.drift(np.asarray(states, np.float64), plans, age)
 
 
 @dataclass

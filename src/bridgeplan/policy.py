@@ -101,7 +101,7 @@ class PlannerPolicy:
                    graph: dict | None = None, *, env: str | None = None, dataset: str | Path | None = None,
                    objects: bool = False, policy_ahead: int | None = None,
                    low_snapshot: int | None = None, replan_after_step: int | None = None,
-                   hand: bool = False) -> PlannerPolicy:
+                   hand: bool = False, replan_object_tolerance: float | None = None) -> PlannerPolicy:
         """The dataset graph (``bridgeplan.graph``; settings ``graph`` over the family's) as ``bridgeplan graph``
         executes it:
 
@@ -115,17 +115,19 @@ class PlannerPolicy:
 
         Without a planner low level the paths are searched again every ``replan_every`` steps (default: once per
         goal); ``objects``: one graph per object or part (``--objects``), the paths searched again
-        ``replan_after_step`` steps after their first step ends if given (``--replan-after-step``), on scene some parts'
-        graphs over the hand's opening too with ``hand`` (``--hand``)."""
+        ``replan_after_step`` steps after their first step ends if given (``--replan-after-step``) and, on cubes, where
+        an object is ``replan_object_tolerance`` from its plan if given (``--replan-object-tolerance``), on scene some
+        parts' graphs over the hand's opening too with ``hand`` (``--hand``)."""
         from bridgeplan.gcbc import is_gcbc_run, run_policy
         from bridgeplan.hierarchy import check_graph_low, graph_agent, graph_hierarchy
 
         policy_low = low_run is not None and is_gcbc_run(low_run)
         check_graph_low(low_run, policy_low, nfe_low, replan_high_every, policy_ahead)
         if low_run is not None and not policy_low:
-            if env is not None or dataset is not None or objects or replan_after_step is not None or hand:
+            if (env is not None or dataset is not None or objects or replan_after_step is not None or hand
+                    or replan_object_tolerance is not None):
                 raise BridgeplanError("a planner low level's graph is over its own training data, one graph: no env, "
-                                      "dataset, objects, replan_after_step or hand")
+                                      "dataset, objects, replan_after_step, replan_object_tolerance or hand")
             hierarchy, _, low = graph_hierarchy(Path(low_run), None, graph, low_snapshot, device=device)
             return cls._of_hierarchy(hierarchy, low.config.maze, None, nfe_low, Execution(
                 replan_every=replan_every or hierarchy.spacing, tolerance=tolerance,
@@ -137,6 +139,7 @@ class PlannerPolicy:
             raise BridgeplanError("the graph alone is over a dataset of an environment: give env and dataset")
         family = family_of(env)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, after_step=replan_after_step,
+                              object_tolerance=replan_object_tolerance,
                               controller=controller or family.path_controller, lookahead=lookahead)
         execution = execution.resolved(family, env)
         episode_steps = family.tasks(env, 1).episode_steps

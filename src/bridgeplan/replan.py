@@ -60,14 +60,17 @@ ARRIVALS = ("end", "truncate", "keep")
 
 
 def check_replanning(replan_every: int | None, tolerance: float | None, episode_steps: int,
-                     after_step: int | None = None) -> None:
-    """``replan_every`` in 1..episode_steps (or None: no periodic replanning), ``tolerance`` >= 0 (or None),
-    ``after_step`` in 0..episode_steps (or None)."""
+                     after_step: int | None = None, object_tolerance: float | None = None) -> None:
+    """``replan_every`` in 1..episode_steps (or None: no periodic replanning), ``tolerance`` and
+    ``object_tolerance`` >= 0 (or None), ``after_step`` in 0..episode_steps (or None)."""
     if replan_every is not None and not 1 <= replan_every <= episode_steps:
         raise BridgeplanError(f"--replan-every must be in 1..{episode_steps} (the episode length), "
                               f"got {replan_every}")
     if tolerance is not None and not tolerance >= 0:
         raise BridgeplanError(f"--replan-tolerance must be >= 0 (a distance in position), got {tolerance}")
+    if object_tolerance is not None and not object_tolerance >= 0:
+        raise BridgeplanError(f"--replan-object-tolerance must be >= 0 (a distance in the objects' columns), got "
+                              f"{object_tolerance}")
     if after_step is not None and not 0 <= after_step <= episode_steps:
         raise BridgeplanError(f"--replan-after-step must be in 0..{episode_steps} (the episode length), "
                               f"got {after_step}")
@@ -87,6 +90,10 @@ class Execution:
     """Also plan again S steps after where the plan's first step ends, for paths made of steps (``graph --objects``
     on cube and scene: one part at a time): a step whose part slipped is taken again at once, not at the next
     --replan-every (S: the arm lags its plan; default: off)."""
+    object_tolerance: float | None = None
+    """Also plan again when an object is more than D from where the plan has it within 10 steps of now, for paths that
+    say where every object should be (``graph --objects`` on cube datasets; D in the state's units, 10 per metre
+    there): a dropped or pushed cube is taken again at once (default: off)."""
     candidates: int = 1
     """Plans sampled per decision, in one batch; ``select`` picks one."""
     select: str = "arrival"
@@ -117,7 +124,8 @@ class Execution:
 
     @property
     def replans(self) -> bool:
-        return self.replan_every is not None or self.tolerance is not None or self.after_step is not None
+        return (self.replan_every is not None or self.tolerance is not None or self.after_step is not None
+                or self.object_tolerance is not None)
 
     @property
     def arrival_rule(self) -> str:
@@ -132,7 +140,7 @@ class Execution:
 
     def validate(self, process, episode_steps: int) -> None:
         """Bad settings raise BridgeplanError (the CLI's one-line ``error:``)."""
-        check_replanning(self.replan_every, self.tolerance, episode_steps, self.after_step)
+        check_replanning(self.replan_every, self.tolerance, episode_steps, self.after_step, self.object_tolerance)
         check_controller(self.controller, self.lookahead)
         if self.candidates < 1:
             raise BridgeplanError(f"--candidates must be >= 1, got {self.candidates}")
@@ -156,7 +164,8 @@ class Execution:
                 "first_prior": run_prior, "replan_prior": ("warm" if self.warm else run_prior) if self.replans
                 else None, "controller": self.controller,
                 "lookahead": self.lookahead if self.controller == "pursuit" else None,
-                **({"replan_after_step": self.after_step} if self.after_step is not None else {})}
+                **({"replan_after_step": self.after_step} if self.after_step is not None else {}),
+                **({"replan_object_tolerance": self.object_tolerance} if self.object_tolerance is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict | None) -> Execution:
@@ -164,14 +173,16 @@ class Execution:
         JSONs): open loop, tracked."""
         if not d:
             return cls()
-        replans = any(d.get(k) is not None for k in ("replan_every", "replan_tolerance", "replan_after_step"))
+        replans = any(d.get(k) is not None for k in ("replan_every", "replan_tolerance", "replan_after_step",
+                                                      "replan_object_tolerance"))
         candidates = int(d.get("candidates") or 1)
         default_arrival = "truncate" if replans or candidates > 1 else "end"
         controller = d.get("controller") or "track"
         kwargs = dict(replan_every=d.get("replan_every"), tolerance=d.get("replan_tolerance"), candidates=candidates,
                       warm=d.get("replan_prior") == "warm",
                       arrival=None if d.get("arrival", default_arrival) == default_arrival else d["arrival"],
-                      controller=controller, after_step=d.get("replan_after_step"))
+                      controller=controller, after_step=d.get("replan_after_step"),
+                      object_tolerance=d.get("replan_object_tolerance"))
         if d.get("select"):
             kwargs["select"] = d["select"]
         if controller != "track":  # a JSON without it was pursued at Maze2D's lookahead then, 1
@@ -187,6 +198,8 @@ class Execution:
             parts.append(f"tol{self.tolerance:g}")
         if self.after_step is not None:
             parts.append(f"afterstep{self.after_step}")
+        if self.object_tolerance is not None:
+            parts.append(f"objtol{self.object_tolerance:g}")
         if self.candidates > 1:
             parts.append(f"cand{self.candidates}-{self.select}")
         if self.warm:
@@ -364,7 +377,8 @@ class PlanExecutor:
     For each batch of ``n`` episodes (:meth:`begin`) it makes a fresh decision source ``decisions(n)`` and controllers
     ``follower(n)``; at an episode's first step it plans for every episode, then again for the episodes whose plan is
     ``replan_every`` steps old, whose position is more than ``tolerance`` from its plan (``Follower.drift``) or whose
-    plan's first step ended ``after_step`` steps ago (a source's ``step_ends``: paths made of steps), all of them in
+    plan's first step ended ``after_step`` steps ago (a source's ``step_ends``: paths made of steps) or whose objects
+    are more than ``object_tolerance`` from their plan (a source's ``drift``: paths of objects), all of them in
     one call, ended episodes never. The controllers execute the newest plan of each episode, indexed from the
     step it was made at (past its end they hold its last position).
 
@@ -376,10 +390,11 @@ class PlanExecutor:
 
     def __init__(self, decisions: Callable[[int], DecisionSource], follower: Callable[[int], Follower],
                  replan_every: int | None = None, tolerance: float | None = None,
-                 warm_up: Callable | None = None, after_step: int | None = None):
+                 warm_up: Callable | None = None, after_step: int | None = None,
+                 object_tolerance: float | None = None):
         self.decisions, self.make_follower = decisions, follower
         self.replan_every, self.tolerance, self.warm_up = replan_every, tolerance, warm_up
-        self.after_step = after_step
+        self.after_step, self.object_tolerance = after_step, object_tolerance
         self.sources: list = []
         self.made: list[np.ndarray] = []
         self.follower_calls: list[np.ndarray] = []
@@ -392,8 +407,10 @@ class PlanExecutor:
     @classmethod
     def executing(cls, execution: Execution, decisions: Callable[[int], DecisionSource],
                   follower: Callable[[int], Follower], warm_up: Callable | None = None) -> PlanExecutor:
-        """The executor that replans as ``execution`` says (every K steps, past a drift, where a step ends)."""
-        return cls(decisions, follower, execution.replan_every, execution.tolerance, warm_up, execution.after_step)
+        """The executor that replans as ``execution`` says (every K steps, past a drift, where a step ends, past an
+        object's drift)."""
+        return cls(decisions, follower, execution.replan_every, execution.tolerance, warm_up, execution.after_step,
+                   execution.object_tolerance)
 
     @property
     def plans_made(self) -> np.ndarray:
@@ -411,6 +428,9 @@ class PlanExecutor:
         if self.after_step is not None and getattr(self.source, "step_ends", None) is None:
             raise BridgeplanError("--replan-after-step plans again where a path's first step ends: only paths made "
                                   "of steps have one (graph --objects on cube or scene datasets)")
+        if self.object_tolerance is not None and not getattr(self.source, "drifts", False):
+            raise BridgeplanError("--replan-object-tolerance plans again where an object left its plan: only paths "
+                                  "that say where every object should be do (graph --objects on cube datasets)")
         self.sources.append(self.source)
         self.follower = self.make_follower(self.n)
         self.plans: np.ndarray | None = None
@@ -435,6 +455,8 @@ class PlanExecutor:
             due |= self.follower.drift(states, self.plans, age) > self.tolerance
         if self.after_step is not None:
             due |= age >= self.source.step_ends + self.after_step
+        if self.object_tolerance is not None:
+            due |= self.source.drift(states, self.plans, age) > self.object_tolerance
         return (due | self.forced) & self.active
 
     def act(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:

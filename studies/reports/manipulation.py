@@ -38,13 +38,13 @@ LABELS = {"gcbc": "GCBC (20 k steps)", "gciql": "GCIQL (20 k steps)",
 """The README's names of the studies' methods (the files' names are the report's); the graph's from its folder."""
 GRAPH_FOLDER = re.compile(r"(?:regenerated-data/)?graph-keep(\d+)-r([\d.]+)(-objects(?:-hand)?)?"
                           r"(?:-(gcbc|gciql)-ahead(\d+)|-(ddpm|bridge|flow|meanflow)(?:-(line|learned|gaussian))?"
-                          r"-k\d+-nfe\d+)?(?:-afterstep(\d+))?")
+                          r"-k\d+-nfe\d+)?(?:-afterstep(\d+))?(?:-objtol([\d.]+))?")
 """A graph row's folder (under ``regenerated-data/`` where made on the recipe's data generated again elsewhere: its
 arrays differ, see :data:`REGENERATED`): its graph (every Nth state, radius, one graph per cube or scene's part, or a
 puzzle's presses solved; ``-hand``: scene's window and its button measuring the hand's opening too), then its low
 level: a policy and its lookahead, or a planner's process, its prior where not the coarse path (the first low levels'
 folders name none), its stride and NFE; then the paths' replanning where each first step ends
-(``--replan-after-step``)."""
+(``--replan-after-step``) and where an object left its plan (``--replan-object-tolerance``)."""
 REGENERATED = "regenerated-data/"
 """The folder of rows made on a dataset generated again by the same recipe on another machine, whose arrays are not
 the other rows' (the rows' ``dataset_identity``: the arrays' sha256; docs/usage.md says why): compared with each
@@ -79,6 +79,8 @@ def label(method: str, found: list[dict]) -> str:
     replan = f", replanned every {every.pop()} steps" if len(every) == 1 and None not in every else ""
     if m[8]:
         replan += f" and {m[8]} steps after a path's first step ends"
+    if m[9]:  # the cubes' columns: 10 per metre
+        replan += f" and where a cube is more than {10 * float(m[9]):g} cm from its plan"
     first = next(r for r in found if r["method"] == method)
     graph = first.get("graph", {})
     hand = ", the window's and its button's graphs measuring the hand's opening too" if m[3] == "-objects-hand" else ""
@@ -97,8 +99,8 @@ def label(method: str, found: list[dict]) -> str:
     if m[4]:  # a policy low level
         return (f"the dataset graph (every {m[1]}th state, radius {m[2]}{apart}{replan}), its paths executed by "
                 f"the policy of {LABELS[m[4]]} toward the path's state {m[5]} steps on")
-    data = (f"; on the recipe's data generated again here, sha256 {first['data']}" if method.startswith(REGENERATED)
-            else "")
+    data = ("; on the recipe's data generated again here" + (f", sha256 {first['data']}" if first["data"] else "")
+            if method.startswith(REGENERATED) else "")
     return f"the dataset graph (no network: every {m[1]}th state, radius {m[2]}{apart}{hand}{replan}{data})"
 
 
@@ -287,23 +289,29 @@ def low_levels(found: list[dict]) -> list[str]:
                     "decision ms at batch 1"], body), *priors, *floor]
 
 
-def hand_pairs(found: list[dict]) -> list[str]:
-    """Each graph measuring the hand (``-objects-hand``) against the same graph without it on the same data, on the
-    test tasks paired by evaluation seed (the same episodes), with the verdict at 2 standard errors."""
+SETTINGS = ((r"-objects-hand", "-objects"), (r"-objtol[\d.]+", ""))
+"""A graph's settings that a folder names (the hand measured; searched again where an object left its plan), each
+with what its folder is without it: :func:`setting_pairs` pairs the two."""
+
+
+def setting_pairs(found: list[dict]) -> list[str]:
+    """Each graph with a setting of :data:`SETTINGS` against the same graph without it on the same data, on the test
+    tasks paired by evaluation seed (the same episodes), with the verdict at 2 standard errors."""
     by: dict[str, dict[int, float]] = {}
     for r in final(found):
         if not r["validation"] and GRAPH_FOLDER.fullmatch(r["method"]):
             by.setdefault(f"{r['method']} {r['data']}", {})[r["seed"]] = 100 * r["success_rate"]
     out = []
     for key, rates in sorted(by.items()):
-        without = key.replace("-objects-hand", "-objects")
-        if "-objects-hand" in key and without in by:
-            d = paired(rates, by[without], seeds="common")
-            verdict = f" ({d.n} seeds, {compare(d)})" if d.n > 1 else " (1 seed)"
-            out.append(f"{key.split()[0]} minus {without.split()[0]}: {fmt_diff(d)}{verdict}")
-    return ["", "The hand measured against the same graph without it, on the same data, paired by evaluation seed "
-                "(test tasks; verdict: better or worse beyond 2 standard errors, else tie): " + "; ".join(out) + "."
-            ] if out else []
+        for setting, plain in SETTINGS:
+            without = re.sub(setting, plain, key)
+            if without != key and without in by:
+                d = paired(rates, by[without], seeds="common")
+                verdict = f" ({d.n} seeds, {compare(d)})" if d.n > 1 else " (1 seed)"
+                out.append(f"{key.split()[0]} minus {without.split()[0]}: {fmt_diff(d)}{verdict}")
+    return ["", "A graph's setting against the same graph without it (each row's replanning in its file's name), on "
+                "the same data, paired by evaluation seed (test tasks; verdict: better or worse beyond 2 standard "
+                "errors, else tie): " + "; ".join(out) + "."] if out else []
 
 
 def section(scene: str, found: list[dict]) -> list[str]:
@@ -324,7 +332,7 @@ def section(scene: str, found: list[dict]) -> list[str]:
                 body.append([method, "validation (tasks 6-10)" if validation else "test", len(mine),
                              fmt_mean_se(rates, one_seed="mean"), beside, data])
     lines += table(["method", "tasks", "seeds", "success (%)", "published", "data (sha256)"], body)
-    lines += hand_pairs(found)
+    lines += setting_pairs(found)
     lines += low_levels(found)
     found_curves = curves(found)
     if found_curves:

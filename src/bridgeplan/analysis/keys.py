@@ -127,6 +127,8 @@ def parse_execution(tag: str) -> Execution:
                 fields["tolerance"] = float(part.removeprefix("tol"))
             elif part.startswith("afterstep"):
                 fields["after_step"] = int(part.removeprefix("afterstep"))
+            elif part.startswith("objtol"):
+                fields["object_tolerance"] = float(part.removeprefix("objtol"))
             elif part.startswith("cand"):
                 fields["candidates"], fields["select"] = int(part.removeprefix("cand")), parts[i + 1]
                 i += 1
