@@ -86,8 +86,7 @@ def label(method: str, found: list[dict]) -> str:
     hand = ", the window's and its button's graphs measuring the hand's opening too" if m[3] == "-objects-hand" else ""
     apart = ("" if not m[3] else ", the buttons' presses solved (Lights Out), the arm's way to each searched"
              if "buttons" in graph else ", one graph per part (cube, buttons, drawer, window), their steps in order"
-             if "paths_per_part" in graph
-             else ", one graph per cube")
+             if "paths_per_part" in graph else ", one graph per cube")
     if m[6]:  # a planner low level: its settings are its rows'
         row = next(r for r in found if r["method"] == method)
         low, ex = row["low"], row["execution"]
