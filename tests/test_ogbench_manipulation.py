@@ -134,21 +134,24 @@ def test_protocol_success_comes_from_the_environment(monkeypatch):
 
 
 class _Recorder:
-    """A deterministic agent that moves as its states say and keeps every episode's states (episodes in order)."""
+    """A deterministic agent that moves as its states say and keeps every episode's states and goals (episodes in
+    order)."""
 
     def __init__(self):
-        self.batches, self.episodes = [], []
+        self.batches, self.episodes, self.goals = [], [], []
 
     def begin(self, n):
         self.batches.append(n)
         self.rows = list(range(len(self.episodes), len(self.episodes) + n))
         self.episodes += [[] for _ in range(n)]
+        self.goals += [None] * n
         self.active = np.ones(n, dtype=bool)
 
     def act(self, states, goals):
-        for row, state, active in zip(self.rows, states, self.active):
+        for row, state, goal, active in zip(self.rows, states, goals, self.active):
             if active:
                 self.episodes[row].append(state.copy())
+                self.goals[row] = goal.copy()
         return np.tanh(3 * (states[:, 19:24] - states[:, 12:17]))
 
     def end(self, rows):
@@ -157,7 +160,8 @@ class _Recorder:
 
 def test_an_episode_does_not_depend_on_its_batch(monkeypatch):
     """The same episodes in batches of 3 and 1 (an environment reused by the next batch) and all 4 side by side: the
-    same states, steps and successes episode by episode; at most BATCH environments are made."""
+    same states, goals (the arm's part too: the random actions of ogbench's reset seeded), steps and successes
+    episode by episode; at most BATCH environments are made."""
     env = make_env("cube-single-v0")
     trivial = dict(task_name="trivial", init_xyzs=np.array([[0.425, 0.1, 0.02]]),
                    goal_xyzs=np.array([[0.425, 0.1, 0.02]]))
@@ -180,6 +184,7 @@ def test_an_episode_does_not_depend_on_its_batch(monkeypatch):
     assert whole.tasks[6].successes == 2 and whole.tasks[1].steps == [200] * 2
     for a, b in zip(small.episodes, large.episodes):
         np.testing.assert_array_equal(np.array(a), np.array(b))
+    np.testing.assert_array_equal(np.array(small.goals), np.array(large.goals))
     starts = np.array([e[0] for e in large.episodes[2:]])  # task 1's episodes: each reset by its own seed
     assert len({s.tobytes() for s in starts}) == 2
 

@@ -591,6 +591,13 @@ def test_the_manipulation_report_splits_test_from_validation_and_averages_over_s
     assert ("| puzzle-3x3 | graph-keep10-r1.5: 70.0 (one run) | 90.0 (-20.0) | 95 (-25.0) | 95 (-25.0) | "
             "`studies/manip-puzzle-3x3.toml` |") in goal
     assert goal.index("## Against the goal") < goal.index("## cube-single-play-v0")
+    # of equal means, the planner on more seeds
+    for seed in range(3):
+        path = tmp_path / mc.folder("puzzle-3x3") / "graph-keep10-r1.5-objects" / f"track-replan5-seed{seed}.json"
+        write(path, 0.7, step=0, replan=5)
+        path.write_text(json.dumps({**json.loads(path.read_text()), "seed": seed}))
+    assert ("| puzzle-3x3 | graph-keep10-r1.5-objects: 70.0 ± 0.0 (3 seeds) | 90.0 (-20.0) |"
+            in mc.render(tmp_path))
 
 
 def test_the_manipulation_reports_low_levels_are_paired_with_ddpm_by_training_seed(tmp_path):

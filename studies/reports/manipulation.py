@@ -169,12 +169,12 @@ def ogbench_average(per_seed: dict[int, dict[int, float]], final_step: int) -> l
 
 
 def best_planner(found: list[dict]) -> tuple[str, list[float]] | None:
-    """The best of bridgeplan's planners (every method but the peers) on the test tasks, by mean success: its
-    method and its rates (one per training seed)."""
+    """The best of bridgeplan's planners (every method but the peers) on the test tasks, by mean success, of equal
+    means the one on more seeds: its method and its rates (one per training seed)."""
     mine = {m: r for m, r in test_rates(found).items() if m not in PEERS}
     if not mine:
         return None
-    return max(mine.items(), key=lambda item: sum(item[1]) / len(item[1]))
+    return max(mine.items(), key=lambda item: (sum(item[1]) / len(item[1]), len(item[1])))
 
 
 def _margin(mine: float, theirs: float) -> str:

@@ -11,10 +11,8 @@ success rate is the mean over its episodes, the overall rate the mean over the t
 Episodes run in batches of at most :data:`BATCH`: one environment per episode of a batch, stepped in lockstep, the agent
 called once per step on the whole batch; the next batch's episodes reuse the environments. Each episode's environment
 is reset with its own seed (from ``seed``, its task and its index, whatever its batch), which
-seeds what the environment draws from its ``np_random`` (the objects' jitter and yaw, the arm's start). One draw is
-outside any seed: ogbench's reset takes two random actions (its ``action_space`` property builds a fresh, unseeded
-space each time) before it records the goal observation, so the robot's part of ``info["goal"]`` varies slightly
-from run to run (the objects' part, which success reads, does not).
+seeds what the environment draws from its ``np_random`` (the objects' jitter and yaw, the arm's start) and the random
+actions its reset takes (:func:`reset_actions`).
 
 Validation tasks (ids 6-10, :func:`validation_tasks`) are not the test tasks: drawn once per scene by a fixed seed.
 """
@@ -22,7 +20,6 @@ Validation tasks (ids 6-10, :func:`validation_tasks`) are not the test tasks: dr
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -207,9 +204,26 @@ def task_infos(tasks: ManipulationTasks, env) -> list[dict]:
 def reset(env, task: int, index: int, seed: int, infos: Sequence[dict]) -> tuple[np.ndarray, dict]:
     """Episode ``index`` of task ``task``: ``env`` reset by the episode's own seed to the task's start."""
     options = dict(task_id=task) if task in TASK_IDS else dict(task_info=infos[task - 1])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the fresh action space's float64 bounds, cast at each reset
-        return env.reset(seed=episode_seed(seed, task, index), options=options)
+    episode = episode_seed(seed, task, index)
+    reset_actions(env).seed(episode)
+    return env.reset(seed=episode, options=options)
+
+
+def reset_actions(env):
+    """The action space ``env``'s reset draws its random actions from, made seedable. ogbench's reset takes a few
+    random actions to settle the goal's scene before it records the goal observation, drawn from its
+    ``action_space`` property, which builds a fresh, unseeded space at each access: the arm's part of
+    ``info["goal"]`` and the simulator's state after a reset (its solver's warm start) differed from run to run."""
+    import gymnasium
+
+    u = env.unwrapped
+    if "_reset_actions" not in vars(u):
+        # the instance's class becomes a subclass whose action_space is one space of its own
+        u.__class__ = type(type(u).__name__, (type(u),),
+                           {"__slots__": (), "__module__": type(u).__module__,
+                            "action_space": property(lambda self: self._reset_actions)})
+        u._reset_actions = gymnasium.spaces.Box(-1.0, 1.0, (ACT_DIM,), np.float32)
+    return u._reset_actions
 
 
 @dataclass
