@@ -8,7 +8,9 @@ import shutil
 
 import pytest
 
+from bridgeplan.bench import suites
 from bridgeplan.cli import main
+from bridgeplan.nets.unet import FrozenUNet
 
 TINY_BENCH = ["--presets", "cpu-small", "--batch-sizes", "1", "--nfes", "1,2", "--repeats", "1",
               "--overhead-repeats", "2", "--no-compile", "--throughput-seconds", "0", "--side-by-side-seconds", "0",
@@ -103,12 +105,16 @@ def test_bench_times_the_methods_asked_for_at_any_nfe_and_skips_the_overheads(tm
     assert "Untrained networks with N = 21 for the timings" in (tmp_path / "bench.md").read_text()
 
 
-def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, capsys):
+def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, capsys, monkeypatch):
     """The mean flow and the shortcut model (their network takes a second time input) are timed like the others;
-    the shortcut model only at powers of two, on a network of N a power of two (N = 32 for NFE 20)."""
+    the shortcut model only at powers of two, on a network of N a power of two (N = 32 for NFE 20); ``--frozen``
+    times each through its network traced and frozen as well."""
     args = [*TINY_BENCH, "--methods", "mean flow (line),shortcut (line)", "--nfes", "1,3,20", "--overhead-repeats",
-            "0", "--busy-steps", "0"]
+            "0", "--busy-steps", "0", "--frozen"]
+    frozen = []
+    monkeypatch.setattr(suites, "FrozenUNet", lambda net, horizon: frozen.append(net) or FrozenUNet(net, horizon))
     assert main(["bench", "--out", str(tmp_path), *args]) == 0
+    assert len(frozen) == 2 and all(net.interval_mlp is not None for net in frozen)
     capsys.readouterr()
     result = json.loads((tmp_path / "bench.json").read_text())
     rows = result["latency"]
@@ -116,7 +122,9 @@ def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, caps
     assert m["load_1min_start"] >= 0 and m["load_1min_end"] >= 0
     assert f"load average was {m['load_1min_start']:.1f} at the start" in (tmp_path / "bench.md").read_text()
     assert sorted((r["method"], r["nfe"]) for r in rows) == [
-        ("mean flow (line)", 1), ("mean flow (line)", 3), ("mean flow (line)", 20), ("shortcut (line)", 1)]
+        ("mean flow (line)", 1), ("mean flow (line)", 3), ("mean flow (line)", 20), ("mean flow (line), frozen", 1),
+        ("mean flow (line), frozen", 3), ("mean flow (line), frozen", 20), ("shortcut (line)", 1),
+        ("shortcut (line), frozen", 1)]
     assert all(r["plan_ms"] > 0 and r["prior_ms"] > 0 for r in rows)
 
 
@@ -146,7 +154,6 @@ def test_bench_keeps_two_runs_of_one_method_apart(tiny_runs, tmp_path, capsys):
 def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
     import torch
 
-    from bridgeplan.bench import suites
     from bridgeplan.nets.unet import Mish
 
     monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("medium",))  # one shape is enough here
@@ -186,7 +193,6 @@ def test_training_throughput_rows_against_the_machine_limit(monkeypatch):
 def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
     import torch
 
-    from bridgeplan.bench import suites
     from bridgeplan.bench.markdown import format_throughput
     from bridgeplan.nets.unet import TemporalUNet
 
@@ -209,7 +215,6 @@ def test_training_throughput_times_the_compiled_step_when_asked(monkeypatch):
 def test_two_jobs_side_by_side(monkeypatch):
     import torch
 
-    from bridgeplan.bench import suites
     from bridgeplan.bench.markdown import format_side_by_side
 
     monkeypatch.setattr(suites, "THROUGHPUT_MAZES", ("umaze",))  # one shape, one batch (cpu-small's 32)

@@ -52,11 +52,28 @@ def test_eval_is_reproducible(tiny_runs, tmp_path):
     (["--nfe", "6"], "nfe"),
     (["--episodes", "0"], "episodes must be positive"),
     (["--plan-batch", "0"], "--plan-batch must be positive"),
+    (["--compile", "--frozen"], "choose one"),
 ])
 def test_eval_bad_input(tiny_runs, capsys, bad, message):
     assert main(["eval", str(tiny_runs["bridge"]), "--device", "cpu", *bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0].lower()
+
+
+@pytest.mark.parametrize("process", ["ddpm", "bridge"])
+def test_eval_through_the_frozen_network_plans_the_same(tiny_runs, tmp_path, process):
+    """``--frozen`` (the network traced and frozen) plans the eager network's plans: the same episodes, scores and
+    floors; the JSON says which network planned."""
+    rows = {}
+    for frozen in (False, True):
+        out = tmp_path / f"{process}-{frozen}.json"
+        assert main(["eval", str(tiny_runs[process]), "--episodes", "4", "--nfe", "2", "--replan-every", "8",
+                     "--device", "cpu", "--out", str(out), *(["--frozen"] if frozen else [])]) == 0
+        rows[frozen] = json.loads(out.read_text())
+    eager, frozen = rows[False], rows[True]
+    assert eager["frozen"] is False and frozen["frozen"] is True
+    for key in ("return", "score", "success_rate", "per_start_cell", "floor_line"):
+        assert frozen[key] == eager[key]
 
 
 def test_eval_missing_run(tmp_path, capsys):

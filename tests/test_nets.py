@@ -7,7 +7,7 @@ import torch
 
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.prior_mlp import PriorMLP
-from bridgeplan.nets.unet import TemporalUNet, UNetConfig
+from bridgeplan.nets.unet import FrozenUNet, TemporalUNet, UNetConfig
 from bridgeplan.trajectory import MAZE2D
 
 OBS_DIM, TRANSITION_DIM = MAZE2D.obs_dim, MAZE2D.transition_dim
@@ -117,3 +117,28 @@ def test_planning_gets_the_networks_very_numbers():
     with torch.inference_mode():
         planning_path = model(x, t)
     assert torch.equal(trained_path, planning_path)
+
+
+@pytest.mark.parametrize("interval", [False, True])
+def test_the_frozen_network_plans_with_the_networks_very_numbers(interval):
+    """Traced once at batch 1, the frozen network gives the eager network's numbers bit for bit at any batch size
+    (one and two time inputs); with gradients, or at another horizon, it is the eager network itself."""
+    torch.manual_seed(0)
+    net = TemporalUNet(6, 8, (1, 2, 4), horizon=32, interval=interval).eval()
+    frozen = FrozenUNet(net, 32)
+    calls = []
+    net.register_forward_hook(lambda *_: calls.append(1))  # the eager network's calls (the graph has no hooks)
+    for batch in (1, 3, 17):
+        x, t, r = torch.randn(batch, 32, 6), torch.rand(batch) * 16, torch.rand(batch)
+        args = (x, t, r) if interval else (x, t)
+        with torch.inference_mode():
+            eager = net(*args)
+            calls.clear()
+            assert torch.equal(frozen(*args), eager) and not calls
+    x, t = torch.randn(2, 32, 6, requires_grad=True), torch.rand(2)
+    args = (x, t, torch.rand(2)) if interval else (x, t)
+    frozen(*args).sum().backward()  # training and CDDB's corrections differentiate through the eager network
+    assert x.grad is not None and calls == [1]
+    with torch.inference_mode():
+        other = torch.randn(2, 64, 6)
+        assert torch.equal(frozen(other, *args[1:]), net(other, *args[1:])) and calls == [1, 1, 1]

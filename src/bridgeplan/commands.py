@@ -361,6 +361,8 @@ class BenchOptions:
     repeats: int | None = opt(None, "timed repeats per latency figure")
     overhead_repeats: int | None = opt(None, "interleaved rounds per overhead ratio (0: skip them)")
     no_compile: bool = opt(False, "skip the torch.compile timings (minutes on a CPU)")
+    frozen: bool = opt(False, "also time each method's plan through its network traced and frozen (`eval --frozen`), "
+                              "a latency row each named '..., frozen'")
     eval_run: str | None = opt(None, "a trained run: also time 200 umaze episodes at NFE 1")
     budget_runs: str | None = opt(None, "comma-separated trained runs, a row each (one per method, at equal training "
                                         "steps): the score-per-budget table")
@@ -396,7 +398,7 @@ def _cmd_bench(o: BenchOptions) -> int:
              "repeats": o.repeats, "overhead_repeats": o.overhead_repeats, "eval_run": o.eval_run,
              "budget_episodes": o.budget_episodes, "device": o.device.device, "busy_steps": o.busy_steps,
              "throughput_seconds": o.throughput_seconds, "side_by_side_seconds": o.side_by_side_seconds,
-             "compile": False if o.no_compile else None}
+             "compile": False if o.no_compile else None, "frozen": o.frozen}
     for name in ("batch_sizes", "nfes", "budgets", "budget_steps", "throughput_batch_sizes"):
         text = getattr(o, name)
         given[name] = text and int_tuple(text, "--" + name.replace("_", "-"))

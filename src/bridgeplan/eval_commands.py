@@ -93,6 +93,8 @@ class EvalOptions:
     correction: Correction = group(Correction)
     compile: bool = opt(False, "through the torch.compile'd network: planning compiles first, untimed (see "
                                "`bridgeplan bench`); training compiles at the first step")
+    frozen: bool = opt(False, "plan through the network traced and frozen (TorchScript): the same plans, a batch-1 "
+                              "decision faster on a CPU (`bridgeplan bench --frozen`)")
     no_floor: bool = opt(False, "skip the floors (the same episodes from the straight line alone, no network)")
     tasks: Tasks = group(Tasks)
     replanning: Replanning = group(Replanning)
@@ -128,11 +130,12 @@ def eval_run(o: EvalOptions) -> int:
     result = evaluate_run(Path(o.run), episodes=o.tasks.episodes, nfe=o.nfe, seed=o.tasks.seed,
                           multi_task=o.tasks.multi_task, task_ids=o.tasks.ids, batch_size=o.plan_batch,
                           snapshot=o.snapshot, device=o.device.device, sampler=o.sampler, eta=o.eta,
-                          compile=o.compile, execution=plan, correction=correction, floor=not o.no_floor)
+                          compile=o.compile, execution=plan, correction=correction, floor=not o.no_floor,
+                          frozen=o.frozen)
     d = result.to_dict()
     name = "-".join(part for part in (
         f"step{d['step']}-nfe{d['nfe']}", o.sampler and f"{o.sampler}{o.eta:g}",
-        o.compile and "compiled", plan.resolved(result.family, result.tasks.env).tag(),
+        o.compile and "compiled", o.frozen and "frozen", plan.resolved(result.family, result.tasks.env).tag(),
         correction and correction.file_tag()) if part)
     return _show(result, o.output, _out(o.output, o.tasks, folder, name))
 

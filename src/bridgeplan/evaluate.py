@@ -36,6 +36,7 @@ from bridgeplan.envs.controllers import Follower
 from bridgeplan.envs.family import Tasks
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.files import atomic_write_text, check_writable, code_version
+from bridgeplan.nets.unet import FrozenUNet
 from bridgeplan.planner import Planner
 from bridgeplan.priors import make_prior
 from bridgeplan.replan import DecisionSource, Execution, PlanExecutor, PlanSource, percentiles_ms
@@ -315,6 +316,7 @@ def evaluate_planner(planner: Planner, tasks: Tasks, nfe: int | None = None, run
     result.cost.update({
         "prior_ms_per_plan": 1000.0 * prior_seconds / sampled, "batch_size": min(batch_size or n * m, n * m),
         "compiled": compile_seconds is not None, "compile_seconds": compile_seconds or 0.0,
+        "frozen": isinstance(planner.model, FrozenUNet),
         "candidate_plans_per_episode": float(episodes.executor.plans_made.mean() * m)})
     result.extra.update({
         "correction": None if c is None else c.to_dict(nfe),
@@ -359,11 +361,13 @@ def evaluate_run(run: Path, episodes: int | None = None, nfe: int | None = None,
                  multi_task: bool = False, task_ids: tuple[int, ...] | None = None, batch_size: int | None = None,
                  snapshot: int | None = None, device: str = "auto", sampler: str | None = None, eta: float = 0.0,
                  compile: bool = False, execution: Execution | None = None, correction: Correction | None = None,
-                 floor: bool = True) -> EvalResult:
+                 floor: bool = True, frozen: bool = False) -> EvalResult:
     """Load a trained run (or one of its snapshots) of any family and :func:`evaluate_planner` it on its
     environment's seeded tasks (``execution``: closed loop, candidates, arrival; default open loop; ``correction``: a
-    consistency correction of the x0 predictions, ``consistency.Correction``)."""
-    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile)
+    consistency correction of the x0 predictions, ``consistency.Correction``; ``frozen``: through the network traced
+    and frozen, ``runs.load_planner``)."""
+    planner, info = load_planner(run, snapshot=snapshot, device=device, sampler=sampler, eta=eta, compile=compile,
+                                 frozen=frozen)
     planner = planner.with_correction(correction)
     tasks = run_tasks(info, episodes, seed, multi_task, task_ids)
     return evaluate_planner(planner, tasks, nfe, run=info, batch_size=batch_size, compiled=compile,

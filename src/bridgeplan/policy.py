@@ -56,18 +56,19 @@ class PlannerPolicy:
     def from_run(cls, run: str | Path, nfe: int = 1, replan_every: int | None = 8, tolerance: float | None = None,
                  candidates: int = 1, select: str = "arrival", warm: bool = False, arrival: str | None = None,
                  controller: str = "track", lookahead: float | None = None, device: str = "auto", seed: int = 0,
-                 snapshot: int | None = None) -> PlannerPolicy:
+                 snapshot: int | None = None, frozen: bool = False) -> PlannerPolicy:
         """Load a trained run (EMA weights; ``snapshot``: that training step's) as a policy.
 
         ``replan_every``/``tolerance``/``candidates``/``select``/``warm``/``arrival``/``controller``/
         ``lookahead``: as ``bridgeplan eval``'s flags (:class:`~bridgeplan.replan.Execution`);
         ``replan_every=None`` and no tolerance plans once per episode (open loop). ``seed`` seeds the planning
         generator (the same episode, the same plans). ``device``: ``auto`` (CUDA where present, as every command),
-        ``cpu``, ``cuda``, ...
+        ``cpu``, ``cuda``, ... ``frozen``: plan through the network traced and frozen (the same plans, faster at
+        batch 1 on a CPU; ``runs.load_planner``).
         """
         from bridgeplan.runs import load_planner
 
-        planner, info = load_planner(Path(run), snapshot=snapshot, device=device)
+        planner, info = load_planner(Path(run), snapshot=snapshot, device=device, frozen=frozen)
         maze = get_maze(info.config.maze)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
                               warm=warm, arrival=arrival, controller=controller,

@@ -55,6 +55,9 @@ class BenchConfig:
     compile: bool = True
     """Also time ``torch.compile``'d forward passes against eager ones, and ``train --compile``'s step in the
     training-throughput table (compilation takes minutes on a CPU)."""
+    frozen: bool = False
+    """Also time each method's plan through its network traced and frozen (:class:`~bridgeplan.nets.unet.FrozenUNet`,
+    ``eval --frozen``): a latency row each, its method named ``..., frozen``."""
     eval_run: str = ""
     """A trained run: time 200 of its umaze episodes at NFE 1, planning included."""
     budget_runs: tuple[str, ...] = ()
@@ -110,7 +113,7 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
     for preset in bench.presets:
         progress(f"[{preset}] planning latency")
         result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev,
-                                                     bench.methods)
+                                                     bench.methods, bench.frozen)
         if bench.overhead_repeats:
             progress(f"[{preset}] overheads")
             result["plan_overhead"] += [suites.plan_overhead(preset, b, bench.overhead_repeats, dev, bench.methods)

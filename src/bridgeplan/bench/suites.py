@@ -23,6 +23,7 @@ from bridgeplan.bench.harness import (
 )
 from bridgeplan.config import TrainConfig, preset_config
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.nets.unet import FrozenUNet
 from bridgeplan.planner import Planner
 from bridgeplan.processes import DDPM, Bridge, MeanFlow, Shortcut
 from bridgeplan.runs import build_model, build_planner, build_prior_net, windows_of
@@ -93,13 +94,19 @@ def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
     return np.repeat([[0.9, -0.9, 0.0, 0.0]], batch, 0), np.repeat([[-1.0, 1.0]], batch, 0)
 
 
-def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device, methods=()) -> list[dict]:
-    """Milliseconds per plan call (whole batch) vs NFE, per method; prior sampling time shown separately."""
+def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device, methods=(),
+                     frozen: bool = False) -> list[dict]:
+    """Milliseconds per plan call (whole batch) vs NFE, per method (``frozen``: and per method through its network
+    traced and frozen, named ``..., frozen``); prior sampling time shown separately."""
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
+    timed = planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes))
+    if frozen:
+        timed |= {f"{name}, frozen": dataclasses.replace(p, model=FrozenUNet(p.model, config.horizon))
+                  for name, p in timed.items()}
     rows = []
-    for name, planner in planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes)).items():
+    for name, planner in timed.items():
         for batch in batch_sizes:
             starts, goals = _tasks(batch)
             cond = planner.conditions(starts, goals)

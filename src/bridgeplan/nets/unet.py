@@ -16,6 +16,7 @@ initial weights, at one seed) it always had, so every earlier run's checkpoint l
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import torch
@@ -207,3 +208,30 @@ class TemporalUNet(nn.Module):
             h = torch.cat([h, skips.pop()], dim=1)
             h = up(block2(block1(h, emb), emb))
         return self.final(h).transpose(1, 2)
+
+
+class FrozenUNet(nn.Module):
+    """A :class:`TemporalUNet` for planning, its Python cost per module traced away: under ``torch.inference_mode``,
+    on inputs of the horizon and dtype it was frozen for, the network runs as one TorchScript graph
+    (``torch.jit.trace``, then ``torch.jit.freeze``), traced once here and good for any batch size; elsewhere
+    (training, CDDB's gradients, another horizon or dtype) it is the eager network itself. The same operations:
+    the same numbers. At batch 1 a cpu-small decision is mostly that Python cost (``bridgeplan bench --frozen``)."""
+
+    def __init__(self, net: TemporalUNet, horizon: int):
+        super().__init__()
+        self.net = net.eval()
+        weight = next(net.parameters())
+        self.horizon, self.dtype = horizon, weight.dtype
+        x = torch.zeros(1, horizon, net.transition_dim, dtype=weight.dtype, device=weight.device)
+        t = torch.zeros(1, dtype=weight.dtype, device=weight.device)
+        with warnings.catch_warnings(), torch.inference_mode():
+            warnings.simplefilter("ignore")  # TorchScript's deprecation notice, and the horizon's check traced as a
+            # constant (this horizon's, checked here by the eager network)
+            self.graph = torch.jit.freeze(torch.jit.trace(net, (x, t) if net.interval_mlp is None else (x, t, t),
+                                                          check_trace=False))
+
+    def forward(self, x: torch.Tensor, t: torch.Tensor, interval: torch.Tensor | None = None) -> torch.Tensor:
+        if (torch.is_inference_mode_enabled() and x.shape[1] == self.horizon and x.dtype == self.dtype
+                and t.dtype == self.dtype and (interval is None) == (self.net.interval_mlp is None)):
+            return self.graph(x, t) if interval is None else self.graph(x, t, interval)
+        return self.net(x, t, interval)
