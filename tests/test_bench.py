@@ -121,6 +121,7 @@ def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, caps
     m = result["machine"]
     assert m["load_1min_start"] >= 0 and m["load_1min_end"] >= 0
     assert f"load average was {m['load_1min_start']:.1f} at the start" in (tmp_path / "bench.md").read_text()
+    assert "(the latency table's figures alternating, a call of each per round)" in (tmp_path / "bench.md").read_text()
     assert sorted((r["method"], r["nfe"]) for r in rows) == [
         ("mean flow (line)", 1), ("mean flow (line)", 3), ("mean flow (line)", 20), ("mean flow (line), frozen", 1),
         ("mean flow (line), frozen", 3), ("mean flow (line), frozen", 20), ("shortcut (line)", 1),

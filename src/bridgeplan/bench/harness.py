@@ -27,28 +27,26 @@ def timed(fn, device: torch.device) -> float:
     return time.perf_counter() - t0
 
 
-def median_seconds(fn, repeats: int, device: torch.device, warmup: int = 2) -> float:
-    for _ in range(warmup):
-        fn()
-    return statistics.median(timed(fn, device) for _ in range(repeats))
-
-
-def interleaved_ratios(fns: dict[str, object], base: str, rounds: int, device: torch.device) -> dict[str, float]:
-    """Median time of each function over the median time of ``base``, timed in alternating rounds.
-
-    Alternating keeps a slow patch of the machine (another process, a frequency change) from landing
-    on one side of a ratio only. ``<base>_ms`` holds the base's median in milliseconds.
-    """
+def interleaved_medians(fns: dict[str, object], rounds: int, device: torch.device, warmup: int = 2) -> dict[str, float]:
+    """Median seconds of each function's call, timed in alternating rounds (one call of each per round) after
+    ``warmup`` calls of each: a slow patch of the machine (another process, a frequency change) falls on every
+    function alike, not on the one timed while it lasted."""
     for fn in fns.values():
-        fn()
-        fn()
+        for _ in range(warmup):
+            fn()
     times: dict[str, list[float]] = {name: [] for name in fns}
     for _ in range(rounds):
         for name, fn in fns.items():
             times[name].append(timed(fn, device))
-    base_s = statistics.median(times[base])
-    return {name: statistics.median(t) / base_s for name, t in times.items() if name != base} | {
-        f"{base}_ms": 1000 * base_s}
+    return {name: statistics.median(t) for name, t in times.items()}
+
+
+def interleaved_ratios(fns: dict[str, object], base: str, rounds: int, device: torch.device) -> dict[str, float]:
+    """Median time of each function over the median time of ``base``, timed in alternating rounds
+    (:func:`interleaved_medians`). ``<base>_ms`` holds the base's median in milliseconds."""
+    medians = interleaved_medians(fns, rounds, device)
+    base_s = medians[base]
+    return {name: s / base_s for name, s in medians.items() if name != base} | {f"{base}_ms": 1000 * base_s}
 
 
 def machine(device: torch.device) -> dict:

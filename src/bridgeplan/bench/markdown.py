@@ -28,10 +28,13 @@ def format_bench(result: dict) -> str:
     m = result["machine"]
     where = m.get("gpu", f"{m.get('cpu') or m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch "
                          "threads")
+    # benches made before the latency table's figures alternated timed each figure's calls in a row
+    alternating = " (the latency table's figures alternating, a call of each per round)" if result.get(
+        "latency_interleaved") else ""
     lines = ["# bridgeplan bench", "",
              f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
              f"with N = {diffusion_steps(result['bench']['nfes'])} for the timings; medians over "
-             f"{result['bench']['repeats']} repeats after 2 warm-up calls, ratios over "
+             f"{result['bench']['repeats']} repeats after 2 warm-up calls{alternating}, ratios over "
              f"{result['bench']['overhead_repeats']} interleaved rounds.{load_sentence(m)}", "",
              "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
              "of it and shown separately.", ""]

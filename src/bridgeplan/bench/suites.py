@@ -16,8 +16,8 @@ import torch
 from bridgeplan.bench.harness import (
     busy_cores,
     empty_inductor_cache,
+    interleaved_medians,
     interleaved_ratios,
-    median_seconds,
     running_only,
     timed,
 )
@@ -97,26 +97,29 @@ def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
 def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device, methods=(),
                      frozen: bool = False) -> list[dict]:
     """Milliseconds per plan call (whole batch) vs NFE, per method (``frozen``: and per method through its network
-    traced and frozen, named ``..., frozen``); prior sampling time shown separately."""
+    traced and frozen, named ``..., frozen``); prior sampling time shown separately. At each batch size every
+    figure's calls alternate with the others' (:func:`interleaved_medians`)."""
     config = preset_config("umaze", preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
-    timed = planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes))
+    by_name = planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes))
     if frozen:
-        timed |= {f"{name}, frozen": dataclasses.replace(p, model=FrozenUNet(p.model, config.horizon))
-                  for name, p in timed.items()}
+        by_name |= {f"{name}, frozen": dataclasses.replace(p, model=FrozenUNet(p.model, config.horizon))
+                    for name, p in by_name.items()}
     rows = []
-    for name, planner in timed.items():
-        for batch in batch_sizes:
-            starts, goals = _tasks(batch)
+    for batch in batch_sizes:
+        starts, goals = _tasks(batch)
+        calls = {}
+        for name, planner in by_name.items():
             cond = planner.conditions(starts, goals)
             gen = torch.Generator(device=dev).manual_seed(0)
-            with torch.inference_mode():
-                prior_s = median_seconds(lambda: planner.prior.sample(cond, config.horizon, batch, gen), repeats, dev)
+            calls[name, "prior"] = lambda p=planner, c=cond, g=gen: p.prior.sample(c, config.horizon, batch, g)
             for nfe in (n for n in nfes if takes_nfe(planner.process, n)):
-                plan_s = median_seconds(lambda: planner.plan(starts, goals, nfe, gen), repeats, dev)
-                rows.append({"preset": preset, "method": name, "batch": batch, "nfe": nfe,
-                             "plan_ms": 1000 * plan_s, "prior_ms": 1000 * prior_s})
+                calls[name, nfe] = lambda p=planner, n=nfe, g=gen: p.plan(starts, goals, n, g)
+        with torch.inference_mode():
+            seconds = interleaved_medians(calls, repeats, dev)
+        rows += [{"preset": preset, "method": name, "batch": batch, "nfe": nfe, "plan_ms": 1000 * s,
+                  "prior_ms": 1000 * seconds[name, "prior"]} for (name, nfe), s in seconds.items() if nfe != "prior"]
     return rows
 
 
