@@ -440,7 +440,8 @@ def test_the_onestep_report_times_the_decision_at_batch_1_against_2_ms(tmp_path)
     """The bench's batch-1 rows (batch 64 left out) against the goal; the machine's load written beside them."""
     onestep = report("onestep")
     assert "Not measured yet: `bridgeplan bench" in onestep.render(tmp_path)
-    bench = {"bench": {"repeats": 50}, "machine": {"code_version": "0.1.0+abc", "device": "cpu", "cpu_count": 2,
+    bench = {"bench": {"repeats": 50}, "machine": {"code_version": "0.1.0+abc", "device": "cpu",
+                                                   "cpu": "AMD EPYC (avx2)", "cpu_count": 2,
                                                    "torch_threads": 1, "load_1min_start": 0.5, "load_1min_end": 1.25},
              "latency": [{"method": "mean flow (line)", "batch": 1, "nfe": 1, "plan_ms": 1.734},
                          {"method": "DDPM [ancestral]", "batch": 1, "nfe": 2, "plan_ms": 3.01},
@@ -451,6 +452,7 @@ def test_the_onestep_report_times_the_decision_at_batch_1_against_2_ms(tmp_path)
     assert "| mean flow (line) | 1 | 1.73 | yes |" in lines and "| DDPM [ancestral] | 2 | 3.01 | no |" in lines
     assert sum(line.startswith("| mean flow (line) |") for line in lines) == 1
     assert any("load average was 0.5 at the start and 1.2 at the end" in line for line in lines)
+    assert any("cpu (AMD EPYC (avx2), 2 cores, 1 torch thread)" in line for line in lines)
 
 
 def test_the_manipulation_report_splits_test_from_validation_and_averages_over_seeds(tmp_path):

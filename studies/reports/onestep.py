@@ -140,10 +140,10 @@ def latency_section(root: Path) -> list[str]:
             for r in bench["latency"] if r["batch"] == 1]
     return lines + [f"Milliseconds per plan call at batch 1 (the prior's sample included), cpu-small's U-Net, "
                     f"median of {bench['bench']['repeats']} calls; code {m['code_version']}, {m['device']} "
-                    f"({m['cpu_count']} cores, {m['torch_threads']} torch thread).{load_sentence(m)} A method named "
-                    f"'..., frozen' plans through its network traced and frozen (`eval --frozen`: the same plans). "
-                    f"Made by "
-                    f"`{LATENCY_COMMAND}` (docs/results/{LATENCY}/bench.md).", "",
+                    f"({m.get('cpu') or m['processor']}, {m['cpu_count']} cores, {m['torch_threads']} torch "
+                    f"thread).{load_sentence(m)} A method named '..., frozen' plans through its network traced and "
+                    f"frozen (`eval --frozen`: the same plans). Made by `{LATENCY_COMMAND}` "
+                    f"(docs/results/{LATENCY}/bench.md).", "",
                     *table(["method", "NFE", "plan ms", f"under {GOAL_MS:g} ms"], rows)]
 
 

@@ -219,6 +219,9 @@ class FrozenUNet(nn.Module):
 
     def __init__(self, net: TemporalUNet, horizon: int):
         super().__init__()
+        if not (hasattr(torch.jit, "trace") and hasattr(torch.jit, "freeze")):
+            raise BridgeplanError(f"a frozen network needs TorchScript (torch.jit), which torch {torch.__version__} "
+                                  f"does not have: plan without --frozen")
         self.net = net.eval()
         weight = next(net.parameters())
         self.horizon, self.dtype = horizon, weight.dtype
