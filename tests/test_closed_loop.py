@@ -499,6 +499,21 @@ def test_policy_replans_when_the_goal_moves(tiny_runs):
         policy(np.zeros(4))
 
 
+def test_a_policy_through_the_frozen_network_acts_as_the_eager_one(tiny_runs):
+    """``frozen=True``: the network traced and frozen, the same actions step by step."""
+    from bridgeplan.nets.unet import FrozenUNet
+    from bridgeplan.policy import PlannerPolicy
+
+    policies = [PlannerPolicy.from_run(tiny_runs["bridge"], replan_every=4, device="cpu", frozen=frozen)
+                for frozen in (False, True)]
+    assert [isinstance(p.executor.sources[0].planner.model, FrozenUNet) for p in policies] == [False, True]
+    obs = {"observation": np.array([1.0, 1.0, 0.0, 0.0]), "desired_goal": np.array([1.0, -1.0])}
+    for _ in range(10):
+        eager, frozen = (p(obs) for p in policies)
+        assert np.array_equal(eager, frozen)
+        obs = {**obs, "observation": obs["observation"] + np.r_[0.05 * eager, 0.0, 0.0]}
+
+
 # ---------------------------------------------------------------- render and bad input
 
 def test_render_closed_loop(tiny_runs, tmp_path):
