@@ -959,6 +959,10 @@ def test_bridgeplan_graph_objects_names_its_rows(tiny_data, tmp_path, capsys):
     # searched again where a cube left its plan: the cubes' paths only, a distance >= 0
     assert _error(capsys, [*graph[:-1], "--replan-object-tolerance", "0.5"]).startswith(
         "error: --replan-object-tolerance plans again where an object left its plan: give --objects on a cube")
+    puzzle = ["graph", "--maze", "puzzle-3x3-play-v0", "--dataset", str(tiny_data), "--objects"]
+    assert _error(capsys, [*puzzle, "--replan-object-tolerance", "0.5"]).startswith(
+        "error: --replan-object-tolerance plans again where an object left its plan: give --objects on a cube or "
+        "scene dataset")
     assert _error(capsys, [*graph, "--replan-object-tolerance", "-1", "--out", str(tmp_path / "bad.json")]
                   ).startswith("error: --replan-object-tolerance must be >= 0")
     assert _error(capsys, [*graph, "--replan-after-step", "-1", "--out", str(tmp_path / "bad.json")]).startswith(
@@ -1251,6 +1255,38 @@ def test_a_scenes_path_chains_its_steps():
     steps.graphs[1] = Straight(long=4)  # the press three steps long
     source(start[None], goal[None], np.array([0]), 1)
     assert source.step_ends.tolist() == [3, 1]
+
+
+def test_a_scenes_plan_says_where_its_cube_should_be():
+    """A step's path holds the parts it does not move where they are (its graph's states are another episode's), the
+    cube in the drawer carried with the drawer it slides; the plan's drift is the cube's distance from it
+    (``--replan-object-tolerance``)."""
+    from bridgeplan.graph import DRIFT_WINDOW, GraphSource, SceneSteps
+
+    parts = FAMILY.graph_scene("scene-play-v0")
+
+    class Layout:
+        layout = FAMILY.layout("scene-play-v0")
+
+    steps = SceneSteps([Layout()], parts)
+    box = parts.slides[parts.container]
+    state = np.zeros(40)
+    state[list(parts.cube)] = (0.33 - 0.425) * 10, -3.56 + 1.6, 0.66  # in the drawer, opened 0.16 m
+    state[box], state[list(parts.buttons)] = -2.88, (1.0, 0.0)
+    piece = np.random.default_rng(0).normal(size=(3, 40))  # another episode's states
+    piece[:, box] = -2.88, -1.44, 0.0  # the drawer closing
+    plan = steps.held(piece.copy(), state, {box: 0.0})
+    others = [c for c in FAMILY.layout("scene-play-v0").goal if c not in (box, *parts.cube)]
+    np.testing.assert_array_equal(plan[:, others], np.repeat(state[None, others], 3, axis=0))
+    np.testing.assert_allclose(plan[:, list(parts.cube)], state[list(parts.cube)] - np.outer([0.0, 0.5, 1.0],
+                                                                                           [0.0, 1.6, 0.0]))
+    np.testing.assert_array_equal(plan[:, 12:15], piece[:, 12:15])  # the arm as the graph's path has it
+    assert steps.drifting == (parts.cube,) and GraphSource(steps, 8).drifts
+    pushed = plan[1].copy()
+    pushed[parts.cube[0]] += 0.7
+    ages = np.array([1, 1])
+    np.testing.assert_allclose(steps.drift(np.stack([plan[1], pushed]), np.stack([plan, plan]), ages), [0.0, 0.7])
+    assert DRIFT_WINDOW >= 2  # the whole plan within the window here
 
 
 def test_a_scenes_graphs_are_its_parts(tmp_path):

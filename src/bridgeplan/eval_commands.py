@@ -324,24 +324,26 @@ def graph_eval(o: GraphOptions) -> int:
         raise BridgeplanError("give the dataset the graph is made of (--dataset FILE), or a low level (--low RUN)")
     if not Path(dataset).exists():
         raise BridgeplanError(f"no dataset {dataset}: make it with `bridgeplan data generate --maze {env}`")
+    family = family_of(env)
     if o.objects:
         from bridgeplan.graph import check_objects
 
-        check_objects(family_of(env), env)  # refused before the data is read
+        check_objects(family, env)  # refused before the data is read
     if o.hand:
         from bridgeplan.graph import check_hand
 
-        check_hand(family_of(env), env, o.objects)
-    if o.replan_after_step is not None and not (o.objects and family_of(env).graph_buttons(env) is None):
+        check_hand(family, env, o.objects)
+    if o.replan_after_step is not None and not (o.objects and family.graph_buttons(env) is None):
         raise BridgeplanError("--replan-after-step plans again where a path's first step ends: give --objects on a "
                               "cube or scene dataset (its paths are made of steps, one part at a time)")
-    if o.replan_object_tolerance is not None and not (o.objects and family_of(env).graph_objects(env) is not None):
+    if o.replan_object_tolerance is not None and not (
+            o.objects and (family.graph_objects(env) is not None or family.graph_scene(env) is not None)):
         raise BridgeplanError("--replan-object-tolerance plans again where an object left its plan: give --objects "
-                              "on a cube dataset (its paths say where every cube should be)")
+                              "on a cube or scene dataset (its paths say where every cube should be)")
     plan = dataclasses.replace(execution(o.replanning, o.controller, env=env), after_step=o.replan_after_step,
                                object_tolerance=o.replan_object_tolerance)
     folder = (eval_dir(run_dir_of(Path(o.low))) if o.low
-              else Path("results") / "graph" / family_of(env).label(env))
+              else Path("results") / "graph" / family.label(env))
     check_result_path(o.output.out, folder)
     draw = _graph_drawing(o, env) if o.render else None
     tasks = make_tasks(env, o.tasks.episodes, o.tasks.seed, o.tasks.multi_task, o.tasks.ids)

@@ -415,9 +415,27 @@ class PartSteps:
             self.chosen.append(-1)
         return np.concatenate(pieces)
 
+    @property
+    def drifting(self) -> tuple[tuple[int, ...], ...]:
+        """The position columns (x, y, z) of each object whose plan :meth:`drift` measures."""
+        raise NotImplementedError
+
     def held(self, piece: np.ndarray, state: np.ndarray, target: dict[int, float]) -> np.ndarray:
-        """A step's path ``piece`` as the plan says it (here as its graph found it)."""
+        """A step's path ``piece`` with the parts it does not move held where ``state`` has them (its graph leaves
+        them out: its states have another episode's), so the plan says where every part should be (:meth:`drift`)."""
+        others = [c for c in self.graphs[0].layout.goal if c not in target]
+        piece[:, others] = state[others]
         return piece
+
+    def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
+        """``[n]`` how far the objects (:attr:`drifting`) are from their plans: per episode, over its objects the
+        largest of each one's distance to the nearest of its planned positions within :data:`DRIFT_WINDOW` steps of
+        the plan's ``age`` (the arm lags its plan, so a carried object lags too); a dropped or pushed object is far."""
+        columns = np.array(self.drifting)  # [objects, 3]
+        steps = np.clip(np.asarray(age)[:, None] + np.arange(-DRIFT_WINDOW, DRIFT_WINDOW + 1), 0, plans.shape[1] - 1)
+        near = plans[np.arange(len(plans))[:, None], steps][:, :, columns]  # [n, steps, objects, 3]
+        gaps = np.linalg.norm(near - states[:, columns][:, None], axis=3)  # [n, steps, objects]
+        return gaps.min(axis=1).max(axis=1)
 
     def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
         """The state a step toward ``target`` from ``state`` leaves: the arm as at its path's ``end``, the parts as in
@@ -505,23 +523,9 @@ class ObjectGraphs(PartSteps):
         self.set_aside += place is not None
         return i, dict(zip(self.objects[i], (goal[list(self.objects[i])] if place is None else place).tolist()))
 
-    def held(self, piece: np.ndarray, state: np.ndarray, target: dict[int, float]) -> np.ndarray:
-        """A step's path ``piece`` with the objects it does not move held where ``state`` has them (its graph leaves
-        them out: its states have another episode's), so the plan says where every object should be
-        (:meth:`drift`)."""
-        others = [c for c in self.graphs[0].layout.goal if c not in target]
-        piece[:, others] = state[others]
-        return piece
-
-    def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
-        """``[n]`` how far the objects are from their plans: per episode, over its objects the largest of each one's
-        distance to the nearest of its planned positions within :data:`DRIFT_WINDOW` steps of the plan's ``age`` (the
-        arm lags its plan, so a carried object lags too); a dropped or pushed object is far."""
-        columns = np.array(self.objects)  # [objects, 3]
-        steps = np.clip(np.asarray(age)[:, None] + np.arange(-DRIFT_WINDOW, DRIFT_WINDOW + 1), 0, plans.shape[1] - 1)
-        near = plans[np.arange(len(plans))[:, None], steps][:, :, columns]  # [n, steps, objects, 3]
-        gaps = np.linalg.norm(near - states[:, columns][:, None], axis=3)  # [n, steps, objects]
-        return gaps.min(axis=1).max(axis=1)
+    @property
+    def drifting(self) -> tuple[tuple[int, ...], ...]:
+        return self.objects
 
     def summary(self) -> dict:
         """Their sizes summed and what their queries found, with the steps per object."""
@@ -805,13 +809,37 @@ class SceneSteps(PartSteps):
             return 1 + p.locks[k], {lock: 1.0}
         return 1 + len(p.buttons) + k, {p.slides[k]: value}
 
+    @property
+    def drifting(self) -> tuple[tuple[int, ...], ...]:
+        """The cube (the buttons and slides move only where the arm pushes them)."""
+        return (self.parts.cube,)
+
+    def held(self, piece: np.ndarray, state: np.ndarray, target: dict[int, float]) -> np.ndarray:
+        """:meth:`PartSteps.held`, the cube carried with the drawer it lies in."""
+        piece = super().held(piece, state, target)
+        if self._carries(state, target):
+            box = self.parts.slides[self.parts.container]
+            piece[:, list(self.parts.cube)] = self._carried(state, piece[:, [box]])
+        return piece
+
     def after(self, state: np.ndarray, end: np.ndarray, target: dict[int, float]) -> np.ndarray:
         """:meth:`PartSteps.after`, the cube carried with the drawer it lies in."""
-        p, out = self.parts, super().after(state, end, target)
-        box = p.slides[p.container]
-        if box in target and p.in_container(state[list(p.cube)], state[box]):
-            out[list(p.cube)] += np.asarray(p.carried) * (target[box] - state[box])
+        out = super().after(state, end, target)
+        if self._carries(state, target):
+            out[list(self.parts.cube)] = self._carried(state, target[self.parts.slides[self.parts.container]])
         return out
+
+    def _carries(self, state: np.ndarray, target: dict[int, float]) -> bool:
+        """Whether a step toward ``target`` from ``state`` slides the drawer with the cube in it."""
+        p = self.parts
+        box = p.slides[p.container]
+        return box in target and p.in_container(state[list(p.cube)], state[box])
+
+    def _carried(self, state: np.ndarray, drawer) -> np.ndarray:
+        """The cube's position (``[..., 3]``) in the drawer that ``state`` has it in, the drawer slid to ``drawer``."""
+        p = self.parts
+        box = p.slides[p.container]
+        return state[list(p.cube)] + np.asarray(p.carried) * (drawer - state[box])
 
     def summary(self) -> dict:
         """Their sizes summed and what their queries found, with the steps per part (cube, buttons, slides) and the
@@ -922,10 +950,10 @@ class GraphSource:
     @property
     def drifts(self) -> bool:
         """Whether its paths say where each object should be (:meth:`drift`)."""
-        return isinstance(self.graph, ObjectGraphs)
+        return isinstance(self.graph, PartSteps)
 
     def drift(self, states: np.ndarray, plans: np.ndarray, age: np.ndarray) -> np.ndarray:
-        """``[n]`` the objects' distance from their plans (:meth:`ObjectGraphs.drift`)."""
+        """``[n]`` the objects' distance from their plans (:meth:`PartSteps.drift`)."""
         return self.graph.drift(np.asarray(states, np.float64), plans, age)
 
 

@@ -92,8 +92,8 @@ class Execution:
     --replan-every (S: the arm lags its plan; default: off)."""
     object_tolerance: float | None = None
     """Also plan again when an object is more than D from where the plan has it within 10 steps of now, for paths that
-    say where every object should be (``graph --objects`` on cube datasets; D in the state's units, 10 per metre
-    there): a dropped or pushed cube is taken again at once (default: off)."""
+    say where every object should be (``graph --objects`` on cube and scene datasets; D in the state's units, 10 per
+    metre there): a dropped or pushed cube is taken again at once (default: off)."""
     candidates: int = 1
     """Plans sampled per decision, in one batch; ``select`` picks one."""
     select: str = "arrival"
