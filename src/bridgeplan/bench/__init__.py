@@ -108,9 +108,9 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
     """Run the suite and write ``bench.json`` and ``bench.md`` into ``out_dir``; returns the Markdown path."""
     bench.validate()
     dev = resolve_device(bench.device)
-    result = {"bench": dataclasses.asdict(bench), "machine": machine(dev), "latency_interleaved": True,
-              "latency": [], "plan_overhead": [],
-              "train_overhead": [], "busy_core": [], "compile": [], "throughput": [], "side_by_side": []}
+    result = {"bench": dataclasses.asdict(bench), "machine": machine(dev), "latency_interleaved": True, "latency": [],
+              "plan_overhead": [], "train_overhead": [], "busy_core": [], "compile": [], "throughput": [],
+              "side_by_side": []}
     for preset in bench.presets:
         progress(f"[{preset}] planning latency")
         result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev,
