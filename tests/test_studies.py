@@ -665,7 +665,7 @@ def test_the_dry_run_times_a_json_by_the_committed_ones_of_its_command(tmp_path)
      "evaluations[0].args: unrecognized option 'nfee' (valid: arrival, candidates, compile, controller,"),
     # an NFE the run's process cannot take (diffusion_steps = 4): refused before anything is trained
     ('command = "eval"\nruns = ["high"]\nout = "x.json"\nargs = { nfe = 5 }',
-     "evaluations[0].args.nfe: high: nfe must be in 1..4 for ddpm with 4 steps, got 5"),
+     "evaluations[0].args.nfe: high: nfe must be in 1..4 for DDPM with 4 steps, got 5"),
     ('command = "hierarchy eval"\nruns = ["high", "low"]\nout = "x.json"\nargs = { nfe_high = 4, nfe_low = 0 }',
      "evaluations[0].args.nfe_low: low: nfe must be"),
     ('command = "hierarchy eval"\nruns = ["high", "low"]\nout = "x.json"\nargs = { nfe_high = 9 }',

@@ -136,7 +136,7 @@ class LinePrior:
         return apply_conditions(x, conditions)
 
 
-class CoarsePrior:
+class CoarsePrior(LinePrior):
     """A hierarchy's low-level prior (:mod:`bridgeplan.hierarchy`): the piecewise straight line through every
     fully conditioned state (the start, the subgoals, the goal), each piece drawn as :class:`LinePrior` draws a
     whole plan (velocity covering the piece in its steps, action toward its end), then the conditions inpainted.
@@ -150,9 +150,6 @@ class CoarsePrior:
     """
 
     name = "coarse"
-
-    def __init__(self, normalizer: Normalizer, layout: Layout, stride: int = 1):
-        self.normalizer, self.layout, self.stride = normalizer, layout, int(stride)
 
     def sample(self, conditions: Conditions, horizon: int, batch: int,
                generator: torch.Generator | None = None) -> torch.Tensor:

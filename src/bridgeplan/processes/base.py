@@ -105,10 +105,26 @@ class Process:
         return " ".join(str(v) if k == "sampler" else f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                         for k, v in changed)
 
+    @property
+    def max_nfe(self) -> int:
+        """The most network calls a plan may take: one per step unless the process says otherwise."""
+        return self.steps
+
+    def validate_nfe(self, nfe: int) -> None:
+        """Refuse an NFE this process cannot be sampled with (1..``max_nfe`` unless the process says otherwise)."""
+        if not 1 <= nfe <= self.max_nfe:
+            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for {self.display_name} with {self.steps} steps, "
+                                  f"got {nfe}")
+
     def usable_samplers(self) -> tuple[str, ...]:
         """The :attr:`samplers` this process, with its parameters, can be sampled by (all of them by default)."""
         return self.samplers
 
     def with_sampler(self, sampler: str, eta: float = 0.0) -> Process:
-        """The same trained process sampled another way; only processes with samplers to choose have it."""
-        raise BridgeplanError(f"--sampler: {self.name} has one way to sample")
+        """The same trained process sampled another way; only processes with samplers to choose have it, and only
+        DDPM's take ``eta``."""
+        if not self.samplers:
+            raise BridgeplanError(f"--sampler: {self.name} has one way to sample")
+        if eta != 0:
+            raise BridgeplanError(f"{self.display_name} samplers take no eta (it is DDIM's), got {eta}")
+        return dataclasses.replace(self, sampler=sampler)

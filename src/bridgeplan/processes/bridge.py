@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -66,8 +65,7 @@ class Bridge(Process):
             raise BridgeplanError(f"beta_max must be positive, got {self.beta_max}")
         check_choice("prediction", self.predict, PREDICTIONS)
         check_choice("weighting", self.weighting, WEIGHTINGS)
-        if self.sampler not in SAMPLERS:
-            raise BridgeplanError(f"unknown sampler {self.sampler!r} for the bridge: choose from {', '.join(SAMPLERS)}")
+        check_choice("sampler", self.sampler, SAMPLERS)
 
     @cached_property
     def betas(self) -> torch.Tensor:
@@ -83,12 +81,8 @@ class Bridge(Process):
 
     @property
     def max_nfe(self) -> int:
+        """A bridge's chain has N - 1 steps: NFE < N."""
         return self.steps - 1
-
-    def validate_nfe(self, nfe: int) -> None:
-        if not 1 <= nfe <= self.max_nfe:
-            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for the bridge with {self.steps} steps "
-                                  f"(NFE < N), got {nfe}")
 
     @cached_property
     def marginal_coefs(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -143,8 +137,3 @@ class Bridge(Process):
         return bridge_sample(self.x0_predictor(model, correct), x_start, conditions,
                              spaced_steps(self.steps, nfe), self.std_fwd, self.ot_ode or self.sampler == "mean",
                              generator)
-
-    def with_sampler(self, sampler: str, eta: float = 0.0) -> Bridge:
-        if eta != 0:
-            raise BridgeplanError(f"bridge samplers take no eta (it is DDIM's), got {eta}")
-        return dataclasses.replace(self, sampler=sampler)

@@ -48,15 +48,6 @@ class DDPM(Process):
     def alpha_bar(self) -> torch.Tensor:
         return torch.cumprod(1 - cosine_betas(self.steps), 0)
 
-    @property
-    def max_nfe(self) -> int:
-        return self.steps
-
-    def validate_nfe(self, nfe: int) -> None:
-        if not 1 <= nfe <= self.max_nfe:
-            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for ddpm with {self.steps} steps, "
-                                  f"got {nfe}")
-
     def with_sampler(self, sampler: str, eta: float = 0.0) -> DDPM:
         return dataclasses.replace(self, sampler=sampler, eta=eta)
 

@@ -41,7 +41,6 @@ with I2SB's symmetric beta schedule, and an x0 output instead of I2SB's scaled d
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -125,28 +124,14 @@ class Flow(Process):
         if not math.isfinite(self.sigma) or self.sigma < 0:
             raise BridgeplanError(f"flow sigma must be a finite number >= 0, got {self.sigma}")
         check_choice("flow path", self.path, PATHS)
-        if self.sampler not in SAMPLERS:
-            raise BridgeplanError(f"unknown sampler {self.sampler!r} for flow: choose from {', '.join(SAMPLERS)}")
+        check_choice("sampler", self.sampler, SAMPLERS)
         if self.sampler == "stochastic" and self.sigma == 0:
             raise BridgeplanError("the stochastic flow sampler puts back the path's noise, and sigma=0 has none "
                                   "(it would be the euler sampler): train with sigma > 0 or use euler")
 
-    @property
-    def max_nfe(self) -> int:
-        return self.steps
-
-    def validate_nfe(self, nfe: int) -> None:
-        if not 1 <= nfe <= self.max_nfe:
-            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for flow with {self.steps} steps, got {nfe}")
-
     def usable_samplers(self) -> tuple[str, ...]:
         """``stochastic`` needs the path's noise (``sigma > 0``)."""
         return SAMPLERS if self.sigma > 0 else ("euler",)
-
-    def with_sampler(self, sampler: str, eta: float = 0.0) -> Flow:
-        if eta != 0:
-            raise BridgeplanError(f"flow samplers take no eta (it is DDIM's), got {eta}")
-        return dataclasses.replace(self, sampler=sampler)
 
     def interpolate(self, x0: torch.Tensor, x1: torch.Tensor, n: torch.Tensor,
                     generator: torch.Generator | None = None) -> torch.Tensor:

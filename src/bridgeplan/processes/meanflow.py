@@ -57,15 +57,6 @@ class MeanFlow(JumpProcess):
         if not (math.isfinite(self.adaptive_p) and self.adaptive_p >= 0):
             raise BridgeplanError(f"adaptive_p must be a finite number >= 0, got {self.adaptive_p}")
 
-    @property
-    def max_nfe(self) -> int:
-        return self.steps
-
-    def validate_nfe(self, nfe: int) -> None:
-        if not 1 <= nfe <= self.max_nfe:
-            raise BridgeplanError(f"nfe must be in 1..{self.max_nfe} for the mean flow with {self.steps} steps, "
-                                  f"got {nfe}")
-
     def interval_input(self, r: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         return self.steps * (t - r)
 

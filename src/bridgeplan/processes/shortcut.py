@@ -47,10 +47,6 @@ class Shortcut(JumpProcess):
         if not 0 <= self.bootstrap_share <= 1:
             raise BridgeplanError(f"bootstrap_share must be in [0, 1], got {self.bootstrap_share}")
 
-    @property
-    def max_nfe(self) -> int:
-        return self.steps
-
     def validate_nfe(self, nfe: int) -> None:
         if not (is_power_of_two(nfe) and nfe <= self.max_nfe):
             raise BridgeplanError(f"nfe must be a power of two up to {self.max_nfe} for the shortcut model with "
