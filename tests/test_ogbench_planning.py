@@ -20,6 +20,7 @@ from bridgeplan.envs.ogbench_pointmaze.controllers import BODY, GAIN, pursuit_ac
 from bridgeplan.envs.ogbench_pointmaze.maze import make_env
 from bridgeplan.envs.ogbench_pointmaze.plans import plan_shape
 from bridgeplan.errors import BridgeplanError
+from bridgeplan.policy import PlannerPolicy
 from bridgeplan.processes import DDPM
 from bridgeplan.replan import Execution, PlanExecutor, PlanSource
 from bridgeplan.trajectory import KINEMATIC_POINT, span
@@ -116,6 +117,31 @@ def test_eval_through_the_protocol(process, point_runs, tmp_path, capsys):
     assert r["plans_per_episode"]["max"] == max(expected_plans(s, k) for s in steps)
     assert r["calls_per_episode"] == 2 * r["plans_per_episode"]["mean"] and r["plan_ms_per_plan"] > 0
     assert "/" + "work" not in out.read_text().replace(str(tmp_path), "")  # no absolute path but the output's
+
+
+def _drive(policy, steps: int) -> None:
+    """``policy`` in OGBench's own loop on task 1 for ``steps`` steps: the observation and ``info["goal"]`` in."""
+    env = make_env("medium")
+    obs, info = env.reset(seed=0, options=dict(task_id=1))
+    policy.reset()
+    for _ in range(steps):
+        action = policy(obs, info["goal"])
+        assert action.shape == (2,) and action.dtype == np.float32 and np.abs(action).max() <= 1
+        obs, *_ = env.step(action)
+    env.close()
+    assert policy.steps == steps
+
+
+@pytest.mark.parametrize("every", [None, 7])
+def test_a_run_as_a_policy_in_ogbenchs_own_loop(point_runs, every):
+    """``PlannerPolicy.from_run`` of an OGBench run plans with its family's goal radius and wall map, a plan every K
+    steps (once, open loop)."""
+    policy = PlannerPolicy.from_run(point_runs["bridge"], replan_every=every, device="cpu")
+    assert (policy.env, policy.maze, policy.execution.controller) == (NAME, None, "track")
+    (source,) = policy.executor.sources
+    assert source.radius == FAMILY.goal_radius and source.free is not None
+    _drive(policy, 20)
+    assert policy.plans_made == expected_plans(20, every)
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -283,3 +309,8 @@ def test_a_hierarchy_on_the_protocol(navigate, tmp_path, capsys):
     assert main(["hierarchy", "eval", str(tmp_path / "low"), str(tmp_path / "high"), "--replan-every", "12",
                  "--device", "cpu"]) == 2
     assert "must plan from a start to a goal" in capsys.readouterr().err
+    policy = PlannerPolicy.from_hierarchy(tmp_path / "high", tmp_path / "low", nfe_high=2, nfe_low=1,
+                                          replan_every=12, controller="pursuit", device="cpu")  # as a policy
+    assert (policy.env, policy.maze) == (NAME, None)
+    _drive(policy, 30)
+    assert policy.plans_made == 3  # low-level plans at steps 0, 12 and 24

@@ -23,12 +23,12 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from bridgeplan.envs import family_of, maze2d
 from bridgeplan.envs.maze2d.grids import get_maze
 from bridgeplan.errors import BridgeplanError
-from bridgeplan.replan import Execution, PlanExecutor, PlanSource
+from bridgeplan.evaluate import PlannerDecisions, generator
+from bridgeplan.replan import Execution, PlanExecutor
 
 
 class PlannerPolicy:
@@ -69,15 +69,15 @@ class PlannerPolicy:
         from bridgeplan.runs import load_planner
 
         planner, info = load_planner(Path(run), snapshot=snapshot, device=device, frozen=frozen)
-        maze = get_maze(info.config.maze)
+        env = info.config.maze
+        family = family_of(env)
         execution = Execution(replan_every=replan_every, tolerance=tolerance, candidates=candidates, select=select,
                               warm=warm, arrival=arrival, controller=controller,
-                              lookahead=lookahead).resolved(maze2d.FAMILY, maze.name)
+                              lookahead=lookahead).resolved(family, env)
         planner.process.validate_nfe(nfe)
-        execution.validate(planner.process, maze.episode_steps)
-        source = PlanSource(planner, execution, nfe, torch.Generator(device=planner.device).manual_seed(seed), 1,
-                            maze2d.FAMILY.goal_radius, maze.is_free_xy)
-        return cls(source, maze.name, execution)
+        execution.validate(planner.process, family.tasks(env, 1).episode_steps)
+        decisions = PlannerDecisions(planner, nfe, execution, family, env)
+        return cls(decisions.source(1, generator(planner.device, seed)), env, execution)
 
     @classmethod
     def from_hierarchy(cls, high_run: str | Path, low_run: str | Path, nfe_high: int | None = None,
@@ -149,18 +149,19 @@ class PlannerPolicy:
         return cls(agent.decisions.source(1), env, execution, agent.follower)
 
     @classmethod
-    def _of_hierarchy(cls, hierarchy, maze_name: str, nfe_high: int | None, nfe_low: int | None,
+    def _of_hierarchy(cls, hierarchy, env: str, nfe_high: int | None, nfe_low: int | None,
                       execution: Execution, seed: int, replan_high_every: int | None) -> PlannerPolicy:
-        """Any hierarchy (two runs, or the graph over a low level) in ``maze_name``, its execution checked."""
+        """Any hierarchy (two runs, or the graph over a low level) in ``env``, its execution checked."""
         from bridgeplan.hierarchy import HierarchySource, check_execution, check_high_replanning
 
-        maze = get_maze(maze_name)
-        execution = execution.resolved(maze2d.FAMILY, maze.name)
-        check_execution(execution, maze.episode_steps)
-        check_high_replanning(replan_high_every, maze.episode_steps)
-        source = HierarchySource(hierarchy, nfe_high, nfe_low,
-                                 torch.Generator(device=hierarchy.low.device).manual_seed(seed), 1, replan_high_every)
-        return cls(source, maze.name, execution)
+        family = family_of(env)
+        execution = execution.resolved(family, env)
+        episode_steps = family.tasks(env, 1).episode_steps
+        check_execution(execution, episode_steps)
+        check_high_replanning(replan_high_every, episode_steps)
+        source = HierarchySource(hierarchy, nfe_high, nfe_low, generator(hierarchy.low.device, seed), 1,
+                                 replan_high_every)
+        return cls(source, env, execution)
 
     def reset(self) -> None:
         """Start a new episode: the next call plans afresh."""
