@@ -190,6 +190,35 @@ def test_train_plan_and_evaluate_on_your_own_environment(reach, tmp_path, proces
     assert 0.3 <= r["floor_line"]["success_rate"] <= 0.7
     assert r["success_rate"] >= max(0.8, r["floor_line"]["success_rate"] + 0.2), r["success_rate"]
     assert r["successes"] == round(r["success_rate"] * 40) and 0 < r["return"]["mean"] <= 1
+    # the run as a policy in the user's own loop (its observation and info["goal"] in): it reaches goals as well
+    from bridgeplan.policy import PlannerPolicy
+
+    policy, scope = PlannerPolicy.from_run(run, replan_every=8, device="cpu"), {}
+    exec(ENV_SOURCE, scope)
+    env, reached = scope["make_env"](), 0
+    for episode in range(20):
+        obs, info = env.reset(seed=episode)
+        policy.reset()
+        for _ in range(60):
+            obs, _, success, _, _ = env.step(policy(obs, info["goal"]))
+            if success:
+                reached += 1
+                break
+    assert reached >= 16, reached  # as `eval` (>= 0.8); 9 of 20 with the columns in the environment's order
+
+
+def test_a_policy_gets_the_plans_columns_and_the_environments_action_box(reach, tmp_path):
+    """What ``PlannerPolicy`` asks the family in a user's own loop: the state in the plan's column order (the goal's
+    first), the goal from its columns or a whole goal state, and the actions' box from the environment."""
+    family, env = family_of(str(reach)), str(reach)
+    state, goal = family.policy_input(env, np.array([0.1, 0.2, 0.3]), np.array([0.5, -0.5]))
+    assert state.tolist() == [0.1, 0.3, 0.2] and goal.tolist() == [0.5, -0.5]
+    assert family.policy_input(env, np.zeros(3), np.array([0.5, 9.0, -0.5]))[1].tolist() == [0.5, -0.5]
+    assert [b.tolist() for b in family.action_bounds(env)] == [[-1, -1], [1, 1]]
+    (tmp_path / "slow_env.py").write_text(ENV_SOURCE.replace("Box(-1.0, 1.0, (2,))", "Box(-0.5, 0.5, (2,))"))
+    (tmp_path / "slow.toml").write_text(reach.read_text().replace("reach_env.py", "slow_env.py").replace(
+        "reach.npz", str(reach.parent / "reach.npz")))
+    assert [b.tolist() for b in family.action_bounds(str(tmp_path / "slow.toml"))] == [[-0.5, -0.5], [0.5, 0.5]]
 
 
 def test_the_dataset_graph_on_your_own_environment(reach, tmp_path):

@@ -45,7 +45,7 @@ class PlannerPolicy:
     def __init__(self, source, env: str, execution: Execution, follower: Callable | None = None):
         """``follower(n)``: what executes the plans (default: ``execution``'s controller in ``env``)."""
         self.source, self.env, self.execution = source, env, execution
-        family = family_of(env)
+        self.family = family = family_of(env)
         self.layout = family.layout(env)
         self.maze = get_maze(env) if maze2d.FAMILY.owns(env) else None
         self.executor = PlanExecutor.executing(execution, lambda n: source, follower or (lambda n: family.follower(
@@ -179,16 +179,18 @@ class PlannerPolicy:
         return int(self.executor.made[-1][0])
 
     def __call__(self, obs, goal=None) -> np.ndarray:
-        """The action (float32, in [-1, 1]) for an observation and its goal: a PointMaze observation dict alone
-        (its ``observation`` and ``desired_goal``), or an observation array and the goal (OGBench's ``info["goal"]``:
-        a goal observation where the task is its objects', else a position)."""
+        """The action (float32, in the environment's action box: [-1, 1] but in your own) for an observation and its
+        goal: a PointMaze observation dict alone (its ``observation`` and ``desired_goal``), or an observation array
+        and the goal (OGBench's ``info["goal"]``: a goal observation where the task is its objects', else a position;
+        your own environment's ``info["goal"]``, its goal columns or a whole goal state)."""
         obs_dim, goal_width = self.layout.obs_dim, self.layout.goal_width
         try:
             if isinstance(obs, Mapping):
                 obs, goal = obs["observation"], obs["desired_goal"]
             elif goal is None:
                 raise TypeError("no goal given")
-            state = np.asarray(obs, dtype=np.float64).reshape(1, obs_dim)
+            state, goal = self.family.policy_input(self.env, obs, goal)
+            state = np.asarray(state, dtype=np.float64).reshape(1, obs_dim)
             goal = np.asarray(goal, dtype=np.float64).reshape(1, goal_width)
         except (KeyError, TypeError, ValueError) as e:
             raise BridgeplanError(f"{self.env}: an observation of {obs_dim} numbers and its goal of {goal_width} are "
@@ -198,6 +200,6 @@ class PlannerPolicy:
             self.executor.replan(np.zeros(1, dtype=np.int64))  # the goal moved: plan for the new one now, from scratch
             self.source.reset()
         self.goal = goal
-        return np.clip(self.executor.act(state, goal)[0], -1, 1).astype(np.float32)
+        return np.clip(self.executor.act(state, goal)[0], *self.family.action_bounds(self.env)).astype(np.float32)
 
     act = __call__

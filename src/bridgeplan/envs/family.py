@@ -295,6 +295,15 @@ class Family:
         """Whether positions ``[..., 2]`` lie in free space (the wall map; no planner reads it), or None."""
         return None
 
+    def policy_input(self, env: str, observation: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """An observation and its goal as the environment hands them to a policy in a user's own loop
+        (``policy.PlannerPolicy``), as the plans' state and goal (here as they are)."""
+        return observation, goal
+
+    def action_bounds(self, env: str) -> tuple[np.ndarray | float, np.ndarray | float]:
+        """The environment's action box, which a policy's actions are clipped to."""
+        return -1.0, 1.0
+
     def oracle(self, env: str) -> Agent:
         """The family's expert (noise-free) as an agent for :meth:`run`."""
         raise NotImplementedError

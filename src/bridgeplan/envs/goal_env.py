@@ -443,6 +443,14 @@ class GoalEnv(Family):
     def run(self, tasks: GoalTasks, agent, progress: bool = False) -> Outcome:
         return run_episodes(tasks, agent, progress)
 
+    def policy_input(self, env: str, observation: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        io = interface(env)  # the plan's column order (the goal's first), the goal's columns of a whole goal state
+        return io.states(observation), io.goal(observation, {"goal": goal})
+
+    def action_bounds(self, env: str) -> tuple[np.ndarray, np.ndarray]:
+        io = interface(env)
+        return io.action_low, io.action_high
+
     def score(self, tasks: GoalTasks, outcome: Outcome) -> dict:
         n = len(outcome.returns)
         se = float(outcome.returns.std(ddof=1) / np.sqrt(n)) if n > 1 else float("nan")
