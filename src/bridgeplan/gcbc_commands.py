@@ -38,8 +38,10 @@ def add_gcbc_commands(sub) -> None:
     p = sub.add_parser("gcbc", help="OGBench's goal-conditioned baselines on its own data: GCBC and GCIQL")
     og = p.add_subparsers(dest="gcbc_command", required=True)
     add_command(og, "train", GCBCTrainOptions, _cmd_gcbc_train, GCBC_CONFIG,
-                help="goal-conditioned behaviour cloning (OGBench's GCBC baseline)",
-                description="Defaults (shown): OGBench's GCBC for pointmaze (GCBCConfig in bridgeplan/gcbc.py). "
+                help="OGBench's GCBC (goal-conditioned behaviour cloning) or, with --agent gciql, its GCIQL; "
+                     "`bridgeplan eval RUN` evaluates either",
+                description="Defaults (shown): OGBench's GCBC for pointmaze, its GCIQL's where marked GCIQL "
+                            "(GCBCConfig in bridgeplan/gcbc.py). "
                             "--maze: the OGBench dataset the data is of (pointmaze-medium-navigate-v0, "
                             "cube-single-play-v0, or a bare pointmaze maze; checked; evaluation's default).")
 
