@@ -9,6 +9,7 @@ import math
 import pytest
 import torch
 
+from bridgeplan import config as cfg
 from bridgeplan.cli import main
 from bridgeplan.errors import BridgeplanError
 from bridgeplan.nets.unet import TemporalUNet
@@ -285,7 +286,9 @@ def one_error_line(capsys) -> str:
 
 
 CLI = {"meanflow": ["--process", "meanflow", "--prior", "line"],
-       "shortcut": ["--process", "shortcut", "--prior", "line", "--diffusion-steps", "4"]}
+       "shortcut": ["--process", "shortcut", "--prior", "line", "--diffusion-steps", "4"],
+       "bridge": ["--process", "bridge", "--prior", "line", "--diffusion-steps", "6", "--process-param", "predict=ddbm",
+                  "--process-param", "weighting=ddbm"]}  # DDBM's parametrization of the bridge
 
 
 @pytest.mark.parametrize("name", list(CLI))
@@ -295,12 +298,15 @@ def test_train_and_eval_through_the_cli(tiny_dataset, tmp_path, capsys, name):
     capsys.readouterr()
     saved = json.loads((run / "config.json").read_text())["config"]
     assert saved["process"]["name"] == name and saved["prior"] == "line"
+    if name == "bridge":
+        assert (saved["process"]["predict"], saved["process"]["weighting"]) == ("ddbm", "ddbm")
+        assert run.name == "run" and "predictddbm-weightingddbm" in cfg.from_dict(cfg.TrainConfig, saved).run_name()
     for nfe in (1, 2):
         assert main(["eval", str(run), "--episodes", "4", "--device", "cpu", "--nfe", str(nfe), "--json"]) == 0
         result = json.loads(capsys.readouterr().out)
         assert result["process"] == name and result["nfe"] == nfe and result["prior"] == "line"
         assert math.isfinite(result["score"]["minari"]["mean"])
-    impossible = "3" if name == "shortcut" else "7"  # not a power of two; above the steps
+    impossible = {"shortcut": "3", "meanflow": "7", "bridge": "6"}[name]  # not a power of two; above the steps
     written = sorted(run.rglob("*"))
     assert main(["eval", str(run), "--episodes", "2", "--device", "cpu", "--nfe", impossible]) == 2
     assert "nfe must be" in one_error_line(capsys)

@@ -119,8 +119,10 @@ def test_bridge_sampler_step_has_the_conditional_moments():
 
 @pytest.mark.parametrize("process", [DDPM(steps=10), Bridge(steps=10), Bridge(steps=10, beta_max=0.3, ot_ode=True),
                                      Bridge(steps=10, consistent=True), Bridge(steps=10, predict="x0"),
-                                     Bridge(steps=10, weighting="uniform"), Flow(steps=10), Flow(steps=10, sigma=0.5),
-                                     Flow(steps=1, sigma=0.2)])
+                                     Bridge(steps=10, weighting="uniform"), Bridge(steps=10, predict="ddbm"),
+                                     Bridge(steps=10, predict="ddbm", weighting="ddbm", sigma_01=0.2, ot_ode=True),
+                                     Bridge(steps=10, predict="ddbm", consistent=True), Flow(steps=10),
+                                     Flow(steps=10, sigma=0.5), Flow(steps=1, sigma=0.2)])
 def test_exact_label_has_zero_loss_and_predicts_x0(process):
     """A network that outputs the exact label has zero loss and its x0 prediction is x0 at every step."""
     b, h = 64, 8
@@ -129,8 +131,9 @@ def test_exact_label_has_zero_loss_and_predicts_x0(process):
     x1 = torch.randn((b, h, 6), generator=gen, dtype=F64)
     cond = {0: x0[:, 0, ACT_DIM:], h - 1: x0[:, -1, ACT_DIM:]}
 
-    def exact_label(x0):
-        return lambda x_n, n: process.training_target(x0, x_n, n.long())
+    def exact_label(x0):  # from the network's input back to x_n (a preconditioned input is x_n scaled)
+        return lambda x_in, n: process.training_target(x0, x_in / process.network_input(torch.ones_like(x_in),
+                                                                                          n.long()), n.long())
 
     assert float(process.training_loss(exact_label(x0), x0, x1, cond, gen)) < 1e-28
     x_n, n, _ = process.training_pair(x0, x1, cond, gen)
@@ -277,11 +280,12 @@ def test_default_bridge_keeps_i2sb_marginal():
 
 # --- the bridge's loss ablation (predict x weighting) ----------------------------------------------------
 
-@pytest.mark.parametrize("predict", ["eps", "x0"])
-@pytest.mark.parametrize("weighting", ["i2sb", "uniform"])
+@pytest.mark.parametrize("predict", ["eps", "x0", "ddbm"])
+@pytest.mark.parametrize("weighting", ["i2sb", "uniform", "ddbm"])
 def test_bridge_loss_is_the_weighted_x0_error(predict, weighting):
-    """Every variant's loss is ``mean(w(n) |x0_hat - x0|^2)`` with I2SB's ``w = 1 / std_fwd[n]^2`` or 1, for any
-    network: the output is what ``predict`` says, and the weighting alone sets w."""
+    """Every variant's loss is ``mean(w(n) |x0_hat - x0|^2)`` with I2SB's ``w = 1 / std_fwd[n]^2``, 1 or DDBM's
+    ``1 / c_out[n]^2``, for any network: the output is what ``predict`` says (DDBM's network given ``c_in x_n``), and
+    the weighting alone sets w."""
     bridge = Bridge(steps=16, predict=predict, weighting=weighting)
     b, h = 256, 8
     x0 = torch.rand((b, h, 6), generator=torch.Generator().manual_seed(1), dtype=F64) * 1.8 - 0.9
@@ -294,9 +298,14 @@ def test_bridge_loss_is_the_weighted_x0_error(predict, weighting):
 
     loss = bridge.training_loss(model, x0, x1, cond, torch.Generator().manual_seed(3))
     x_n, n, _ = bridge.training_pair(x0, x1, cond, torch.Generator().manual_seed(3))
-    out, std = model(x_n, n.float()), bridge.std_fwd.double()[n][:, None, None]
-    x0_hat = x_n - std * out if predict == "eps" else out
-    w = 1 / std ** 2 if weighting == "i2sb" else torch.ones_like(std)
+    std = bridge.std_fwd.double()[n][:, None, None]
+    c_in, c_skip, c_out = (c[n][:, None, None] for c in bridge.ddbm_scalings)
+    if predict == "ddbm":
+        x0_hat = c_skip * x_n + c_out * model(c_in * x_n, n.float())
+    else:
+        out = model(x_n, n.float())
+        x0_hat = x_n - std * out if predict == "eps" else out
+    w = {"i2sb": 1 / std ** 2, "uniform": torch.ones_like(std), "ddbm": 1 / c_out ** 2}[weighting]
     assert torch.allclose(loss, torch.mean(w * (x0_hat - x0) ** 2), rtol=1e-10)
 
 
@@ -310,6 +319,33 @@ def test_bridge_default_loss_is_unchanged():
     loss = bridge.training_loss(lambda x, n: net(x), x0, x1, cond, torch.Generator().manual_seed(3))
     x_n, n, target = bridge.training_pair(x0, x1, cond, torch.Generator().manual_seed(3))
     assert torch.equal(loss, torch.mean((net(x_n) - target) ** 2))
+
+
+@pytest.mark.parametrize("sigma_01", [0.0, 0.2])
+@pytest.mark.parametrize("ot_ode", [False, True])
+def test_ddbm_scalings_give_unit_variance_input_and_label(sigma_01, ot_ode):
+    """DDBM's preconditioning, Monte Carlo at its assumed moments: x0 and x1 with standard deviations sigma_0 and
+    sigma_1 and covariance sigma_01, x_n drawn by the bridge's own marginal; then at every step the network's input
+    ``c_in x_n`` and the label have unit variance, and the label is uncorrelated with x_n (c_skip is x0's regression
+    on x_n: what is left for the network is what x_n cannot tell)."""
+    bridge = Bridge(steps=10, predict="ddbm", sigma_0=0.4, sigma_1=0.6, sigma_01=sigma_01, ot_ode=ot_ode)
+    gen, m = torch.Generator().manual_seed(4), 200_000
+    z = torch.randn((2, m), generator=gen, dtype=F64)
+    rho = sigma_01 / (0.4 * 0.6)
+    x0 = 0.4 * z[0]
+    x1 = 0.6 * (rho * z[0] + (1 - rho ** 2) ** 0.5 * z[1])
+    for k in range(bridge.steps):
+        n = torch.full((m,), k)
+        x_n = bridge.marginal(x0.view(m, 1, 1), x1.view(m, 1, 1), n, gen)
+        net_in, label = bridge.network_input(x_n, n).ravel(), bridge.training_target(x0.view(m, 1, 1), x_n, n).ravel()
+        assert abs(float(net_in.var()) - 1) < 0.02 and abs(float(label.var()) - 1) < 0.02, k
+        assert abs(float(torch.corrcoef(torch.stack([label, x_n.ravel()]))[0, 1])) < 0.01, k
+
+
+def test_ddbm_refuses_impossible_moments():
+    for bad in ({"sigma_0": 0.0}, {"sigma_1": -1.0}, {"sigma_01": 0.25}):
+        with pytest.raises(BridgeplanError, match="ddbm's moments need"):
+            Bridge(predict="ddbm", **bad)
 
 
 @pytest.mark.parametrize("field", ["predict", "weighting"])

@@ -61,9 +61,14 @@ class Process:
         tag = [self.name] + ([prior] if self.uses_prior else []) + [f"N{self.steps}"]
         return tag + [k if v is True else f"{k}{v}" for k, v in self.variant().items()]
 
+    def network_input(self, x_n: torch.Tensor, n: int | torch.Tensor) -> torch.Tensor:
+        """What the network is given of ``x_n`` at step ``n`` (sampling) or steps ``n`` ``[B]`` (training): ``x_n``
+        itself unless the process scales it (a preconditioned bridge's ``c_in``)."""
+        return x_n
+
     def network(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
         """The network's output on the batch ``x_n`` at step ``n`` (given as a float, as in training)."""
-        return model(x_n, torch.full((x_n.shape[0],), float(n), device=x_n.device))
+        return model(self.network_input(x_n, n), torch.full((x_n.shape[0],), float(n), device=x_n.device))
 
     def predict_x0(self, model, x_n: torch.Tensor, n: int) -> torch.Tensor:
         """The clean trajectory the network sees in ``x_n`` at step ``n``, clipped to [-1, 1]. By default the
@@ -91,7 +96,7 @@ class Process:
         """L2 between the network's output and the label of the process's ``training_pair`` (``x1``: the
         prior sample for ``x0``; a process without a prior ignores it), weighted by :meth:`output_weight`."""
         x_n, n, target = self.training_pair(x0, x1, conditions, generator)
-        sq = (model(x_n, n.float()) - target) ** 2
+        sq = (model(self.network_input(x_n, n), n.float()) - target) ** 2
         weight = self.output_weight(n)
         if weight is None:
             return torch.mean(sq)
