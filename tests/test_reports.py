@@ -436,6 +436,29 @@ def test_the_onestep_report_judges_each_one_step_method_against_ddpms_bar_chosen
     assert "| mean flow (line) | 1 | 70.1 ± 0.1 | no (-20.0 ± 0.0) |" in pursued
 
 
+def test_the_onestep_report_sets_the_bridges_parametrizations_against_ddpm_and_the_default_bridge(tmp_path):
+    """medium-v2-curves' tracked single-task rows: DDPM's bar, and each parametrization at NFE 1 against it and, paired
+    per seed, against I2SB's bridge at the same NFE (the default's own row has no difference); Multi2D rows and a
+    replanned part are not this section's."""
+    onestep = report("onestep")
+    ddpm, bridge = make_process("ddpm", steps=16), make_process("bridge", steps=16)
+    ddbm = make_process("bridge", steps=16, predict="ddbm", weighting="ddbm")
+    rows = []
+    for seed in SEEDS:
+        rows += [_row("nfe-curves", ddpm, "gaussian", 8000, 2, 80.0, seed),
+                 _row("nfe-curves", bridge, "line", 8000, 1, 70.0, seed),
+                 _row("nfe-curves", ddbm, "line", 8000, 1, 75.0 + seed, seed),
+                 _row("closed-loop", ddbm, "line", 8000, 1, 13.0, seed, execution="replan32")]
+    _write(tmp_path / onestep.PARAMETRIZATIONS_SOURCE / "results.csv", rows)
+    text = onestep.render(tmp_path).split("## The bridge's parametrizations (medium, tracked, single-task)")[1]
+    lines = text.split("## ")[0].splitlines()
+    assert "| DDPM's best | 2 | 80.1 ± 0.1 |  |  |" in lines
+    assert "| bridge (line) | 1 | 70.1 ± 0.1 | no (-10.0 ± 0.0) |  |" in lines
+    # scores 75.0, 76.1, 77.2 (seeds 0-2): 5, 6, 7 above the default bridge and 5, 4, 3 below DDPM's bar
+    assert "| bridge (line; predict=ddbm; weighting=ddbm) | 1 | 76.1 ± 0.6 | no (-4.0 ± 0.6) | +6.0 ± 0.6 |" in lines
+    assert "13.1" not in text.split("## ")[0]  # the replanned rows
+
+
 def test_the_onestep_report_times_the_decision_at_batch_1_against_2_ms(tmp_path):
     """The bench's batch-1 rows (batch 64 left out) against the goal; the machine's load written beside them."""
     onestep = report("onestep")

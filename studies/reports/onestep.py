@@ -14,6 +14,10 @@ as in cddb.md); it is reported on the test episodes. Every other method is shown
 Differences are per seed (the method minus DDPM's bar, Minari score), mean ± standard error over seeds; "reaches":
 yes when the mean is not below zero, "within noise" when below by less than two standard errors, else no.
 
+The bridge's parametrizations (issue 43, item 4: DDBM's): the I2SB bridge from the line as trained by default, its
+loss ablation and DDBM's parametrization, from the rows of docs/results/medium-v2-curves (:data:`PARAMETRIZATIONS`),
+tracked, single-task, against DDPM's best of the same study as above, and paired with the default bridge per seed.
+
 Made by `bridgeplan study report onestep` (studies/onestep.toml) into docs/results/onestep.md.
 """
 
@@ -39,7 +43,13 @@ DDPM = key("ddpm", steps=N)
 ONE_STEP = (key("distill", steps=N),
             *(key(process, prior, steps=N) for process in ("meanflow", "shortcut")
               for prior in ("gaussian", "line", "learned")))
-READS = (DDPM, *ONE_STEP)
+PARAMETRIZATIONS_SOURCE = "medium-v2-curves"
+BRIDGE = key("bridge", "line", steps=N)
+PARAMETRIZATIONS = (BRIDGE, key("bridge", "line", steps=N, predict="x0"),
+                    key("bridge", "line", steps=N, weighting="uniform"),
+                    key("bridge", "line", steps=N, predict="ddbm", weighting="ddbm"))
+"""The I2SB bridge from the line, its loss ablation (x0 output; equal weights) and DDBM's parametrization."""
+READS = (DDPM, *ONE_STEP, *PARAMETRIZATIONS)
 """The trained methods the tables read (studies that make this report must train them)."""
 GOAL_NFE = (1, 2)
 LATENCY = "onestep-latency"
@@ -72,10 +82,10 @@ class Part:
         return sorted({r.seed for r in self.results})
 
 
-def parts(root: Path) -> list[Part]:
-    """The parts of every exported folder of :data:`SOURCES`, in their order; tracked single-task first."""
+def parts_of(root: Path, sources=SOURCES) -> list[Part]:
+    """The parts of every exported folder of ``sources``, in their order; tracked single-task first."""
     found = []
-    for _, rows in exported_rows(root, SOURCES):
+    for _, rows in exported_rows(root, sources):
         groups = dict.fromkeys((r.maze, r.key.execution, r.key.multi_task) for r in rows)
         for maze, execution, multi in sorted(groups, key=lambda g: (g[1] != OPEN_LOOP, g[1].tag(), g[2])):
             found.append(Part(maze, execution, multi, Results(
@@ -104,26 +114,52 @@ def reaches(ours: dict[int, float], bar: dict[int, float]) -> str:
     return f"{goal_verdict(d, 'reaches')} ({fmt_diff(d)})"
 
 
-def part_table(part: Part) -> list[str]:
-    """Rows: DDPM's bar, then each one-step method at NFE 1 and 2; columns: the snapshots, then the verdict at the
-    last one."""
+def part_table(part: Part, methods=ONE_STEP, versus: MethodKey | None = None) -> list[str]:
+    """Rows: DDPM's bar, then each of ``methods`` at NFE 1 and 2; columns: the snapshots, the verdict at the last one,
+    and with ``versus`` each method's difference from it at the same NFE there (paired per seed)."""
     results = part.results
     steps = results.steps(part.here(DDPM))
     if not steps:
         return ["No DDPM rows in this part: nothing to compare with."]
     bars = {step: ddpm_bar(part, step) for step in steps}
     header = ["method", "NFE", *(f"step {s}" for s in steps), f"reaches DDPM's best at step {steps[-1]}"]
+    against = [f"against {label(versus)}"] if versus else []
     rows = [["DDPM's best", " / ".join(str(bars[s].nfe) if bars[s] else "-" for s in steps),
-             *(cell(results.values(bars[s])) if bars[s] else "-" for s in steps), ""]]
+             *(cell(results.values(bars[s])) if bars[s] else "-" for s in steps), "", *[""] * len(against)]]
     final_bar = results.values(bars[steps[-1]]) if bars[steps[-1]] else {}
-    for method in ONE_STEP:
+    for method in methods:
         here = part.here(method)
         for nfe in GOAL_NFE:
             scores = [results.values(Point(here, s, nfe)) for s in steps]
             if not any(scores):
                 continue
-            rows.append([label(method), nfe, *(cell(v) for v in scores), reaches(scores[-1], final_bar)])
-    return table(header, rows)
+            row = [label(method), nfe, *(cell(v) for v in scores), reaches(scores[-1], final_bar)]
+            if versus:
+                base = results.values(Point(part.here(versus), steps[-1], nfe))
+                row.append("" if method == versus else fmt_diff(paired(scores[-1], base, seeds="common"))
+                           if len(set(scores[-1]) & set(base)) >= 2 else "not measured")
+            rows.append(row)
+    return table(header + against, rows)
+
+
+def parametrizations_section(root: Path) -> list[str]:
+    """The bridge's parametrizations on medium, tracked, single-task (the rows of
+    :data:`PARAMETRIZATIONS_SOURCE`)."""
+    lines = ["## The bridge's parametrizations (medium, tracked, single-task)", ""]
+    found = [p for p in parts_of(root, (PARAMETRIZATIONS_SOURCE,))
+             if p.execution == OPEN_LOOP and not p.multi_task and p.maze == "medium"]
+    if not found:
+        return lines + [f"No rows: docs/results/{PARAMETRIZATIONS_SOURCE} is not exported."]
+    part = found[0]
+    return lines + [
+        f"From docs/results/{PARAMETRIZATIONS_SOURCE} (studies/{PARAMETRIZATIONS_SOURCE}.toml: cpu-small at batch 32, "
+        f"lr 1e-3, training seeds {', '.join(map(str, part.seeds()))}): I2SB's bridge from the line as trained by "
+        "default (its network predicts the scaled difference, I2SB's weighting), its loss ablation (`predict=x0`; "
+        "`weighting=uniform`) and DDBM's parametrization (`predict=ddbm`, `weighting=ddbm`: EDM's preconditioning on "
+        "the bridge's marginal at DDBM's assumed moments, docs/conventions.md), at NFE 1 and 2, against DDPM's best "
+        "of the same study (chosen as above) and against the default bridge at the same NFE; Minari score, mean ± SE "
+        "over seeds, differences per seed.", "",
+        *part_table(part, PARAMETRIZATIONS, BRIDGE), ""]
 
 
 def latency_section(root: Path) -> list[str]:
@@ -152,7 +188,7 @@ def render(root: Path) -> str:
              "Generated by `bridgeplan study report onestep` from the committed rows of "
              + ", ".join(f"docs/results/{s}" for s in SOURCES) + " (studies/onestep-medium.toml, "
              "studies/onestep-large.toml); how the bar and the verdicts are made: studies/reports/onestep.py.", ""]
-    found = parts(root)
+    found = parts_of(root)
     if not found:
         lines += ["No rows committed yet. The campaigns: `bridgeplan study run onestep-medium` then "
                   "`bridgeplan study export onestep-medium`, and the same for onestep-large.", ""]
@@ -160,5 +196,6 @@ def render(root: Path) -> str:
         lines += [f"## {part.title}", "",
                   f"Training seeds {', '.join(map(str, part.seeds()))}; Minari score, mean ± SE over seeds.", "",
                   *part_table(part), ""]
+    lines += parametrizations_section(root)
     lines += latency_section(root)
     return "\n".join(lines).rstrip("\n")
