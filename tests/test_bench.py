@@ -83,6 +83,7 @@ def test_bench_writes_every_table(tiny_runs, tmp_path, capsys):
     (["--side-by-side-seconds", "-1"], "side-by-side-seconds must be >= 0"),
     (["--methods", "DDPM [fast]"], "unknown method 'DDPM [fast]'"),
     (["--overhead-repeats", "-1"], "overhead-repeats must be >= 0"),
+    (["--mazes", "medium,maze9"], "unknown maze 'maze9'"),
 ])
 def test_bench_bad_input(tmp_path, capsys, bad, message):
     assert main(["bench", "--out", str(tmp_path), "--no-compile", *bad]) == 2
@@ -103,6 +104,24 @@ def test_bench_times_the_methods_asked_for_at_any_nfe_and_skips_the_overheads(tm
         ("DDPM [ancestral]", 1), ("DDPM [ancestral]", 20), ("bridge (line)", 1), ("bridge (line)", 20)]
     assert result["plan_overhead"] == [] and result["train_overhead"] == []
     assert "Untrained networks with N = 21 for the timings" in (tmp_path / "bench.md").read_text()
+
+
+def test_bench_times_the_plans_of_each_maze_asked_for(tmp_path, capsys, monkeypatch):
+    """``--mazes``: each maze's plans at its preset's shape (cpu-small: umaze 128 states one step apart, medium 32
+    states 8 apart), the shape in each row and in the table."""
+    shapes = []
+    plan = suites.Planner.plan
+    monkeypatch.setattr(suites.Planner, "plan", lambda self, *a: shapes.append((self.horizon, self.stride)) or
+                        plan(self, *a))
+    args = [*TINY_BENCH, "--methods", "bridge (line)", "--nfes", "1", "--overhead-repeats", "0", "--busy-steps", "0",
+            "--mazes", "umaze,medium"]
+    assert main(["bench", "--out", str(tmp_path), *args]) == 0
+    capsys.readouterr()
+    rows = json.loads((tmp_path / "bench.json").read_text())["latency"]
+    assert [(r["maze"], r["horizon"], r["stride"]) for r in rows] == [("umaze", 128, 1), ("medium", 32, 8)]
+    assert set(shapes) == {(128, 1), (32, 8)}
+    text = (tmp_path / "bench.md").read_text()
+    assert "| cpu-small | medium, 32 x 8 | bridge (line) | 1 | 1 |" in text and "| umaze, 128 x 1 |" in text
 
 
 def test_bench_times_the_one_call_processes_at_the_nfes_they_take(tmp_path, capsys, monkeypatch):

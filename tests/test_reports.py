@@ -466,14 +466,17 @@ def test_the_onestep_report_times_the_decision_at_batch_1_against_2_ms(tmp_path)
     bench = {"bench": {"repeats": 50}, "machine": {"code_version": "0.1.0+abc", "device": "cpu",
                                                    "cpu": "AMD EPYC (avx2)", "cpu_count": 2,
                                                    "torch_threads": 1, "load_1min_start": 0.5, "load_1min_end": 1.25},
-             "latency": [{"method": "mean flow (line)", "batch": 1, "nfe": 1, "plan_ms": 1.734},
+             "latency": [{"method": "mean flow (line)", "batch": 1, "nfe": 1, "plan_ms": 1.734, "maze": "medium",
+                          "horizon": 32, "stride": 8},
                          {"method": "DDPM [ancestral]", "batch": 1, "nfe": 2, "plan_ms": 3.01},
                          {"method": "mean flow (line)", "batch": 64, "nfe": 1, "plan_ms": 1.0}]}
     (tmp_path / onestep.LATENCY).mkdir()
     (tmp_path / onestep.LATENCY / "bench.json").write_text(json.dumps(bench))
     lines = onestep.render(tmp_path).splitlines()
-    assert "| mean flow (line) | 1 | 1.73 | yes |" in lines and "| DDPM [ancestral] | 2 | 3.01 | no |" in lines
-    assert sum(line.startswith("| mean flow (line) |") for line in lines) == 1
+    # the row of a bench that names its plans' shape, and one of a bench that did not (umaze's, then)
+    assert "| medium, 32 x 8 | mean flow (line) | 1 | 1.73 | yes |" in lines
+    assert "| umaze, 128 x 1 | DDPM [ancestral] | 2 | 3.01 | no |" in lines
+    assert sum("| mean flow (line) |" in line for line in lines) == 1
     assert any("load average was 0.5 at the start and 1.2 at the end" in line for line in lines)
     assert any("cpu (AMD EPYC (avx2), 2 cores, 1 torch thread)" in line for line in lines)
 

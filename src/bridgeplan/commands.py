@@ -354,6 +354,8 @@ def _cmd_report(o: ReportOptions) -> int:
 class BenchOptions:
     out: str | None = shared(og.Output, "out", default="bench")
     presets: str | None = opt(None, "comma-separated presets to time")
+    mazes: str | None = opt(None, "comma-separated Maze2D mazes whose plans (their preset's shape) the latency table "
+                                  "times")
     batch_sizes: str | None = opt(None, "comma-separated plans per call")
     nfes: str | None = opt(None, "comma-separated network calls per plan (latency table)")
     methods: str | None = opt(None, "comma-separated methods of the latency and overhead tables, named as there "
@@ -384,7 +386,8 @@ def _add_bench_command(sub) -> None:
                 help="planning latency, overheads, torch.compile, evaluation throughput and score per planning budget "
                      "(JSON + Markdown)",
                 description="Defaults: the fields of BenchConfig in bridgeplan/bench.py (cpu-small and diffuser "
-                            "networks, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes). --out: the output "
+                            "networks, umaze's plans, batches 1 and 64, NFE 1-15, budgets 1,2,4,8, 200 episodes). "
+                            "--out: the output "
                             "directory (bench.json, bench.md).")
 
 
@@ -392,7 +395,7 @@ def _cmd_bench(o: BenchOptions) -> int:
     from bridgeplan.bench import BenchConfig, run_bench
     from bridgeplan.files import check_writable
 
-    given = {"presets": o.presets and tuple(o.presets.split(",")),
+    given = {"presets": o.presets and tuple(o.presets.split(",")), "mazes": o.mazes and tuple(o.mazes.split(",")),
              "methods": o.methods and tuple(o.methods.split(",")),
              "budget_runs": o.budget_runs and tuple(r for r in o.budget_runs.split(",") if r),
              "repeats": o.repeats, "overhead_repeats": o.overhead_repeats, "eval_run": o.eval_run,

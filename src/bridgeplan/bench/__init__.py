@@ -19,6 +19,7 @@ from bridgeplan.bench.harness import machine
 from bridgeplan.bench.markdown import format_bench
 from bridgeplan.config import PRESETS
 from bridgeplan.device import resolve_device
+from bridgeplan.envs.maze2d.grids import MAZE_NAMES
 from bridgeplan.errors import BridgeplanError, check_choice
 from bridgeplan.files import atomic_write_text
 from bridgeplan.paths import snapshot_path, snapshot_steps
@@ -30,6 +31,9 @@ class BenchConfig:
 
     presets: tuple[str, ...] = ("cpu-small", "diffuser")
     """Networks to time (untrained; timing does not depend on the weights)."""
+    mazes: tuple[str, ...] = ("umaze",)
+    """The Maze2D mazes whose plans the latency table times, each at its preset's shape (cpu-small: umaze 128 states
+    one step apart; medium 32 and large 48, 8 steps apart)."""
     batch_sizes: tuple[int, ...] = (1, 64)
     """Plans per call for the latency, overhead and compile figures."""
     nfes: tuple[int, ...] = (1, 2, 4, 8, 15)
@@ -90,6 +94,10 @@ class BenchConfig:
                 raise BridgeplanError(f"{name.replace('_', '-')} must be positive integers, got {list(values)}")
         for preset in self.presets:
             check_choice("preset", preset, PRESETS)
+        if not self.mazes:
+            raise BridgeplanError("mazes must name at least one maze")
+        for maze in self.mazes:
+            check_choice("maze", maze, MAZE_NAMES)
         known = suites.method_configs(self.presets[0] if self.presets else "cpu-small")
         unknown = [m for m in self.methods if m not in known]
         if unknown:
@@ -112,9 +120,10 @@ def run_bench(out_dir: Path, bench: BenchConfig, progress=print) -> Path:
               "plan_overhead": [], "train_overhead": [], "busy_core": [], "compile": [], "throughput": [],
               "side_by_side": []}
     for preset in bench.presets:
-        progress(f"[{preset}] planning latency")
-        result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev,
-                                                     bench.methods, bench.frozen)
+        for maze in bench.mazes:
+            progress(f"[{preset}] planning latency ({maze})")
+            result["latency"] += suites.planning_latency(preset, bench.batch_sizes, bench.nfes, bench.repeats, dev,
+                                                         bench.methods, bench.frozen, maze)
         if bench.overhead_repeats:
             progress(f"[{preset}] overheads")
             result["plan_overhead"] += [suites.plan_overhead(preset, b, bench.overhead_repeats, dev, bench.methods)

@@ -38,9 +38,13 @@ def format_bench(result: dict) -> str:
              f"{result['bench']['overhead_repeats']} interleaved rounds.{load_sentence(m)}", "",
              "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
              "of it and shown separately.", ""]
-    lines += table(["preset", "method", "batch", "NFE", "plan ms", "of which prior ms"],
-                    [[r["preset"], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}", f"{r['prior_ms']:.2f}"]
-                     for r in result["latency"]])
+    # benches made before the latency table named its plans' shape timed umaze's, unnamed
+    shapes = [f"{r['maze']}, {r['horizon']} x {r['stride']}" for r in result["latency"] if "maze" in r]
+    if shapes:
+        lines[-2] += " Plans: the maze whose plans are timed, their states x the steps between two (its preset's)."
+    lines += table(["preset", *(["plans"] if shapes else []), "method", "batch", "NFE", "plan ms", "of which prior ms"],
+                   [[r["preset"], *shapes[i:i + 1], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}",
+                     f"{r['prior_ms']:.2f}"] for i, r in enumerate(result["latency"])])
     if result["plan_overhead"]:
         lines += format_overheads(result)
     if result.get("busy_core"):

@@ -50,11 +50,11 @@ def small_windows(horizon: int, stride: int = 1):
     return windows_of(stream, horizon, stride)
 
 
-def method_configs(preset: str, steps: int = DIFFUSION_STEPS) -> dict[str, TrainConfig]:
-    """One config per method timed, at ``steps`` diffusion steps: DDPM with each sampler, the bridge from each
-    prior, and the processes built for one call (mean flow, shortcut) from the line: their network takes a second
-    time input, which a one-call decision pays for."""
-    base = preset_config("umaze", preset)
+def method_configs(preset: str, steps: int = DIFFUSION_STEPS, maze: str = "umaze") -> dict[str, TrainConfig]:
+    """One config per method timed, at ``steps`` diffusion steps, planning ``maze``'s plans (its preset's shape): DDPM
+    with each sampler, the bridge from each prior, and the processes built for one call (mean flow, shortcut) from
+    the line: their network takes a second time input, which a one-call decision pays for."""
+    base = preset_config(maze, preset)
     out = {}
     for sampler in DDPM.samplers:
         out[f"DDPM [{sampler}]"] = dataclasses.replace(base, process=DDPM(steps, sampler=sampler))
@@ -68,11 +68,11 @@ def method_configs(preset: str, steps: int = DIFFUSION_STEPS) -> dict[str, Train
 
 
 def planners(preset: str, model: torch.nn.Module, normalizer, device: torch.device, methods=(),
-             steps: int = DIFFUSION_STEPS) -> dict[str, Planner]:
+             steps: int = DIFFUSION_STEPS, maze: str = "umaze") -> dict[str, Planner]:
     """Each method's planner (``methods``; empty: every one) around one (untrained) network, ``model``, or, for
     the processes whose network takes a second time input, one such network of the same preset; the learned
     prior's net is untrained too."""
-    configs = {name: c for name, c in method_configs(preset, steps).items() if not methods or name in methods}
+    configs = {name: c for name, c in method_configs(preset, steps, maze).items() if not methods or name in methods}
     first = next(iter(configs.values()))
     prior_net = build_prior_net(first.layout, first.horizon).to(device).eval()
     interval_model = next((build_model(c).to(device).eval() for c in configs.values() if c.process.takes_interval),
@@ -95,14 +95,15 @@ def _tasks(batch: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.device, methods=(),
-                     frozen: bool = False) -> list[dict]:
+                     frozen: bool = False, maze: str = "umaze") -> list[dict]:
     """Milliseconds per plan call (whole batch) vs NFE, per method (``frozen``: and per method through its network
-    traced and frozen, named ``..., frozen``); prior sampling time shown separately. At each batch size every
-    figure's calls alternate with the others' (:func:`interleaved_medians`)."""
-    config = preset_config("umaze", preset)
+    traced and frozen, named ``..., frozen``), of plans of ``maze``'s shape (its preset's horizon and stride); prior
+    sampling time shown separately. At each batch size every figure's calls alternate with the others'
+    (:func:`interleaved_medians`)."""
+    config = preset_config(maze, preset)
     model = build_model(config).to(dev).eval()
     _, normalizer = small_windows(config.horizon)
-    by_name = planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes))
+    by_name = planners(preset, model, normalizer, dev, methods, diffusion_steps(nfes), maze)
     if frozen:
         by_name |= {f"{name}, frozen": dataclasses.replace(p, model=FrozenUNet(p.model, config.horizon))
                     for name, p in by_name.items()}
@@ -118,7 +119,8 @@ def planning_latency(preset: str, batch_sizes, nfes, repeats: int, dev: torch.de
                 calls[name, nfe] = lambda p=planner, n=nfe, g=gen: p.plan(starts, goals, n, g)
         with torch.inference_mode():
             seconds = interleaved_medians(calls, repeats, dev)
-        rows += [{"preset": preset, "method": name, "batch": batch, "nfe": nfe, "plan_ms": 1000 * s,
+        rows += [{"preset": preset, "maze": maze, "horizon": config.horizon, "stride": config.stride, "method": name,
+                  "batch": batch, "nfe": nfe, "plan_ms": 1000 * s,
                   "prior_ms": 1000 * seconds[name, "prior"]} for (name, nfe), s in seconds.items() if nfe != "prior"]
     return rows
 
