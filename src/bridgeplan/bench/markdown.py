@@ -31,20 +31,20 @@ def format_bench(result: dict) -> str:
     # benches made before the latency table's figures alternated timed each figure's calls in a row
     alternating = " (the latency table's figures alternating, a call of each per round)" if result.get(
         "latency_interleaved") else ""
+    named = any("maze" in r for r in result["latency"])  # benches made before --mazes timed umaze's plans, unnamed
     lines = ["# bridgeplan bench", "",
              f"Device {m['device']} ({where}); torch {m['torch']}; code {m['code_version']}. Untrained networks "
              f"with N = {diffusion_steps(result['bench']['nfes'])} for the timings; medians over "
              f"{result['bench']['repeats']} repeats after 2 warm-up calls{alternating}, ratios over "
              f"{result['bench']['overhead_repeats']} interleaved rounds.{load_sentence(m)}", "",
              "## Planning latency", "", "Milliseconds per plan call for the whole batch; prior sampling is part "
-             "of it and shown separately.", ""]
-    # benches made before the latency table named its plans' shape timed umaze's, unnamed
-    shapes = [f"{r['maze']}, {r['horizon']} x {r['stride']}" for r in result["latency"] if "maze" in r]
-    if shapes:
-        lines[-2] += " Plans: the maze whose plans are timed, their states x the steps between two (its preset's)."
-    lines += table(["preset", *(["plans"] if shapes else []), "method", "batch", "NFE", "plan ms", "of which prior ms"],
-                   [[r["preset"], *shapes[i:i + 1], r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}",
-                     f"{r['prior_ms']:.2f}"] for i, r in enumerate(result["latency"])])
+             "of it and shown separately." + (" Plans: the maze whose plans are timed, their states x the steps "
+                                               "between two (its preset's)." if named else ""), ""]
+    lines += table(["preset", *(["plans"] if named else []), "method", "batch", "NFE", "plan ms",
+                    "of which prior ms"],
+                   [[r["preset"], *([f"{r['maze']}, {r['horizon']} x {r['stride']}"] if named else []),
+                     r["method"], r["batch"], r["nfe"], f"{r['plan_ms']:.1f}", f"{r['prior_ms']:.2f}"]
+                    for r in result["latency"]])
     if result["plan_overhead"]:
         lines += format_overheads(result)
     if result.get("busy_core"):

@@ -57,7 +57,8 @@ class Bridge(Process):
     ot_ode: bool = False
     consistent: bool = False
     predict: str = "eps"
-    """What the network outputs: ``eps`` I2SB's ``(x_n - x0) / std_fwd[n]``, ``x0`` the clean trajectory."""
+    """What the network outputs: ``eps`` I2SB's ``(x_n - x0) / std_fwd[n]``, ``x0`` the clean trajectory, ``ddbm``
+    DDBM's preconditioned ``(x0 - c_skip[n] x_n) / c_out[n]`` from ``c_in[n] x_n``."""
     weighting: str = "i2sb"
     """Per-step weight of the squared x0 error: ``i2sb`` ``1 / std_fwd[n]^2`` (I2SB), ``uniform`` 1 (Diffuser),
     ``ddbm`` ``1 / c_out[n]^2`` (DDBM's)."""
