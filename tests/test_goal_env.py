@@ -193,7 +193,7 @@ def test_train_plan_and_evaluate_on_your_own_environment(reach, tmp_path, proces
     # the run as a policy in the user's own loop (its observation and info["goal"] in): it reaches goals as well
     from bridgeplan.policy import PlannerPolicy
 
-    policy, scope = PlannerPolicy.from_run(run, replan_every=8, device="cpu"), {}
+    policy, scope = PlannerPolicy.from_run(run, nfe=r["nfe"], replan_every=8, device="cpu"), {}  # eval's NFE
     exec(ENV_SOURCE, scope)
     env, reached = scope["make_env"](), 0
     for episode in range(20):
