@@ -449,7 +449,7 @@ def test_the_onestep_report_sets_the_bridges_parametrizations_against_ddpm_and_t
                  _row("nfe-curves", bridge, "line", 8000, 1, 70.0, seed),
                  _row("nfe-curves", ddbm, "line", 8000, 1, 75.0 + seed, seed),
                  _row("closed-loop", ddbm, "line", 8000, 1, 13.0, seed, execution="replan32")]
-    _write(tmp_path / onestep.PARAMETRIZATIONS_SOURCE / "results.csv", rows)
+    _write(tmp_path / onestep.PARAMETRIZATIONS_SOURCES[0] / "results.csv", rows)
     text = onestep.render(tmp_path).split("## The bridge's parametrizations (medium, tracked, single-task)")[1]
     lines = text.split("## ")[0].splitlines()
     assert "| DDPM's best | 2 | 80.1 ± 0.1 |  |  |" in lines

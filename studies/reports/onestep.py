@@ -15,8 +15,9 @@ Differences are per seed (the method minus DDPM's bar, Minari score), mean ± st
 yes when the mean is not below zero, "within noise" when below by less than two standard errors, else no.
 
 The bridge's parametrizations (issue 43, item 4: DDBM's): the I2SB bridge from the line as trained by default, its
-loss ablation and DDBM's parametrization, from the rows of docs/results/medium-v2-curves (:data:`PARAMETRIZATIONS`),
-tracked, single-task, against DDPM's best of the same study as above, and paired with the default bridge per seed.
+loss ablation (medium) and DDBM's parametrization, from the rows of docs/results/medium-v2-curves and large-v2-curves
+(:data:`PARAMETRIZATIONS`), tracked, single-task, against DDPM's best of the same study as above, and paired with the
+default bridge per seed.
 
 Made by `bridgeplan study report onestep` (studies/onestep.toml) into docs/results/onestep.md.
 """
@@ -43,7 +44,7 @@ DDPM = key("ddpm", steps=N)
 ONE_STEP = (key("distill", steps=N),
             *(key(process, prior, steps=N) for process in ("meanflow", "shortcut")
               for prior in ("gaussian", "line", "learned")))
-PARAMETRIZATIONS_SOURCE = "medium-v2-curves"
+PARAMETRIZATIONS_SOURCES = ("medium-v2-curves", "large-v2-curves")
 BRIDGE = key("bridge", "line", steps=N)
 PARAMETRIZATIONS = (BRIDGE, key("bridge", "line", steps=N, predict="x0"),
                     key("bridge", "line", steps=N, weighting="uniform"),
@@ -144,23 +145,23 @@ def part_table(part: Part, methods=ONE_STEP, versus: MethodKey | None = None) ->
 
 
 def parametrizations_section(root: Path) -> list[str]:
-    """The bridge's parametrizations on medium, tracked, single-task (the rows of
-    :data:`PARAMETRIZATIONS_SOURCE`)."""
-    lines = ["## The bridge's parametrizations (medium, tracked, single-task)", ""]
-    found = [p for p in parts_of(root, (PARAMETRIZATIONS_SOURCE,))
-             if p.execution == OPEN_LOOP and not p.multi_task and p.maze == "medium"]
-    if not found:
-        return lines + [f"No rows: docs/results/{PARAMETRIZATIONS_SOURCE} is not exported."]
-    part = found[0]
-    return lines + [
-        f"From docs/results/{PARAMETRIZATIONS_SOURCE} (studies/{PARAMETRIZATIONS_SOURCE}.toml: cpu-small at batch 32, "
-        f"lr 1e-3, training seeds {', '.join(map(str, part.seeds()))}): I2SB's bridge from the line as trained by "
-        "default (its network predicts the scaled difference, I2SB's weighting), its loss ablation (`predict=x0`; "
-        "`weighting=uniform`) and DDBM's parametrization (`predict=ddbm`, `weighting=ddbm`: EDM's preconditioning on "
-        "the bridge's marginal at DDBM's assumed moments, docs/conventions.md), at NFE 1 and 2, against DDPM's best "
-        "of the same study (chosen as above) and against the default bridge at the same NFE; Minari score, mean ± SE "
-        "over seeds, differences per seed.", "",
-        *part_table(part, PARAMETRIZATIONS, BRIDGE), ""]
+    """The bridge's parametrizations, tracked, single-task: a table per maze of :data:`PARAMETRIZATIONS_SOURCES`."""
+    lines = []
+    for source in PARAMETRIZATIONS_SOURCES:
+        found = [p for p in parts_of(root, (source,)) if p.execution == OPEN_LOOP and not p.multi_task]
+        if not found:
+            continue
+        part = found[0]
+        lines += [f"## The bridge's parametrizations ({part.maze}, tracked, single-task)", "",
+                  f"From docs/results/{source} (studies/{source}.toml: cpu-small at batch 32, lr 1e-3, training seeds "
+                  f"{', '.join(map(str, part.seeds()))}): I2SB's bridge from the line as trained by default (its "
+                  "network predicts the scaled difference, I2SB's weighting), where the study has them its loss "
+                  "ablation (`predict=x0`; `weighting=uniform`), and DDBM's parametrization (`predict=ddbm`, "
+                  "`weighting=ddbm`: EDM's preconditioning on the bridge's marginal at DDBM's assumed moments, "
+                  "docs/conventions.md), at NFE 1 and 2, against DDPM's best of the same study (chosen as above) and "
+                  "against the default bridge at the same NFE; Minari score, mean ± SE over seeds, differences per "
+                  "seed.", "", *part_table(part, PARAMETRIZATIONS, BRIDGE), ""]
+    return lines
 
 
 def latency_section(root: Path) -> list[str]:
